@@ -1,0 +1,264 @@
+// The MoveRL shield node: a thin ROS shell around moverl_shield's core.
+//
+// Per env step (service ~step): read the current state, make ONE ValidateMotion call to the planning scene,
+// then execute the direct move or the replacement plan through the driver's ExecuteTrajectory service, or
+// hold still. Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
+// be reached the shield fails closed: nothing moves and the verdict says SCENE_UNAVAILABLE.
+//
+// The shield talks to the robot only through what a driver offers: joint states in (the `joint_states`
+// topic and the state returned by each execution) and joint trajectories out. ~reset forwards to a
+// simulator's reset service, when the driver has one.
+#include <chrono>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <moverl_msgs/ExecuteTrajectory.h>
+#include <moverl_msgs/ResetRobot.h>
+#include <moverl_msgs/ShieldStep.h>
+#include <moverl_msgs/ValidateMotion.h>
+#include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
+
+#include "moverl_shield/kinematics.h"
+#include "moverl_shield/shield_core.h"
+
+namespace moverl_shield {
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// A persistent service client that reconnects (without waiting) after its server went away.
+template <class Srv>
+class PersistentClient {
+ public:
+  PersistentClient(ros::NodeHandle& nh, std::string name) : nh_(nh), name_(std::move(name)) {}
+
+  /// \brief Call the service; on a broken connection reconnect once if the server exists again.
+  bool call(Srv& srv) {
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      if (!client_.isValid()) {
+        if (!ros::service::exists(name_, false)) return false;
+        client_ = nh_.serviceClient<Srv>(name_, /*persistent=*/true);
+      }
+      if (client_.call(srv)) return true;
+      client_.shutdown();
+    }
+    return false;
+  }
+  const std::string& name() const { return name_; }
+
+ private:
+  ros::NodeHandle& nh_;
+  std::string name_;
+  ros::ServiceClient client_;
+};
+
+class ShieldNode {
+ public:
+  ShieldNode(ros::NodeHandle& nh, ros::NodeHandle& pnh)
+      : nh_(nh),
+        scene_(nh_, pnh.param<std::string>("scene_service", "/planning_scene/validate_motion")),
+        execute_(nh_, pnh.param<std::string>("execute_service", "/sim/execute")),
+        reset_(nh_, pnh.param<std::string>("reset_service", "/sim/reset_robot")) {
+    // false: pass targets straight to the driver without checks (the "shield off" baseline).
+    enabled_ = pnh.param("enabled", true);
+    // Replace a colliding straight path by an OMPL plan (true) or discard the action (false).
+    plan_on_path_collision_ = pnh.param("plan_on_path_collision", true);
+    // Fraction of the URDF velocity limits used to time plans and direct moves.
+    velocity_scale_ = pnh.param("velocity_scale", 1.0);
+
+    std::string urdf, base_link, ee_link;
+    if (!nh.getParam("robot_description", urdf)) throw std::runtime_error("parameter /robot_description is not set");
+    if (!nh.getParam("robot/joints", joints_) || joints_.empty()) {
+      throw std::runtime_error("parameter /robot/joints is not set (load config/robots/<robot>.yaml)");
+    }
+    if (!nh.getParam("robot/base_link", base_link) || !nh.getParam("robot/ee_link", ee_link)) {
+      throw std::runtime_error("parameters /robot/base_link and /robot/ee_link must be set");
+    }
+    std::map<std::string, double> fixed;
+    nh.getParam("robot/fixed_joint_positions", fixed);
+    kinematics_ = std::make_unique<ChainKinematics>(urdf, base_link, ee_link, joints_, fixed);
+    for (size_t i = 0; i < joints_.size(); ++i) index_[joints_[i]] = i;
+
+    state_sub_ = nh.subscribe("joint_states", 10, &ShieldNode::onJointState, this);
+    step_srv_ = pnh.advertiseService("step", &ShieldNode::step, this);
+    reset_srv_ = pnh.advertiseService("reset", &ShieldNode::reset, this);
+    ROS_INFO("shield ready (%s), %zu joints, scene %s, driver %s", enabled_ ? "enabled" : "DISABLED",
+             joints_.size(), scene_.name().c_str(), execute_.name().c_str());
+  }
+
+ private:
+  /// Adopt a measured state if it is newer than what we know (stamps from the driver's clock).
+  void onJointState(const sensor_msgs::JointStateConstPtr& msg) {
+    if (have_state_ && msg->header.stamp <= state_stamp_) return;
+    adoptState(*msg);
+  }
+
+  /// Copy a JointState into q_ (controlled joints only). Returns false if a joint is missing.
+  bool adoptState(const sensor_msgs::JointState& msg) {
+    std::vector<double> q(joints_.size(), 0.0);
+    size_t found = 0;
+    for (size_t k = 0; k < msg.name.size() && k < msg.position.size(); ++k) {
+      auto it = index_.find(msg.name[k]);
+      if (it == index_.end()) continue;
+      q[it->second] = msg.position[k];
+      ++found;
+    }
+    if (found != joints_.size()) return false;
+    q_ = std::move(q);
+    state_stamp_ = msg.header.stamp;
+    have_state_ = true;
+    return true;
+  }
+
+  void fillState(sensor_msgs::JointState& state, geometry_msgs::Pose& ee) const {
+    state.header.stamp = state_stamp_;
+    state.name = joints_;
+    state.position = q_;
+    const Pose pose = kinematics_->endEffectorPose(q_);
+    ee.position.x = pose.position[0];
+    ee.position.y = pose.position[1];
+    ee.position.z = pose.position[2];
+    ee.orientation.x = pose.orientation[0];
+    ee.orientation.y = pose.orientation[1];
+    ee.orientation.z = pose.orientation[2];
+    ee.orientation.w = pose.orientation[3];
+  }
+
+  bool step(moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
+    res.verdict = static_cast<uint8_t>(run(req, res));
+    if (have_state_) fillState(res.state, res.ee_pose);
+    if (!res.contacts.header.stamp.isZero()) return true;
+    // No motion this step: no contacts, as far as the driver's last report goes.
+    res.contacts.header.stamp = state_stamp_;
+    res.contacts.available = contacts_available_;
+    res.contacts.total_contact_substeps = total_contact_substeps_;
+    return true;
+  }
+
+  Verdict run(const moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
+    const std::string bad = validateTarget(req.target, joints_.size());
+    if (!bad.empty()) {
+      res.message = bad;
+      return Verdict::kInvalidRequest;
+    }
+    if (!have_state_) {
+      res.message = "no joint state received yet from the driver (topic joint_states or ~reset)";
+      return Verdict::kExecutionFailed;
+    }
+    Decision decision;
+    if (!enabled_) {
+      decision = passThrough(q_, req.target);
+    } else {
+      moverl_msgs::ValidateMotion vm;
+      vm.request.start = q_;
+      vm.request.goal = req.target;
+      vm.request.plan_on_path_collision = plan_on_path_collision_;
+      if (!scene_.call(vm)) {
+        res.message = "planning scene service " + scene_.name() + " is unreachable: failing closed, robot held";
+        ROS_WARN_THROTTLE(5.0, "%s", res.message.c_str());
+        return Verdict::kSceneUnavailable;
+      }
+      res.pairs = vm.response.pairs;
+      res.state_check_time = vm.response.state_check_time;
+      res.path_check_time = vm.response.path_check_time;
+      res.planning_time = vm.response.planning_time;
+      res.message = vm.response.message;
+      Waypoints plan;
+      plan.reserve(vm.response.path.points.size());
+      for (const auto& p : vm.response.path.points) plan.push_back(p.positions);
+      decision = decide(static_cast<SceneOutcome>(vm.response.outcome), vm.response.replanned, plan, q_, req.target);
+    }
+    if (decision.waypoints.empty()) return decision.verdict;
+    return execute(decision, req.duration, res);
+  }
+
+  Verdict execute(const Decision& decision, double duration, moverl_msgs::ShieldStep::Response& res) {
+    std::vector<double> times;
+    try {
+      times = timeWaypoints(decision.waypoints, kinematics_->velocityLimits(), duration, velocity_scale_);
+    } catch (const std::exception& e) {
+      res.message = std::string("cannot time the trajectory: ") + e.what();
+      return Verdict::kExecutionFailed;
+    }
+    moverl_msgs::ExecuteTrajectory ex;
+    ex.request.trajectory.joint_names = joints_;
+    ex.request.trajectory.points.resize(decision.waypoints.size());
+    for (size_t k = 0; k < decision.waypoints.size(); ++k) {
+      ex.request.trajectory.points[k].positions = decision.waypoints[k];
+      ex.request.trajectory.points[k].time_from_start = ros::Duration(times[k]);
+    }
+    const auto start = std::chrono::steady_clock::now();
+    const bool called = execute_.call(ex);
+    res.execution_time = secondsSince(start);
+    if (!called) {
+      res.message = "driver service " + execute_.name() + " is unreachable";
+      return Verdict::kExecutionFailed;
+    }
+    adoptState(ex.response.state);
+    res.contacts = ex.response.contacts;
+    contacts_available_ = ex.response.contacts.available;
+    total_contact_substeps_ = ex.response.contacts.total_contact_substeps;
+    if (ex.response.outcome != moverl_msgs::ExecuteTrajectory::Response::SUCCESS) {
+      res.message = "driver refused the trajectory: " + ex.response.message;
+      return Verdict::kExecutionFailed;
+    }
+    return decision.verdict;
+  }
+
+  bool reset(moverl_msgs::ResetRobot::Request& req, moverl_msgs::ResetRobot::Response& res) {
+    const std::string bad = validateTarget(req.positions, joints_.size());
+    if (!bad.empty()) {
+      res.success = false;
+      res.message = bad;
+      return true;
+    }
+    moverl_msgs::ResetRobot fwd;
+    fwd.request = req;
+    if (!reset_.call(fwd)) {
+      res.success = false;
+      res.message = "driver reset service " + reset_.name() + " is unreachable (hardware drivers have none)";
+      return true;
+    }
+    res = fwd.response;
+    if (res.success) adoptState(res.state);
+    return true;
+  }
+
+  ros::NodeHandle& nh_;
+  PersistentClient<moverl_msgs::ValidateMotion> scene_;
+  PersistentClient<moverl_msgs::ExecuteTrajectory> execute_;
+  PersistentClient<moverl_msgs::ResetRobot> reset_;
+  ros::Subscriber state_sub_;
+  ros::ServiceServer step_srv_, reset_srv_;
+  std::unique_ptr<ChainKinematics> kinematics_;
+  std::vector<std::string> joints_;
+  std::map<std::string, size_t> index_;
+  bool enabled_ = true, plan_on_path_collision_ = true;
+  double velocity_scale_ = 1.0;
+  std::vector<double> q_;
+  ros::Time state_stamp_;
+  bool have_state_ = false;
+  bool contacts_available_ = false;
+  uint64_t total_contact_substeps_ = 0;
+};
+
+}  // namespace
+}  // namespace moverl_shield
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "shield");
+  ros::NodeHandle nh, pnh("~");
+  try {
+    moverl_shield::ShieldNode node(nh, pnh);
+    ros::spin();
+  } catch (const std::exception& e) {
+    ROS_FATAL("shield: %s", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,575 @@
+"""ROS-free PyBullet simulator of one robot arm among static obstacles, with ground-truth contacts.
+
+The Simulator owns its own BulletClient (never the global pybullet connection), so several
+simulators can live in one process. It is not thread safe: callers serialise access.
+"""
+import math
+from dataclasses import dataclass, field
+from typing import Dict, List, NamedTuple, Tuple
+
+import numpy as np
+import pybullet
+from pybullet_utils import bullet_client
+
+from .world import World
+
+__all__ = ["Simulator", "ContactStats", "ExecutionResult", "Motion", "InvalidTrajectory", "LimitViolation"]
+
+POSITION_TOLERANCE = 1e-6       # rad (or m): tolerance on the joint position limits
+VELOCITY_TOLERANCE = 1e-6       # relative tolerance on the velocity limits
+START_TOLERANCE = 1e-4          # a first point at t=0 must be this close to the current state
+
+
+class InvalidTrajectory(ValueError):
+    """Malformed request: empty, wrong sizes, NaN/inf, non-increasing times, wrong start point."""
+
+
+class LimitViolation(ValueError):
+    """A position leaves the joint limits or a segment exceeds the joint velocity limits."""
+
+
+@dataclass
+class ContactStats:
+    """Contacts of the robot over one motion (every physics substep).
+
+    world_pairs: (robot link name, world object id) -> deepest penetration (m, positive).
+    self_pairs: (link name, link name), sorted -> deepest penetration (m, positive).
+    """
+    substeps: int = 0
+    substeps_in_contact: int = 0
+    world_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
+    self_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
+    total_contact_substeps: int = 0   # running total since the simulator started
+
+    @property
+    def world_contacts(self):
+        return len(self.world_pairs)
+
+    @property
+    def self_contacts(self):
+        return len(self.self_pairs)
+
+    @property
+    def in_contact(self):
+        return self.substeps_in_contact > 0
+
+
+class ExecutionResult(NamedTuple):
+    positions: Tuple[float, ...]   # controlled joints, in the configured order, at the end
+    contacts: ContactStats
+
+
+class Motion:
+    """A validated trajectory, sampled at every physics substep, being executed."""
+    __slots__ = ("targets", "velocities", "n", "k", "stats", "_counts", "final")
+
+    def __init__(self, targets, velocities, final):
+        self.targets = targets          # list (per substep) of [[q1], [q2], ...]
+        self.velocities = velocities    # same shape: segment velocities
+        self.final = final              # tuple: last setpoint
+        self.n = len(targets)
+        self.k = 0
+        self.stats = ContactStats()
+        self._counts = [0, 0]           # substeps, substeps in contact
+
+    @property
+    def done(self):
+        return self.k >= self.n
+
+    @property
+    def remaining(self):
+        return self.n - self.k
+
+
+def _quat_from_pybullet(q):
+    return (q[0], q[1], q[2], q[3])
+
+
+class Simulator:
+    """One robot (fixed base at the world origin) and static obstacles in a PyBullet world.
+
+    urdf_path: URDF file with resolvable (absolute) mesh paths.
+    joints: controlled joint names, in the order of every position vector.
+    base_link: link mounted to the world; its contacts (and those of links rigidly fixed to it) with
+        the world are ignored.
+    fixed_joint_positions: {joint: value} for movable joints that are not controlled (held there).
+    world: a moverl_sim.world.World.
+    control: "kinematic" (joints set exactly at every substep, collision detection only) or
+        "dynamic" (position-controlled motors track the setpoint, full physics).
+    """
+
+    def __init__(self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None,
+                 physics_hz=240.0, gui=False, control="kinematic"):
+        if control not in ("kinematic", "dynamic"):
+            raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
+        physics_hz = float(physics_hz)
+        if not math.isfinite(physics_hz) or physics_hz <= 0:
+            raise ValueError("physics_hz must be positive, got %r" % (physics_hz,))
+        self.control = control
+        self.physics_hz = physics_hz
+        self.dt = 1.0 / physics_hz
+        self.world = world if world is not None else World(name="empty")
+        self._substeps_total = 0
+        self._total_contact_substeps = 0
+        self._q = None                 # cached controlled positions (kinematic mode, at rest)
+
+        self._p = bullet_client.BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
+        p = self._p
+        try:
+            p.setGravity(0, 0, -9.81)
+            p.setTimeStep(self.dt)
+            flags = pybullet.URDF_USE_SELF_COLLISION | pybullet.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+            try:
+                self.robot = p.loadURDF(str(urdf_path), [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
+            except pybullet.error as exc:
+                raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
+            self._setup_robot(list(joints), base_link, dict(fixed_joint_positions or {}))
+            self._setup_world()
+            self._setup_collision_filters()
+        except Exception:
+            self.close()
+            raise
+        # Bound PyBullet functions for the hot path (BulletClient.__getattr__ is slow).
+        cid = self._p._client
+        self._cid = cid
+        self._reset_states = lambda body, idx, q, v: pybullet.resetJointStatesMultiDof(
+            body, idx, q, v, physicsClientId=cid)
+        self.reset_robot([min(max(0.0, lo), hi) for lo, hi in zip(self.lower, self.upper)])
+
+    # ------------------------------------------------------------------ setup
+    def _setup_robot(self, joints, base_link, fixed):
+        p, robot = self._p, self.robot
+        n = p.getNumJoints(robot)
+        root_name = p.getBodyInfo(robot)[0].decode()
+        self.link_names = {-1: root_name}
+        joint_info = {}
+        parent_of = {}
+        self._joint_type = {}
+        for j in range(n):
+            info = p.getJointInfo(robot, j)
+            name = info[1].decode()
+            joint_info[name] = info
+            self.link_names[j] = info[12].decode()
+            parent_of[j] = info[16]
+            self._joint_type[j] = info[2]
+        self._link_index = {v: k for k, v in self.link_names.items()}
+        movable = [name for name, info in joint_info.items()
+                   if info[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)]
+        if not joints:
+            raise ValueError("no controlled joints configured")
+        if len(set(joints)) != len(joints):
+            raise ValueError("controlled joints are listed twice: %s" % joints)
+        for name in joints:
+            if name not in joint_info:
+                raise ValueError("joint %r is not in the URDF; its movable joints are: %s"
+                                 % (name, ", ".join(movable)))
+            if name not in movable:
+                raise ValueError("joint %r is not a revolute or prismatic joint; movable joints are: %s"
+                                 % (name, ", ".join(movable)))
+        if base_link not in self._link_index:
+            raise ValueError("base link %r is not in the URDF; its links are: %s"
+                             % (base_link, ", ".join(self.link_names[i] for i in sorted(self.link_names))))
+        self.joint_names = tuple(joints)
+        self.base_link = base_link
+        self.joint_indices = [joint_info[name][0] for name in joints]
+        lower, upper, vmax, effort = [], [], [], []
+        for name in joints:
+            info = joint_info[name]
+            lo, hi = float(info[8]), float(info[9])
+            if hi < lo:      # continuous joint: PyBullet reports lower=0, upper=-1
+                lo, hi = -math.inf, math.inf
+            v = float(info[11])
+            lower.append(lo)
+            upper.append(hi)
+            vmax.append(v if v > 0 else math.inf)
+            effort.append(float(info[10]) if info[10] > 0 else 1000.0)
+        self.lower, self.upper = tuple(lower), tuple(upper)
+        self.velocity_limits = tuple(vmax)
+        self._effort = effort
+        self._lower_np, self._upper_np = np.array(lower), np.array(upper)
+        self._vmax_np = np.array(vmax)
+
+        # Uncontrolled movable joints: held at fixed_joint_positions (default 0 clipped to the limits).
+        for name in fixed:
+            if name not in joint_info:
+                raise ValueError("fixed_joint_positions names joint %r, which is not in the URDF; its "
+                                 "movable joints are: %s" % (name, ", ".join(movable)))
+            if name in joints:
+                raise ValueError("joint %r is both controlled and in fixed_joint_positions" % name)
+        self.fixed_joint_names, self.fixed_joint_indices, fixed_values = [], [], []
+        for name in movable:
+            if name in joints:
+                continue
+            info = joint_info[name]
+            lo, hi = float(info[8]), float(info[9])
+            value = float(fixed.get(name, 0.0))
+            if not math.isfinite(value):
+                raise ValueError("fixed joint %r: non-finite position %r" % (name, value))
+            if hi >= lo:
+                if name in fixed and not lo - POSITION_TOLERANCE <= value <= hi + POSITION_TOLERANCE:
+                    raise ValueError("fixed joint %r: position %g outside its limits [%g, %g]" % (name, value, lo, hi))
+                value = min(max(value, lo), hi)
+            self.fixed_joint_names.append(name)
+            self.fixed_joint_indices.append(info[0])
+            fixed_values.append(value)
+        self.fixed_joint_positions = tuple(fixed_values)
+        for j, value in zip(self.fixed_joint_indices, fixed_values):
+            p.resetJointState(robot, j, value, 0.0)
+        if self.control == "dynamic":
+            # Motors hold the uncontrolled joints; PyBullet's default velocity motors are replaced.
+            if self.fixed_joint_indices:
+                p.setJointMotorControlArray(robot, self.fixed_joint_indices, pybullet.POSITION_CONTROL,
+                                            targetPositions=fixed_values,
+                                            forces=[max(float(joint_info[nm][10]), 1.0) for nm in self.fixed_joint_names])
+        else:
+            # Nothing is stepped in kinematic mode, but disable the default motors anyway.
+            all_movable = [joint_info[nm][0] for nm in movable]
+            p.setJointMotorControlArray(robot, all_movable, pybullet.VELOCITY_CONTROL,
+                                        targetVelocities=[0.0] * len(all_movable), forces=[0.0] * len(all_movable))
+
+        # Rigid groups: links joined by fixed joints move together.
+        group = {i: i for i in self.link_names}
+
+        def find(i):
+            while group[i] != i:
+                group[i] = group[group[i]]
+                i = group[i]
+            return i
+
+        for j in range(n):
+            if self._joint_type[j] == pybullet.JOINT_FIXED:
+                group[find(j)] = find(parent_of[j])
+        self._group = {i: find(i) for i in self.link_names}
+        root_group = self._group[-1]
+        if self._group[self._link_index[base_link]] != root_group:
+            raise ValueError("base link %r is not rigidly attached to the URDF root link %r"
+                             % (base_link, root_name))
+        self._base_fixed_links = frozenset(i for i in self.link_names if self._group[i] == root_group)
+        self._has_geometry = {i: len(p.getCollisionShapeData(robot, i)) > 0 for i in self.link_names}
+
+        # Adjacency: parent/child through fixed joints and geometry-less links.
+        group_has_geom = {}
+        for i, g in self._group.items():
+            group_has_geom[g] = group_has_geom.get(g, False) or self._has_geometry[i]
+        group_parent = {}
+        for j in range(n):
+            if self._joint_type[j] != pybullet.JOINT_FIXED:
+                group_parent[self._group[j]] = self._group[parent_of[j]]
+
+        def effective_parent(g):
+            q = group_parent.get(g)
+            while q is not None and not group_has_geom[q]:
+                q = group_parent.get(q)
+            return q
+
+        adjacent_groups = set()
+        for g in set(self._group.values()):
+            q = effective_parent(g)
+            if q is not None:
+                adjacent_groups.add((g, q))
+                adjacent_groups.add((q, g))
+        geom_links = [i for i in self.link_names if self._has_geometry[i]]
+        self.adjacent_pairs = set()   # (link index, link index) pairs whose contacts are ignored
+        for a in geom_links:
+            for b in geom_links:
+                if a < b:
+                    ga, gb = self._group[a], self._group[b]
+                    if ga == gb or (ga, gb) in adjacent_groups:
+                        self.adjacent_pairs.add((a, b))
+                        self.adjacent_pairs.add((b, a))
+
+    def _setup_world(self):
+        p = self._p
+        self._object_bodies = {}
+        self._body_object = {}
+        for obj in self.world.objects:
+            if obj.shape == "box":
+                half = [s / 2.0 for s in obj.size]
+                col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+                vis = p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.6, 0.45, 0.3, 1])
+            elif obj.shape == "sphere":
+                col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=obj.size[0])
+                vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=obj.size[0], rgbaColor=[0.8, 0.2, 0.2, 1])
+            elif obj.shape == "cylinder":
+                h, r = obj.size
+                col = p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=h)
+                vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=[0.2, 0.4, 0.8, 1])
+            else:  # World validation makes this unreachable
+                raise ValueError("object %r: unknown shape %r" % (obj.id, obj.shape))
+            body = p.createMultiBody(baseMass=0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis,
+                                     basePosition=list(obj.xyz), baseOrientation=list(obj.quaternion))
+            self._object_bodies[obj.id] = body
+            self._body_object[body] = obj.id
+
+    def _setup_collision_filters(self):
+        p, robot = self._p, self.robot
+        for a, b in self.adjacent_pairs:
+            if a < b:
+                p.setCollisionFilterPair(robot, robot, a, b, 0)
+        for body in self._body_object:
+            for link in self._base_fixed_links:
+                p.setCollisionFilterPair(robot, body, link, -1, 0)
+
+    def close(self):
+        p = getattr(self, "_p", None)
+        if p is not None:
+            try:
+                p.disconnect()
+            except pybullet.error:
+                pass
+            self._p = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # ------------------------------------------------------------------ state
+    @property
+    def sim_time(self):
+        """Simulated seconds since start: substeps / physics_hz."""
+        return self._substeps_total / self.physics_hz
+
+    @property
+    def substeps_total(self):
+        return self._substeps_total
+
+    @property
+    def total_contact_substeps(self):
+        return self._total_contact_substeps
+
+    def joint_positions(self):
+        """Controlled joint positions, in the configured order."""
+        if self._q is not None:      # kinematic mode: the joints are exactly where we put them
+            return self._q
+        return tuple(s[0] for s in self._p.getJointStates(self.robot, self.joint_indices))
+
+    def joint_velocities(self):
+        return tuple(s[1] for s in self._p.getJointStates(self.robot, self.joint_indices))
+
+    def link_poses(self):
+        """{link name: ((x, y, z), (qx, qy, qz, qw))} of every URDF link frame in the world frame."""
+        p, robot = self._p, self.robot
+        pos, orn = p.getBasePositionAndOrientation(robot)
+        inertial = p.getDynamicsInfo(robot, -1)
+        inv_pos, inv_orn = p.invertTransform(inertial[3], inertial[4])
+        bpos, born = p.multiplyTransforms(pos, orn, inv_pos, inv_orn)
+        poses = {self.link_names[-1]: (tuple(bpos), _quat_from_pybullet(born))}
+        indices = [i for i in self.link_names if i >= 0]
+        if indices:
+            states = p.getLinkStates(robot, indices, computeForwardKinematics=True)
+            for i, s in zip(indices, states):
+                poses[self.link_names[i]] = (tuple(s[4]), _quat_from_pybullet(s[5]))
+        return poses
+
+    def contacts_now(self):
+        """Contacts of the current configuration (runs collision detection; sim time does not advance)."""
+        stats = ContactStats()
+        self._p.performCollisionDetection()
+        pts = pybullet.getContactPoints(self.robot, physicsClientId=self._cid)
+        if pts and self._accumulate(pts, stats):
+            stats.substeps_in_contact = 1
+        stats.total_contact_substeps = self._total_contact_substeps
+        return stats
+
+    # ------------------------------------------------------------------ validation
+    def _check_positions(self, q, what):
+        bad = ~((q >= self._lower_np - POSITION_TOLERANCE) & (q <= self._upper_np + POSITION_TOLERANCE))
+        if bad.any():
+            j = int(np.argmax(bad))
+            raise LimitViolation("%s: joint %s = %.6g outside its limits [%.6g, %.6g]"
+                                 % (what, self.joint_names[j], q[j], self.lower[j], self.upper[j]))
+
+    def reset_robot(self, q):
+        """Teleport the controlled joints to q (velocity 0). No contacts counted, sim time unchanged."""
+        try:
+            arr = np.asarray(q, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise InvalidTrajectory("positions must be numbers, got %r" % (q,)) from None
+        n = len(self.joint_indices)
+        if arr.shape[0] != n:
+            raise InvalidTrajectory("expected %d positions (%s), got %d"
+                                    % (n, ", ".join(self.joint_names), arr.shape[0]))
+        if not np.all(np.isfinite(arr)):
+            raise InvalidTrajectory("positions contain NaN or inf: %s" % arr.tolist())
+        self._check_positions(arr, "reset")
+        arr = np.minimum(np.maximum(arr, self._lower_np), self._upper_np)
+        values = arr[:, None].tolist()
+        self._q = None
+        self._reset_states(self.robot, self.joint_indices, values, [[0.0]] * n)
+        if self.control == "kinematic":
+            self._q = tuple(arr.tolist())
+        else:
+            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
+                                              targetPositions=arr.tolist(), forces=self._effort)
+        return self.joint_positions()
+
+    def prepare(self, times, positions):
+        """Validate a trajectory and sample it at every physics substep. Nothing moves.
+
+        times: time_from_start (s) of each point, strictly increasing, >= 0.
+        positions: one row per point, one column per controlled joint.
+        A first point at t=0 must equal the current state (within 1e-4); without one the motion
+        starts from the current state. Raises InvalidTrajectory or LimitViolation.
+        """
+        n = len(self.joint_indices)
+        try:
+            t = np.asarray(times, dtype=float).reshape(-1)
+            P = np.asarray(positions, dtype=float)
+        except (TypeError, ValueError):
+            raise InvalidTrajectory("times and positions must be numbers") from None
+        if t.shape[0] == 0:
+            raise InvalidTrajectory("empty trajectory")
+        if P.ndim != 2 or P.shape[0] != t.shape[0] or P.shape[1] != n:
+            raise InvalidTrajectory("expected %d points x %d joints (%s), got positions of shape %s"
+                                    % (t.shape[0], n, ", ".join(self.joint_names), P.shape))
+        if not np.all(np.isfinite(t)):
+            raise InvalidTrajectory("times contain NaN or inf")
+        if not np.all(np.isfinite(P)):
+            i = int(np.argmax(~np.all(np.isfinite(P), axis=1)))
+            raise InvalidTrajectory("point %d contains NaN or inf: %s" % (i, P[i].tolist()))
+        if t[0] < 0:
+            raise InvalidTrajectory("negative time_from_start %g at point 0" % t[0])
+        if t.shape[0] > 1:
+            dts = np.diff(t)
+            if np.any(dts <= 0):
+                i = int(np.argmax(dts <= 0))
+                raise InvalidTrajectory("times must be strictly increasing: point %d at %g s, point %d at %g s"
+                                        % (i, t[i], i + 1, t[i + 1]))
+        bad = (P < self._lower_np - POSITION_TOLERANCE) | (P > self._upper_np + POSITION_TOLERANCE)
+        if bad.any():
+            i = int(np.argmax(bad.any(axis=1)))
+            self._check_positions(P[i], "point %d" % i)
+        current = np.array(self.joint_positions())
+        if t[0] == 0.0:
+            dev = np.abs(P[0] - current)
+            if np.any(dev > START_TOLERANCE):
+                j = int(np.argmax(dev))
+                raise InvalidTrajectory("the point at t=0 must be the current state: joint %s is %.6g, "
+                                        "currently %.6g" % (self.joint_names[j], P[0, j], current[j]))
+            P = P.copy()
+            P[0] = current
+        else:
+            t = np.concatenate(([0.0], t))
+            P = np.vstack((current, P))
+        P = np.minimum(np.maximum(P, self._lower_np), self._upper_np)
+        T = float(t[-1])
+        nsub = int(math.ceil(T * self.physics_hz - 1e-9)) if T > 0 else 0
+        if nsub == 0:
+            return Motion([], [], tuple(P[-1].tolist()))
+        dts = np.diff(t)
+        vel = (P[1:] - P[:-1]) / dts[:, None]
+        over = np.abs(vel) > self._vmax_np * (1.0 + VELOCITY_TOLERANCE)
+        if over.any():
+            s, j = np.unravel_index(int(np.argmax(over)), over.shape)
+            raise LimitViolation("segment %.3g s -> %.3g s: joint %s moves at %.6g rad/s, above its velocity "
+                                 "limit %.6g" % (t[s], t[s + 1], self.joint_names[j], abs(vel[s, j]),
+                                                 self.velocity_limits[j]))
+        ts = np.minimum(np.arange(1, nsub + 1, dtype=float) * self.dt, T)
+        seg = np.clip(np.searchsorted(t, ts, side="left") - 1, 0, len(dts) - 1)
+        alpha = (ts - t[seg]) / dts[seg]
+        q = P[seg] + alpha[:, None] * (P[seg + 1] - P[seg])
+        q[-1] = P[-1]
+        return Motion(q[:, :, None].tolist(), vel[seg][:, :, None].tolist(), tuple(P[-1].tolist()))
+
+    # ------------------------------------------------------------------ execution
+    def execute(self, times, positions):
+        """Validate and run a whole trajectory. Returns ExecutionResult(positions, contacts)."""
+        motion = self.prepare(times, positions)
+        self.advance(motion, motion.n)
+        return self.finish(motion)
+
+    def advance(self, motion, max_substeps):
+        """Run up to max_substeps substeps of motion; returns how many ran."""
+        robot, idx, cid = self.robot, self.joint_indices, self._cid
+        self._q = None
+        reset = self._reset_states
+        get_contacts = pybullet.getContactPoints
+        kinematic = self.control == "kinematic"
+        if kinematic:
+            detect = pybullet.performCollisionDetection
+        else:
+            step = pybullet.stepSimulation
+            motor = pybullet.setJointMotorControlArray
+            mode, effort = pybullet.POSITION_CONTROL, self._effort
+        accumulate = self._accumulate
+        stats = motion.stats
+        targets, vels = motion.targets, motion.velocities
+        k0 = motion.k
+        k1 = min(motion.n, k0 + max(0, int(max_substeps)))
+        in_contact = 0
+        for k in range(k0, k1):
+            if kinematic:
+                reset(robot, idx, targets[k], vels[k])
+                detect(physicsClientId=cid)
+            else:
+                motor(robot, idx, mode, targetPositions=[v[0] for v in targets[k]],
+                      targetVelocities=[v[0] for v in vels[k]], forces=effort, physicsClientId=cid)
+                step(physicsClientId=cid)
+            pts = get_contacts(robot, physicsClientId=cid)
+            if pts and accumulate(pts, stats):
+                in_contact += 1
+        ran = k1 - k0
+        motion.k = k1
+        stats.substeps += ran
+        stats.substeps_in_contact += in_contact
+        self._substeps_total += ran
+        self._total_contact_substeps += in_contact
+        stats.total_contact_substeps = self._total_contact_substeps
+        return ran
+
+    def finish(self, motion):
+        """End a motion: in kinematic mode the robot stops exactly at the last setpoint."""
+        if self.control == "kinematic":
+            final = [[v] for v in motion.final]
+            self._reset_states(self.robot, self.joint_indices, final, [[0.0]] * len(final))
+            self._q = tuple(motion.final)
+        else:
+            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
+                                              targetPositions=list(motion.final), forces=self._effort)
+        motion.stats.total_contact_substeps = self._total_contact_substeps
+        return ExecutionResult(self.joint_positions(), motion.stats)
+
+    def hold(self, substeps=1):
+        """Let time pass with the robot holding still (realtime idling). No contacts are recorded."""
+        substeps = int(substeps)
+        if substeps <= 0:
+            return
+        if self.control == "dynamic":
+            for _ in range(substeps):
+                pybullet.stepSimulation(physicsClientId=self._cid)
+        self._substeps_total += substeps
+
+    def _accumulate(self, pts, stats):
+        """Record penetrating contacts; True when at least one counted."""
+        robot = self.robot
+        names = self.link_names
+        body_object = self._body_object
+        adjacent = self.adjacent_pairs
+        base_fixed = self._base_fixed_links
+        found = False
+        for pt in pts:
+            dist = pt[8]
+            if dist >= 0.0:
+                continue
+            a, b, la, lb = pt[1], pt[2], pt[3], pt[4]
+            if a == robot and b == robot:
+                if la == lb or (la, lb) in adjacent:
+                    continue
+                na, nb = names[la], names[lb]
+                key = (na, nb) if na <= nb else (nb, na)
+                pairs = stats.self_pairs
+            else:
+                if a != robot:
+                    a, b, la, lb = b, a, lb, la
+                obj = body_object.get(b)
+                if obj is None or la in base_fixed:
+                    continue
+                key = (names[la], obj)
+                pairs = stats.world_pairs
+            depth = -dist
+            if depth > pairs.get(key, 0.0):
+                pairs[key] = depth
+            found = True
+        return found

@@ -1,0 +1,63 @@
+"""Conversions between the ROS-free core (world, contacts, joint state) and ROS messages.
+
+Imports message modules only (no roscore needed), so it is unit-testable.
+"""
+import rospy
+from geometry_msgs.msg import Pose
+from moverl_msgs.msg import CollisionPair, ContactReport, World as WorldMsg, WorldObject as WorldObjectMsg
+from sensor_msgs.msg import JointState
+from shape_msgs.msg import SolidPrimitive
+
+_SHAPE_TYPES = {"box": SolidPrimitive.BOX, "sphere": SolidPrimitive.SPHERE, "cylinder": SolidPrimitive.CYLINDER}
+
+
+def sim_stamp(seconds):
+    return rospy.Time.from_sec(max(0.0, seconds))
+
+
+def world_to_msg(world, stamp_sec=0.0):
+    """moverl_sim.world.World -> moverl_msgs/World (SolidPrimitive conventions, rpy -> quaternion)."""
+    msg = WorldMsg()
+    msg.header.frame_id = world.frame
+    msg.header.stamp = sim_stamp(stamp_sec)
+    msg.name = world.name
+    if "goal" in WorldMsg.__slots__:   # float64[] goal, added to World.msg after the first contract
+        msg.goal = list(world.goal) if world.goal is not None else []
+    for obj in world.objects:
+        o = WorldObjectMsg()
+        o.id = obj.id
+        o.shape = SolidPrimitive(type=_SHAPE_TYPES[obj.shape], dimensions=list(obj.size))
+        pose = Pose()
+        pose.position.x, pose.position.y, pose.position.z = obj.xyz
+        q = obj.quaternion
+        pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
+        o.pose = pose
+        o.observed = bool(obj.observed)
+        msg.objects.append(o)
+    return msg
+
+
+def contacts_to_msg(stats, stamp_sec):
+    """core.ContactStats -> moverl_msgs/ContactReport (available=true). World pairs: a=link, b=object id."""
+    msg = ContactReport()
+    msg.header.stamp = sim_stamp(stamp_sec)
+    msg.available = True
+    msg.substeps = stats.substeps
+    msg.substeps_in_contact = stats.substeps_in_contact
+    msg.world_contacts = stats.world_contacts
+    msg.self_contacts = stats.self_contacts
+    msg.total_contact_substeps = stats.total_contact_substeps
+    for (a, b), depth in sorted(stats.world_pairs.items()):
+        msg.pairs.append(CollisionPair(a=a, b=b, depth=depth))
+    for (a, b), depth in sorted(stats.self_pairs.items()):
+        msg.pairs.append(CollisionPair(a=a, b=b, depth=depth))
+    return msg
+
+
+def joint_state_msg(names, positions, velocities, stamp_sec):
+    msg = JointState()
+    msg.header.stamp = sim_stamp(stamp_sec)
+    msg.name = list(names)
+    msg.position = list(positions)
+    msg.velocity = list(velocities)
+    return msg

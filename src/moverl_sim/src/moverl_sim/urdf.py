@@ -1,0 +1,111 @@
+"""URDF helpers: resolve robot URIs and produce a self-contained robot description.
+
+ROS-free except for the optional ``rospkg`` lookup of ``package://`` URIs.
+"""
+import os
+import xml.etree.ElementTree as ET
+
+__all__ = ["UrdfError", "resolve_uri", "rewrite_mesh_paths", "robot_description"]
+
+
+class UrdfError(Exception):
+    """A URDF (or one of its meshes) cannot be found or is not valid."""
+
+
+def _ros_package_path(pkg):
+    """Absolute path of a ROS package, or None when rospkg is missing or does not know it."""
+    try:
+        import rospkg
+    except ImportError:
+        return None
+    try:
+        return rospkg.RosPack().get_path(pkg)
+    except Exception:  # rospkg.ResourceNotFound, bad ROS_PACKAGE_PATH, ...
+        return None
+
+
+def _pybullet_data_path():
+    try:
+        import pybullet_data
+    except ImportError as exc:
+        raise UrdfError("pybullet_data:// URI but the pybullet_data package is not installed") from exc
+    return pybullet_data.getDataPath()
+
+
+def resolve_uri(uri, base_dir=None):
+    """Turn a URI into an absolute file path (the file is not required to exist).
+
+    Accepted: an absolute path, ``file:///abs/path``, ``package://<ros_pkg>/<rel>`` (rospkg; when no
+    ROS package has that name, ``<base_dir>/<ros_pkg>/<rel>`` is used, the habit of URDFs that say
+    ``package://meshes/...`` relative to their own folder), ``pybullet_data://<rel>`` and a relative
+    path (relative to ``base_dir``, or the current directory).
+    """
+    if not isinstance(uri, str) or not uri.strip():
+        raise UrdfError("empty URI")
+    uri = uri.strip()
+    if uri.startswith("file://"):
+        path = uri[len("file://"):]
+        if not os.path.isabs(path):
+            raise UrdfError("file:// URI must hold an absolute path: %r" % uri)
+        return os.path.normpath(path)
+    if uri.startswith("pybullet_data://"):
+        rel = uri[len("pybullet_data://"):].lstrip("/")
+        return os.path.normpath(os.path.join(_pybullet_data_path(), rel))
+    if uri.startswith("package://"):
+        rest = uri[len("package://"):]
+        pkg, _, rel = rest.partition("/")
+        if not pkg or not rel:
+            raise UrdfError("malformed package:// URI (expected package://<pkg>/<path>): %r" % uri)
+        pkg_path = _ros_package_path(pkg)
+        if pkg_path is not None:
+            return os.path.normpath(os.path.join(pkg_path, rel))
+        if base_dir is not None:
+            return os.path.normpath(os.path.join(base_dir, pkg, rel))
+        raise UrdfError("no ROS package named %r (from %r) and no base folder to resolve it in" % (pkg, uri))
+    if "://" in uri:
+        raise UrdfError("unsupported URI scheme: %r (use a path, file://, package:// or pybullet_data://)" % uri)
+    if os.path.isabs(uri):
+        return os.path.normpath(uri)
+    return os.path.normpath(os.path.join(base_dir if base_dir is not None else os.getcwd(), uri))
+
+
+def _parse_urdf(text, source):
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise UrdfError("%s is not valid XML: %s" % (source, exc)) from None
+    if root.tag != "robot":
+        raise UrdfError("%s is not a URDF: root element is <%s>, expected <robot>" % (source, root.tag))
+    if root.find("link") is None:
+        raise UrdfError("%s is not a URDF: it has no <link>" % source)
+    return root
+
+
+def rewrite_mesh_paths(text, base_dir=None, source="robot description", check_exists=True):
+    """Return URDF text where every ``<mesh filename=...>`` is an absolute path.
+
+    Raises UrdfError when the text is not a URDF or (check_exists) a mesh file does not exist.
+    """
+    root = _parse_urdf(text, source)
+    for mesh in root.iter("mesh"):
+        fname = mesh.get("filename")
+        if fname is None:
+            raise UrdfError("%s: a <mesh> element has no filename attribute" % source)
+        path = resolve_uri(fname, base_dir)
+        if check_exists and not os.path.isfile(path):
+            raise UrdfError("%s: mesh %r resolves to %s, which does not exist" % (source, fname, path))
+        mesh.set("filename", path)
+    return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def robot_description(uri):
+    """The URDF text of ``uri`` with every mesh filename rewritten to an absolute, existing path."""
+    path = resolve_uri(uri)
+    if not os.path.isfile(path):
+        raise UrdfError("URDF file not found: %s (from %r)" % (path, uri))
+    try:
+        with open(path, "r", encoding="utf-8") as fh:
+            text = fh.read()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UrdfError("cannot read URDF %s: %s" % (path, exc)) from None
+    return rewrite_mesh_paths(text, base_dir=os.path.dirname(path), source=path)

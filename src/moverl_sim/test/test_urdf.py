@@ -1,0 +1,89 @@
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from conftest import PANDA_URI, PKG_DIR
+from moverl_sim.urdf import UrdfError, resolve_uri, robot_description
+
+SCRIPT = os.path.join(PKG_DIR, "scripts", "robot_description")
+
+
+def test_resolve_uri_forms(tmp_path):
+    import pybullet_data
+    data = pybullet_data.getDataPath()
+    assert resolve_uri(PANDA_URI) == os.path.join(data, "franka_panda", "panda.urdf")
+    assert resolve_uri("/a/b/../c.urdf") == "/a/c.urdf"
+    assert resolve_uri("file:///a/b.urdf") == "/a/b.urdf"
+    assert resolve_uri("meshes/x.obj", base_dir="/r") == "/r/meshes/x.obj"
+    # package://<name>/... with no such ROS package: relative to the URDF folder
+    assert resolve_uri("package://meshes_moverl_nonexistent/x.obj", base_dir="/r") == "/r/meshes_moverl_nonexistent/x.obj"
+    with pytest.raises(UrdfError, match="unsupported URI scheme"):
+        resolve_uri("http://example.com/robot.urdf")
+    with pytest.raises(UrdfError, match="no ROS package"):
+        resolve_uri("package://meshes_moverl_nonexistent/x.obj")
+
+
+def test_resolve_ros_package(tmp_path, monkeypatch):
+    pytest.importorskip("rospkg", reason="rospkg (python3-rospkg) is needed for package:// lookups")
+    pkg = tmp_path / "fake_moverl_pkg"
+    pkg.mkdir()
+    (pkg / "package.xml").write_text('<?xml version="1.0"?><package format="2"><name>fake_moverl_pkg</name>'
+                                     '<version>0.0.0</version><description>x</description>'
+                                     '<maintainer email="a@b.c">a</maintainer><license>BSD</license></package>')
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path))
+    assert resolve_uri("package://fake_moverl_pkg/urdf/r.urdf") == str(pkg / "urdf" / "r.urdf")
+
+
+def test_robot_description_meshes_absolute_and_existing():
+    text = robot_description(PANDA_URI)
+    root = ET.fromstring(text)
+    assert root.tag == "robot"
+    meshes = [m.get("filename") for m in root.iter("mesh")]
+    assert len(meshes) >= 10
+    for f in meshes:
+        assert os.path.isabs(f) and os.path.isfile(f), f
+    assert "package://" not in text
+    assert {l.get("name") for l in root.iter("link")} >= {"panda_link0", "panda_hand", "panda_link8"}
+
+
+def test_robot_description_errors(tmp_path):
+    with pytest.raises(UrdfError, match="not found"):
+        robot_description(str(tmp_path / "missing.urdf"))
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'>")
+    with pytest.raises(UrdfError, match="not valid XML"):
+        robot_description(str(bad))
+    notrobot = tmp_path / "notrobot.urdf"
+    notrobot.write_text("<sdf><model/></sdf>")
+    with pytest.raises(UrdfError, match="expected <robot>"):
+        robot_description(str(notrobot))
+    missing_mesh = tmp_path / "mm.urdf"
+    missing_mesh.write_text("<robot name='x'><link name='a'><visual><geometry>"
+                            "<mesh filename='meshes/none.obj'/></geometry></visual></link></robot>")
+    with pytest.raises(UrdfError, match="does not exist"):
+        robot_description(str(missing_mesh))
+
+
+def _run_script(*args):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.path.join(PKG_DIR, "src") + os.pathsep + env.get("PYTHONPATH", "")
+    return subprocess.run([sys.executable, SCRIPT] + list(args), capture_output=True, text=True, env=env, timeout=60)
+
+
+def test_robot_description_script(tmp_path):
+    r = _run_script(PANDA_URI)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("<?xml") and "<robot" in r.stdout and "package://" not in r.stdout
+    cfg = os.path.join(os.path.dirname(os.path.dirname(PKG_DIR)), "config", "robots", "panda.yaml")
+    r2 = _run_script("--robot-config", cfg)
+    assert r2.returncode == 0, r2.stderr
+    assert r2.stdout == r.stdout
+    r = _run_script(str(tmp_path / "missing.urdf"))
+    assert r.returncode == 1 and "not found" in r.stderr and r.stdout == ""
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("not xml at all <")
+    r = _run_script(str(bad))
+    assert r.returncode == 1 and "not valid XML" in r.stderr

@@ -1,0 +1,90 @@
+import math
+import os
+
+import pytest
+
+from conftest import TABLE_WORLD
+from moverl_sim.world import World, WorldFileError, load_world, rpy_to_quaternion
+
+
+def test_table_world_is_parsed():
+    w = load_world(TABLE_WORLD)
+    assert isinstance(w, World)
+    assert w.name == "table" and w.frame == "world"
+    assert w.goal == (0.4, 0.2, 0.2)
+    assert len(w.objects) == 1
+    t = w.object("table")
+    assert t.shape == "box" and t.size == (1.5, 0.8, 0.03)
+    assert t.xyz == (0.35, 0.0, -0.015) and t.rpy == (0.0, 0.0, 0.0)
+    assert t.observed is False
+    assert t.quaternion == pytest.approx((0.0, 0.0, 0.0, 1.0))
+    assert w.source == TABLE_WORLD
+
+
+def test_all_shapes_and_defaults(tmp_path):
+    p = tmp_path / "w.yaml"
+    p.write_text("name: w\nobjects:\n"
+                 "  - {id: s, shape: sphere, size: [0.1], xyz: [0.5, 0, 0.3]}\n"
+                 "  - {id: c, shape: cylinder, size: [0.4, 0.05], xyz: [0.4, 0.3, 0.2], rpy: [0, 0, 1.5707963267948966]}\n")
+    w = load_world(p)
+    assert w.frame == "world" and w.goal is None
+    s, c = w.objects
+    assert s.size == (0.1,) and s.observed is True
+    assert c.size == (0.4, 0.05)
+    h = math.sqrt(0.5)
+    assert c.quaternion == pytest.approx((0.0, 0.0, h, h))
+
+
+def test_rpy_to_quaternion_roll_pitch():
+    assert rpy_to_quaternion((math.pi, 0, 0)) == pytest.approx((1, 0, 0, 0), abs=1e-12)
+    assert rpy_to_quaternion((0, math.pi / 2, 0)) == pytest.approx((0, math.sqrt(0.5), 0, math.sqrt(0.5)))
+
+
+OBJ = "  - {id: box1, shape: box, size: [0.1, 0.1, 0.1], xyz: [0.5, 0, 0.2]}\n"
+BAD_WORLDS = {
+    # case: (file text, substring the error must contain)
+    "yaml_syntax": ("name: w\nobjects: [\n  - {id: a\n", "YAML syntax error"),
+    "not_mapping": ("- a\n- b\n", "mapping"),
+    "missing_name": ("objects: []\n", "'name'"),
+    "unknown_top_key": ("name: w\nobstacles: []\n", "'obstacles'"),
+    "unknown_shape": ("name: w\nobjects:\n  - {id: a, shape: cone, size: [1], xyz: [0, 0, 0]}\n", "unknown shape 'cone'"),
+    "size_length": ("name: w\nobjects:\n  - {id: a, shape: box, size: [1, 1], xyz: [0, 0, 0]}\n", "(id a).size"),
+    "size_length_cyl": ("name: w\nobjects:\n  - {id: a, shape: cylinder, size: [1], xyz: [0, 0, 0]}\n", "[height, radius]"),
+    "size_nonpositive": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [0], xyz: [0, 0, 0]}\n", "positive"),
+    "size_negative": ("name: w\nobjects:\n  - {id: a, shape: box, size: [1, -1, 1], xyz: [0, 0, 0]}\n", "positive"),
+    "duplicate_id": ("name: w\nobjects:\n" + OBJ + OBJ, "duplicate id 'box1'"),
+    "nan_xyz": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [.nan, 0, 0]}\n", "(id a).xyz"),
+    "inf_size": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [.inf], xyz: [0, 0, 0]}\n", "non-finite"),
+    "inf_goal": ("name: w\ngoal: [0, .inf, 0]\nobjects: []\n", "'goal'"),
+    "xyz_length": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0]}\n", "expected 3 numbers"),
+    "string_number": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [big], xyz: [0, 0, 0]}\n", "expected numbers"),
+    "missing_xyz": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1]}\n", "(id a).xyz': missing"),
+    "unknown_object_key": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], mass: 1}\n", ".mass"),
+    "bad_observed": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], observed: maybe}\n", ".observed"),
+    "numeric_id": ("name: w\nobjects:\n  - {id: 3, shape: sphere, size: [1], xyz: [0, 0, 0]}\n", "objects[0].id"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_WORLDS))
+def test_malformed_world_files(tmp_path, case):
+    text, expected = BAD_WORLDS[case]
+    p = tmp_path / ("%s.yaml" % case)
+    p.write_text(text)
+    with pytest.raises(WorldFileError) as err:
+        load_world(p)
+    msg = str(err.value)
+    assert str(p) in msg, msg
+    assert expected in msg, msg
+
+
+def test_missing_world_file(tmp_path):
+    p = os.path.join(str(tmp_path), "nope.yaml")
+    with pytest.raises(WorldFileError, match="nope.yaml: world file not found"):
+        load_world(p)
+
+
+def test_world_dataclass_is_extensible():
+    # New optional keys become dataclass fields with defaults: constructing without them must work.
+    from moverl_sim.world import WorldObject
+    o = WorldObject(id="a", shape="sphere", size=(0.1,), xyz=(0, 0, 0))
+    assert o.rpy == (0.0, 0.0, 0.0) and o.observed is True

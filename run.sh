@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# MoveRL entry points (run ./catkin_ws_setup.sh first):
+#   ./run.sh demo     short safe PPO training on the table world; prints success, interventions, contacts, steps/s
+#   ./run.sh test     every test: gtest (C++ cores), pytest (Python cores), rostest (live graph), env checks
+#   ./run.sh bench    speed benchmark (env steps/s shield on/off, bare PyBullet, panda-gym, check latencies)
+#   ./run.sh train .. moverl_gym's train.py with your arguments
+set -eo pipefail
+cd "$(dirname "$0")"
+# shellcheck disable=SC1091
+source ./env.sh
+cmd=${1:-}; shift || true
+case "$cmd" in
+  demo)  exec python src/moverl_gym/scripts/train.py --env MoveRL/PandaReachTable-v0 -n 5000 --log-folder runs/demo "$@" ;;
+  train) exec python src/moverl_gym/scripts/train.py "$@" ;;
+  bench) exec python src/moverl_gym/scripts/benchmark.py "$@" ;;
+  test)  exec bash tests/run_all.sh "$@" ;;
+  *) sed -n '2,7p' "$0"; exit 2 ;;
+esac

@@ -1,0 +1,7 @@
+"""MoveRL Gymnasium environments. Importing this package registers every env id (see ENV_IDS)."""
+
+from .registration import ENV_IDS, register_envs
+
+register_envs()
+
+__all__ = ["ENV_IDS", "register_envs"]

@@ -1,0 +1,28 @@
+"""Env ids registered as data: one per scenario x observation kind (panda-gym style)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from .paths import config_file
+from .task import TaskConfig
+
+#: Scenario name -> world file name in worlds/.
+SCENARIOS = {"Table": "table"}
+#: Observation kind suffix -> obs_type.
+OBSERVATIONS = {"": "joints", "EE": "ee"}
+ROBOT = "Panda"
+VERSION = "v0"
+
+ENV_IDS: list[str] = [f"MoveRL/{ROBOT}Reach{s}{o}-{VERSION}" for s in SCENARIOS for o in OBSERVATIONS]
+
+
+def register_envs() -> None:
+    max_steps = TaskConfig.from_yaml(config_file("env.yaml")).max_episode_steps
+    for scenario, world in SCENARIOS.items():
+        for suffix, obs_type in OBSERVATIONS.items():
+            env_id = f"MoveRL/{ROBOT}Reach{scenario}{suffix}-{VERSION}"
+            if env_id in gym.registry:
+                continue
+            gym.register(env_id, entry_point="moverl_gym.env:MoveRLReachEnv", max_episode_steps=max_steps,
+                         kwargs={"world": world, "obs_type": obs_type})

@@ -1,0 +1,59 @@
+"""The reach task, ROS-free: goal, reward and success (paper sec. 4.5-4.6, constants from config/env.yaml)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Constants of the reach task; every field is documented in config/env.yaml."""
+
+    dt: float = 0.05
+    kappa: float = 10.0
+    goal_reward: float = 10.0
+    step_penalty: float = -0.2
+    safety_penalty: float = -1.0
+    goal_tolerance: float = 0.10
+    max_episode_steps: int = 100
+    start_sampling_attempts: int = 1000
+
+    @classmethod
+    def from_yaml(cls, path: Path, **overrides) -> "TaskConfig":
+        with open(path) as f:
+            data = yaml.safe_load(f) or {}
+        data.update(overrides)
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown task settings {sorted(unknown)} (known: {sorted(known)})")
+        types = {f.name: f.type for f in fields(cls)}
+        return cls(**{k: (int(v) if types[k] in (int, "int") else float(v)) for k, v in data.items()})
+
+
+class ReachTask:
+    """Reward r = kappa * (d_prev - d) + goal_reward at the goal (else step_penalty) + safety_penalty if discarded."""
+
+    def __init__(self, config: TaskConfig, goal):
+        self.config = config
+        self.goal = np.asarray(goal, dtype=np.float64)
+        if self.goal.shape != (3,) or not np.isfinite(self.goal).all():
+            raise ValueError(f"goal must be 3 finite numbers, got {goal}")
+
+    def distance(self, ee_position) -> float:
+        return float(np.linalg.norm(np.asarray(ee_position) - self.goal))
+
+    def is_success(self, distance: float) -> bool:
+        return distance < self.config.goal_tolerance
+
+    def reward(self, d_prev: float, d: float, discarded: bool) -> float:
+        c = self.config
+        r = c.kappa * (d_prev - d)
+        r += c.goal_reward if self.is_success(d) else c.step_penalty
+        if discarded:
+            r += c.safety_penalty
+        return float(r)

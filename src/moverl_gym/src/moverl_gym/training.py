@@ -1,0 +1,105 @@
+"""Training helpers (RL Zoo style): hyper-parameters from YAML keyed by env id, an episode logger callback."""
+
+from __future__ import annotations
+
+import csv
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import yaml
+from stable_baselines3.common.callbacks import BaseCallback
+
+HYPERPARAMS_DIR = Path(__file__).resolve().parents[2] / "config" / "hyperparams"
+EPISODE_FIELDS = ["episode", "timesteps", "return", "length", "success", "interventions", "discarded_self",
+                  "discarded_pose", "discarded_path", "discarded_start", "replanned", "contacts",
+                  "contact_substeps", "cost", "wall_time"]
+
+
+def load_hyperparams(algo: str, env_id: str, path: Path | None = None) -> dict:
+    """Hyper-parameters for algo on env_id: the env's entry, else "default". Raises ValueError if neither."""
+    path = path or HYPERPARAMS_DIR / f"{algo}.yml"
+    if not path.exists():
+        raise ValueError(f"no hyper-parameter file {path} for algorithm '{algo}'")
+    with open(path) as f:
+        table = yaml.safe_load(f) or {}
+    params = table.get(env_id, table.get("default"))
+    if params is None:
+        raise ValueError(f"{path} has no entry for {env_id} and no 'default'")
+    return dict(params)
+
+
+class EpisodeLogger(BaseCallback):
+    """Per-episode return, length, success, shield interventions by type and ground-truth contacts.
+
+    Written as CSV rows (episodes.csv) and as TensorBoard scalars; totals kept for the final summary.
+    """
+
+    def __init__(self, csv_path: Path, verbose: int = 0):
+        super().__init__(verbose)
+        self.csv_path = Path(csv_path)
+        self.rows: list[dict] = []
+        self.totals = Counter()
+        self._t0 = time.perf_counter()
+
+    def _on_training_start(self) -> None:
+        n = self.training_env.num_envs
+        self._ep = [Counter() for _ in range(n)]
+        self._file = open(self.csv_path, "w", newline="")
+        self._writer = csv.DictWriter(self._file, fieldnames=EPISODE_FIELDS)
+        self._writer.writeheader()
+        self._t0 = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        infos, rewards, dones = self.locals["infos"], self.locals["rewards"], self.locals["dones"]
+        for i, info in enumerate(infos):
+            ep = self._ep[i]
+            ep["return"] += float(rewards[i])
+            ep["length"] += 1
+            verdict = info.get("verdict", "")
+            if verdict.startswith("discarded") or verdict == "replanned":
+                ep[verdict] += 1
+            if info.get("discarded"):
+                ep["interventions"] += 1
+            ep["contacts"] += max(info.get("contacts", 0), 0)
+            ep["contact_substeps"] += max(info.get("contact_substeps", 0), 0)
+            ep["cost"] += info.get("cost", 0.0)
+            if dones[i]:
+                ep["success"] = int(bool(info.get("is_success", False)))
+                self._finish(ep)
+                self._ep[i] = Counter()
+        return True
+
+    def _finish(self, ep: Counter) -> None:
+        row = {k: ep.get(k, 0) for k in EPISODE_FIELDS}
+        row.update(episode=len(self.rows) + 1, timesteps=self.num_timesteps,
+                   wall_time=round(time.perf_counter() - self._t0, 3), **{"return": round(ep["return"], 4)})
+        self.rows.append(row)
+        self._writer.writerow(row)
+        self._file.flush()
+        for key in ("interventions", "replanned", "contacts", "contact_substeps", "cost", "discarded_self",
+                    "discarded_pose", "discarded_path", "discarded_start"):
+            self.totals[key] += row[key]
+        for key in ("return", "length", "success", "interventions", "contacts", "cost"):
+            self.logger.record(f"episode/{key}", float(row[key]))
+
+    def _on_training_end(self) -> None:
+        self._file.close()
+
+    def summary(self, last: int = 200) -> dict:
+        rows = self.rows[-last:]
+        elapsed = time.perf_counter() - self._t0
+        return {
+            "episodes": len(self.rows),
+            "success_rate_last": float(np.mean([r["success"] for r in rows])) if rows else float("nan"),
+            "last_n": len(rows),
+            "interventions": int(self.totals["interventions"]),
+            "replanned": int(self.totals["replanned"]),
+            "by_type": {k: int(self.totals[k]) for k in ("discarded_self", "discarded_pose", "discarded_path",
+                                                         "discarded_start")},
+            "contacts": int(self.totals["contacts"]),
+            "contact_substeps": int(self.totals["contact_substeps"]),
+            "steps_per_second": self.num_timesteps / elapsed if elapsed > 0 else float("nan"),
+            "wall_time": elapsed,
+        }

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Every MoveRL test, in tiers: gtest (C++ cores) and pytest (Python cores) need no roscore; rostest brings up
+# the real headless graph on a free port per test file. Called by `./run.sh test` (and so by CI).
+#   tests/run_all.sh            all tiers
+#   tests/run_all.sh --no-live  cores only
+set -uo pipefail
+cd "$(dirname "$0")/.."
+# shellcheck disable=SC1091
+source ./env.sh
+export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
+live=1; [ "${1:-}" = "--no-live" ] && live=0
+passed=0; failed=0; failures=()
+suite() {
+  local name=$1; shift
+  printf '\n\033[1m== %s\033[0m\n' "$name"
+  local t0=$SECONDS
+  if "$@"; then passed=$((passed + 1)); echo "-- $name: ok ($((SECONDS - t0)) s)";
+  else failed=$((failed + 1)); failures+=("$name"); echo "-- $name: FAILED ($((SECONDS - t0)) s)"; fi
+}
+
+# Tier 1: C++ cores (gtest binaries built by catkin_ws_setup.sh).
+for bin in devel/lib/*/test_*; do
+  [ -x "$bin" ] && suite "gtest $(basename "$bin")" "$bin"
+done
+# Tier 2: Python cores.
+suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_core.py
+# Tier 3: the live graph.
+if [ "$live" = 1 ]; then
+  suite "rostest shield_live" rostest --text moverl_gym shield_live.test
+  suite "rostest env_live (shield on)" rostest --text moverl_gym env_live.test shield:=true
+  suite "rostest env_live (shield off)" rostest --text moverl_gym env_live.test shield:=false
+fi
+
+echo
+[ ${#failures[@]} -gt 0 ] && printf 'failed suite: %s\n' "${failures[@]}"
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]

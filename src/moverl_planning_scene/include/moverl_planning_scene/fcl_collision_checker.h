@@ -1,0 +1,100 @@
+/**
+ * \file fcl_collision_checker.h
+ * \brief FCL 0.7 implementation of CollisionChecker, with the allowed-collision matrix (ACM). ROS-free.
+ */
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "moverl_planning_scene/collision_checker.h"
+#include "moverl_planning_scene/robot_model.h"
+
+namespace fcl {
+template <typename S>
+class CollisionGeometry;
+}
+
+namespace moverl_planning_scene {
+
+/// \brief How robot link meshes are represented.
+enum class MeshMode { kConvexHull, kTriangles };
+
+/// \brief Why a pair of links is not checked (kEnabled: it is checked).
+enum class AcmReason : std::uint8_t { kEnabled = 0, kAdjacent, kRigid, kAlways, kNever, kStatic, kNoGeometry };
+
+/// \brief Tunables of the FCL checker (defaults = config/planning_scene.yaml).
+struct FclCheckerOptions {
+  double padding = 0.01;          ///< world obstacles inflated by this (m)
+  double path_resolution = 0.01;  ///< max motion of any robot point between checked states (m)
+  MeshMode mesh_mode = MeshMode::kConvexHull;
+  int acm_samples = 20000;        ///< random configurations for the always/never-in-collision test (0: skip)
+  unsigned acm_seed = 1;
+  /// Folder where computed ACMs are cached (file name = hash of the inputs). Empty: no cache.
+  std::string acm_cache_dir;
+};
+
+/// \brief Statistics of the ACM computation (for logs and tests).
+struct AcmStats {
+  bool from_cache = false;
+  double seconds = 0.0;  ///< time spent computing or loading
+  int adjacent = 0, rigid = 0, always = 0, never = 0, enabled = 0;
+  std::string cache_file;
+};
+
+/// \brief FCL-based checker: convex hulls (GJK) or OBBRSS triangle BVHs for robot meshes, primitives for the world.
+class FclCollisionChecker : public CollisionChecker {
+ public:
+  /// \brief Loads the collision geometry and computes (or loads) the ACM. Returns nullptr with *error on failure.
+  static std::unique_ptr<FclCollisionChecker> create(const RobotModel& model, const FclCheckerOptions& options,
+                                                     std::string* error);
+  ~FclCollisionChecker() override;
+
+  bool setWorld(const std::vector<WorldObject>& objects, std::string* error) override;
+  void checkState(const double* q, const CollisionRequest& request, CollisionResult* result) override;
+  void checkPath(const double* q0, const double* q1, const PathCheckRequest& request,
+                 PathCheckResult* result) override;
+  std::size_t interiorStateCount(const double* q0, const double* q1) const override;
+
+  /// \brief Reason why the pair of links (by name) is (not) checked; kNoGeometry for unknown names.
+  AcmReason acmReason(const std::string& link_a, const std::string& link_b) const;
+  /// \brief How the ACM was obtained.
+  const AcmStats& acmStats() const { return acm_stats_; }
+  /// \brief Bound r_i (m per rad, or 1 for prismatic) of controlled joint i used by the path check.
+  double jointRadiusBound(std::size_t i) const { return joint_radius_[i]; }
+  /// \brief Number of world objects.
+  std::size_t worldSize() const;
+  const FclCheckerOptions& options() const { return options_; }
+
+ private:
+  struct Geom;
+  struct Obstacle;
+  explicit FclCollisionChecker(const RobotModel& model);
+  bool loadGeometry(std::string* error);
+  void computeAcm();
+  bool geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth) const;
+  bool linkPairCollides(int la, int lb);
+  void updateTransforms(const double* q);
+  std::uint64_t acmKey() const;
+  bool loadAcm(const std::string& file);
+  void saveAcm(const std::string& file) const;
+  void rebuildPairLists();
+
+  const RobotModel& model_;
+  FclCheckerOptions options_;
+  std::vector<Geom> geoms_;                   // all robot collision shapes
+  std::vector<std::vector<int>> link_geoms_;  // per link
+  std::vector<AcmReason> acm_;                // n_links x n_links
+  std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
+  std::vector<int> world_geoms_;                 // geoms of moving links
+  std::vector<Obstacle> world_;
+  std::vector<double> joint_radius_;
+  std::vector<Eigen::Isometry3d> link_poses_;
+  std::vector<double> q_scratch_;
+  CollisionResult state_scratch_;
+  AcmStats acm_stats_;
+};
+
+}  // namespace moverl_planning_scene

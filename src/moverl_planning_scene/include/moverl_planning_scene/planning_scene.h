@@ -1,0 +1,121 @@
+/**
+ * \file planning_scene.h
+ * \brief ROS-free facade behind the planning_scene node: input validation and the five queries
+ *        (check state, check path, plan, forward kinematics, validate motion).
+ */
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "moverl_planning_scene/collision_checker.h"
+#include "moverl_planning_scene/fcl_collision_checker.h"
+#include "moverl_planning_scene/motion_planner.h"
+#include "moverl_planning_scene/robot_model.h"
+
+namespace moverl_planning_scene {
+
+/// \brief Everything needed to build a scene.
+struct PlanningSceneOptions {
+  RobotModelOptions robot;
+  FclCheckerOptions checker;
+  PlannerOptions planner;
+};
+
+/// \brief Outcome of a state check (values match moverl_msgs/CheckState and CheckPath).
+enum class CheckOutcome { kValid = 0, kSelfCollision = 1, kWorldCollision = 2, kInvalidRequest = 3 };
+
+/// \brief Outcome of validateMotion (values match moverl_msgs/ValidateMotion).
+enum class MotionOutcome {
+  kValid = 0,
+  kSelfCollision = 1,
+  kPoseCollision = 2,
+  kPathCollision = 3,
+  kStartInCollision = 4,
+  kInvalidRequest = 5
+};
+
+/// \brief Result of checkState.
+struct StateCheck {
+  CheckOutcome outcome = CheckOutcome::kValid;
+  std::vector<ContactPair> pairs;
+  std::string message;
+  double check_time = 0.0;
+};
+
+/// \brief Result of checkPath.
+struct PathCheck {
+  CheckOutcome outcome = CheckOutcome::kValid;
+  std::vector<ContactPair> pairs;
+  double collision_fraction = -1.0;
+  std::size_t checked_states = 0;
+  std::string message;
+  double check_time = 0.0;
+};
+
+/// \brief Result of validateMotion.
+struct MotionCheck {
+  MotionOutcome outcome = MotionOutcome::kValid;
+  bool replanned = false;
+  std::vector<std::vector<double>> path;  ///< when replanned: start .. goal
+  std::vector<ContactPair> pairs;
+  std::string message;
+  double state_check_time = 0.0, path_check_time = 0.0, planning_time = 0.0;
+};
+
+/// \brief The planning scene: robot model + FCL checker + OMPL planner. Not thread-safe (callers serialize).
+class PlanningScene {
+ public:
+  /// \brief Build from URDF text; nullptr with *error on failure (URDF, joints, meshes, parameters).
+  static std::unique_ptr<PlanningScene> create(const std::string& urdf_xml, const PlanningSceneOptions& options,
+                                               std::string* error);
+
+  /// \brief Replace the world. False (previous world kept) when an object is invalid.
+  bool setWorld(const std::vector<WorldObject>& objects, std::string* error) {
+    return checker_->setWorld(objects, error);
+  }
+
+  /// \brief Validate a configuration: size, finite, within limits (+/- kLimitTolerance). Empty string when valid.
+  std::string validateConfiguration(const std::vector<double>& q, const char* what) const;
+
+  /// \brief Self (ACM applied) then world check of one configuration; all colliding pairs of the first kind found.
+  void checkState(const std::vector<double>& q, StateCheck* out, bool compute_depth = false);
+  /// \brief Check the straight segment including both ends; pairs at the first colliding state.
+  void checkPath(const std::vector<double>& start, const std::vector<double>& goal, PathCheck* out);
+  /// \brief Plan with OMPL (validates inputs, planner name and time limit).
+  void plan(const std::vector<double>& start, const std::vector<double>& goal, const std::string& planner,
+            double time_limit, PlanResult* out);
+  /// \brief Poses of links (empty: the ee link) in the base frame. False with *error on bad input.
+  bool fk(const std::vector<double>& q, const std::vector<std::string>& links, std::vector<Eigen::Isometry3d>* poses,
+          std::string* error);
+  /// \brief One shield query: goal self/world, start, straight path, optional replanning (see ValidateMotion.srv).
+  void validateMotion(const std::vector<double>& start, const std::vector<double>& goal, bool plan_on_path_collision,
+                      MotionCheck* out);
+
+  const RobotModel& model() const { return *model_; }
+  FclCollisionChecker& checker() { return *checker_; }
+  MotionPlanner& planner() { return *planner_; }
+
+  /// Tolerance on joint limits for requests (rad or m); values within it are clamped to the limits.
+  static constexpr double kLimitTolerance = 1e-6;
+  /// Longest accepted planning time limit (s).
+  static constexpr double kMaxPlanningTime = 60.0;
+
+ private:
+  PlanningScene() = default;
+  /// Validates and clamps into the scratch vector; returns the message ("" when fine).
+  std::string prepare(const std::vector<double>& q, const char* what, std::vector<double>* clamped) const;
+
+  std::unique_ptr<RobotModel> model_;
+  std::unique_ptr<FclCollisionChecker> checker_;
+  std::unique_ptr<MotionPlanner> planner_;
+  std::vector<double> start_, goal_;
+  CollisionRequest all_pairs_;
+  CollisionResult state_result_;
+  PathCheckResult path_result_;
+  PlanResult plan_result_;
+  std::vector<Eigen::Isometry3d> link_poses_;
+};
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,563 @@
+#include "moverl_planning_scene/fcl_collision_checker.h"
+
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <assimp/Importer.hpp>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <unistd.h>
+
+#include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/shape/box.h>
+#include <fcl/geometry/shape/cone.h>
+#include <fcl/geometry/shape/convex.h>
+#include <fcl/geometry/shape/cylinder.h>
+#include <fcl/geometry/shape/sphere.h>
+#include <fcl/math/bv/OBBRSS.h>
+#include <fcl/narrowphase/collision.h>
+
+namespace moverl_planning_scene {
+namespace {
+
+constexpr std::uint64_t kFnvOffset = 1469598103934665603ULL;
+constexpr std::uint64_t kFnvPrime = 1099511628211ULL;
+constexpr std::size_t kMaxInteriorStates = 1000000;  // guard against absurd segments
+constexpr int kAcmFileVersion = 1;
+
+void fnv(std::uint64_t* h, const void* data, std::size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    *h ^= p[i];
+    *h *= kFnvPrime;
+  }
+}
+void fnvString(std::uint64_t* h, const std::string& s) {
+  fnv(h, s.data(), s.size());
+  const char sep = '\0';
+  fnv(h, &sep, 1);
+}
+template <typename T>
+void fnvValue(std::uint64_t* h, T v) {
+  fnv(h, &v, sizeof(v));
+}
+
+struct MeshData {
+  std::vector<fcl::Vector3d> vertices;
+  std::vector<fcl::Triangle> triangles;
+};
+
+bool loadMesh(const std::string& path, const Eigen::Vector3d& scale, MeshData* out, std::string* error) {
+  Assimp::Importer importer;
+  const aiScene* scene = importer.ReadFile(
+      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices);
+  if (scene == nullptr || scene->mNumMeshes == 0) {
+    *error = "assimp cannot load mesh '" + path + "': " + importer.GetErrorString();
+    return false;
+  }
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    const std::size_t base = out->vertices.size();
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
+      const aiVector3D& p = mesh->mVertices[v];
+      out->vertices.emplace_back(p.x * scale.x(), p.y * scale.y(), p.z * scale.z());
+    }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points/lines
+      out->triangles.emplace_back(base + face.mIndices[0], base + face.mIndices[1], base + face.mIndices[2]);
+    }
+  }
+  if (out->vertices.empty()) {
+    *error = "mesh '" + path + "' has no vertices";
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+struct FclCollisionChecker::Geom {
+  int link = -1;
+  std::shared_ptr<fcl::CollisionGeometry<double>> geom;
+  Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  // shape in link frame
+  Eigen::Vector3d center_local = Eigen::Vector3d::Zero();     // bounding sphere centre, link frame
+  double radius = 0.0;                                        // bounding sphere radius
+  Eigen::Isometry3d world_tf = Eigen::Isometry3d::Identity();
+  Eigen::Vector3d world_center = Eigen::Vector3d::Zero();
+};
+
+struct FclCollisionChecker::Obstacle {
+  std::string id;
+  std::shared_ptr<fcl::CollisionGeometry<double>> geom;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  double radius = 0.0;  // bounding sphere about pose.translation()
+};
+
+FclCollisionChecker::FclCollisionChecker(const RobotModel& model) : model_(model) {}
+FclCollisionChecker::~FclCollisionChecker() = default;
+
+std::unique_ptr<FclCollisionChecker> FclCollisionChecker::create(const RobotModel& model,
+                                                                 const FclCheckerOptions& options,
+                                                                 std::string* error) {
+  std::string dummy;
+  if (error == nullptr) error = &dummy;
+  if (!(options.padding >= 0.0) || !std::isfinite(options.padding)) {
+    *error = "padding must be >= 0";
+    return nullptr;
+  }
+  if (!(options.path_resolution > 0.0) || !std::isfinite(options.path_resolution)) {
+    *error = "path_resolution must be > 0";
+    return nullptr;
+  }
+  if (options.acm_samples < 0) {
+    *error = "acm_samples must be >= 0";
+    return nullptr;
+  }
+  std::unique_ptr<FclCollisionChecker> c(new FclCollisionChecker(model));
+  c->options_ = options;
+  if (!c->loadGeometry(error)) return nullptr;
+  c->computeAcm();
+  return c;
+}
+
+bool FclCollisionChecker::loadGeometry(std::string* error) {
+  const std::size_t n_links = model_.linkNames().size();
+  link_geoms_.assign(n_links, {});
+  for (std::size_t l = 0; l < n_links; ++l) {
+    for (const CollisionShapeSpec& s : model_.collisionShapes(static_cast<int>(l))) {
+      Geom g;
+      g.link = static_cast<int>(l);
+      g.origin = s.origin;
+      Eigen::Vector3d center_shape = Eigen::Vector3d::Zero();
+      switch (s.type) {
+        case ShapeType::kBox:
+          g.geom = std::make_shared<fcl::Boxd>(s.dims.x(), s.dims.y(), s.dims.z());
+          g.radius = 0.5 * s.dims.norm();
+          break;
+        case ShapeType::kSphere:
+          g.geom = std::make_shared<fcl::Sphered>(s.dims.x());
+          g.radius = s.dims.x();
+          break;
+        case ShapeType::kCylinder:
+          g.geom = std::make_shared<fcl::Cylinderd>(s.dims.x(), s.dims.y());
+          g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
+          break;
+        case ShapeType::kCone:
+          g.geom = std::make_shared<fcl::Coned>(s.dims.x(), s.dims.y());
+          g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
+          break;
+        case ShapeType::kMesh: {
+          MeshData mesh;
+          if (!loadMesh(s.mesh_path, s.scale, &mesh, error)) return false;
+          Eigen::Vector3d lo = mesh.vertices.front(), hi = lo;
+          for (const auto& v : mesh.vertices) {
+            lo = lo.cwiseMin(v);
+            hi = hi.cwiseMax(v);
+          }
+          center_shape = 0.5 * (lo + hi);
+          for (const auto& v : mesh.vertices) g.radius = std::max(g.radius, (v - center_shape).norm());
+          if (options_.mesh_mode == MeshMode::kConvexHull) {
+            // No faces on purpose: FCL then uses an exhaustive support function over all vertices, which is exactly
+            // the support function of the convex hull of the mesh (correct even if the mesh is not convex).
+            auto verts = std::make_shared<const std::vector<fcl::Vector3d>>(mesh.vertices);
+            auto faces = std::make_shared<const std::vector<int>>();
+            g.geom = std::make_shared<fcl::Convexd>(verts, 0, faces);
+          } else {
+            auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+            bvh->beginModel(static_cast<int>(mesh.triangles.size()), static_cast<int>(mesh.vertices.size()));
+            bvh->addSubModel(mesh.vertices, mesh.triangles);
+            bvh->endModel();
+            g.geom = bvh;
+          }
+          break;
+        }
+      }
+      g.geom->computeLocalAABB();
+      g.center_local = s.origin * center_shape;
+      link_geoms_[l].push_back(static_cast<int>(geoms_.size()));
+      geoms_.push_back(std::move(g));
+    }
+  }
+  // r_i: bound on the distance of any geometry point moved by joint i from the joint axis.
+  const std::size_t dof = model_.dof();
+  joint_radius_.assign(dof, 0.0);
+  for (std::size_t i = 0; i < dof; ++i) {
+    if (model_.isPrismatic(i)) {
+      joint_radius_[i] = 1.0;  // every moved point travels exactly |dq_i|
+      continue;
+    }
+    for (const Geom& g : geoms_) {
+      const double chain = model_.chainOffsetBound(i, g.link);
+      if (chain < 0.0) continue;
+      joint_radius_[i] = std::max(joint_radius_[i], chain + g.center_local.norm() + g.radius);
+    }
+  }
+  link_poses_.resize(n_links);
+  q_scratch_.resize(dof);
+  return true;
+}
+
+void FclCollisionChecker::updateTransforms(const double* q) {
+  model_.computeLinkTransforms(q, &link_poses_);
+  for (Geom& g : geoms_) {
+    const Eigen::Isometry3d& p = link_poses_[g.link];
+    g.world_tf = p * g.origin;
+    g.world_center = p * g.center_local;
+  }
+}
+
+bool FclCollisionChecker::geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth) const {
+  const double r = a.radius + b.radius;
+  if ((a.world_center - b.world_center).squaredNorm() > r * r) return false;
+  fcl::CollisionRequestd req(1, compute_depth);
+  fcl::CollisionResultd res;
+  fcl::collide(a.geom.get(), a.world_tf, b.geom.get(), b.world_tf, req, res);
+  if (!res.isCollision()) return false;
+  if (compute_depth && depth != nullptr && res.numContacts() > 0) {
+    *depth = std::max(*depth, res.getContact(0).penetration_depth);
+  }
+  return true;
+}
+
+bool FclCollisionChecker::linkPairCollides(int la, int lb) {
+  for (int ga : link_geoms_[la]) {
+    for (int gb : link_geoms_[lb]) {
+      if (geomPairCollides(geoms_[ga], geoms_[gb], false, nullptr)) return true;
+    }
+  }
+  return false;
+}
+
+std::uint64_t FclCollisionChecker::acmKey() const {
+  std::uint64_t h = kFnvOffset;
+  fnvValue(&h, kAcmFileVersion);
+  fnvString(&h, model_.urdfText());
+  for (const auto& j : model_.jointNames()) fnvString(&h, j);
+  fnvString(&h, "|fixed|");
+  for (const auto& kv : model_.fixedPositions()) {
+    fnvString(&h, kv.first);
+    fnvValue(&h, kv.second);
+  }
+  fnvValue(&h, options_.acm_samples);
+  fnvValue(&h, options_.acm_seed);
+  fnvValue(&h, static_cast<int>(options_.mesh_mode));
+  // Geometry content (mesh files may change while the URDF text does not).
+  for (const Geom& g : geoms_) {
+    fnvValue(&h, g.radius);
+    fnvValue(&h, g.center_local.x());
+    fnvValue(&h, g.center_local.y());
+    fnvValue(&h, g.center_local.z());
+  }
+  return h;
+}
+
+bool FclCollisionChecker::loadAcm(const std::string& file) {
+  std::ifstream in(file);
+  if (!in) return false;
+  const std::size_t n = model_.linkNames().size();
+  std::vector<AcmReason> acm(n * n, AcmReason::kNoGeometry);
+  std::string a, b;
+  int reason = 0;
+  std::size_t count = 0;
+  while (in >> a >> b >> reason) {
+    const int ia = model_.linkIndex(a), ib = model_.linkIndex(b);
+    if (ia < 0 || ib < 0 || reason < 0 || reason > static_cast<int>(AcmReason::kNoGeometry)) return false;
+    acm[ia * n + ib] = acm[ib * n + ia] = static_cast<AcmReason>(reason);
+    ++count;
+  }
+  if (count == 0) return false;
+  acm_ = acm;
+  return true;
+}
+
+void FclCollisionChecker::saveAcm(const std::string& file) const {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
+  const std::string tmp = file + ".tmp" + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp);
+    if (!out) return;
+    const auto& names = model_.linkNames();
+    const std::size_t n = names.size();
+    for (std::size_t a = 0; a < n; ++a) {
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (acm_[a * n + b] == AcmReason::kNoGeometry) continue;
+        out << names[a] << ' ' << names[b] << ' ' << static_cast<int>(acm_[a * n + b]) << '\n';
+      }
+    }
+  }
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) std::filesystem::remove(tmp, ec);
+}
+
+void FclCollisionChecker::computeAcm() {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::size_t n = model_.linkNames().size();
+  acm_stats_ = AcmStats();
+  if (!options_.acm_cache_dir.empty()) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "acm_%016llx.txt", static_cast<unsigned long long>(acmKey()));
+    acm_stats_.cache_file = (std::filesystem::path(options_.acm_cache_dir) / name).string();
+    if (loadAcm(acm_stats_.cache_file)) acm_stats_.from_cache = true;
+  }
+  if (!acm_stats_.from_cache) {
+    acm_.assign(n * n, AcmReason::kNoGeometry);
+    // Nearest ancestor with collision geometry ("looking through" geometry-less links and fixed joints).
+    auto geometry_parent = [&](int l) {
+      int p = model_.parentLink(l);
+      while (p >= 0 && link_geoms_[p].empty()) p = model_.parentLink(p);
+      return p;
+    };
+    std::vector<std::pair<int, int>> candidates;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (link_geoms_[a].empty()) continue;
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (link_geoms_[b].empty()) continue;
+        const int ia = static_cast<int>(a), ib = static_cast<int>(b);
+        AcmReason r = AcmReason::kEnabled;
+        if (model_.isStatic(ia) && model_.isStatic(ib)) {
+          r = AcmReason::kStatic;
+        } else if (geometry_parent(ib) == ia || geometry_parent(ia) == ib) {
+          r = AcmReason::kAdjacent;
+        } else if (model_.drivingJoint(ia) == model_.drivingJoint(ib)) {
+          r = AcmReason::kRigid;  // no controlled joint between them
+        } else {
+          candidates.emplace_back(ia, ib);
+        }
+        acm_[a * n + b] = acm_[b * n + a] = r;
+      }
+    }
+    if (options_.acm_samples > 0 && !candidates.empty()) {
+      std::vector<int> hits(candidates.size(), 0);
+      std::mt19937_64 rng(options_.acm_seed);
+      const std::size_t dof = model_.dof();
+      std::vector<double> q(dof);
+      for (int s = 0; s < options_.acm_samples; ++s) {
+        for (std::size_t i = 0; i < dof; ++i) {
+          std::uniform_real_distribution<double> d(model_.lowerLimits()[i], model_.upperLimits()[i]);
+          q[i] = d(rng);
+        }
+        updateTransforms(q.data());
+        for (std::size_t c = 0; c < candidates.size(); ++c) {
+          if (linkPairCollides(candidates[c].first, candidates[c].second)) ++hits[c];
+        }
+      }
+      for (std::size_t c = 0; c < candidates.size(); ++c) {
+        AcmReason r = AcmReason::kEnabled;
+        if (hits[c] == 0) r = AcmReason::kNever;
+        if (hits[c] == options_.acm_samples) r = AcmReason::kAlways;
+        const int a = candidates[c].first, b = candidates[c].second;
+        acm_[a * n + b] = acm_[b * n + a] = r;
+      }
+    }
+    if (!acm_stats_.cache_file.empty()) saveAcm(acm_stats_.cache_file);
+  }
+  rebuildPairLists();
+  acm_stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void FclCollisionChecker::rebuildPairLists() {
+  const std::size_t n = model_.linkNames().size();
+  self_pairs_.clear();
+  for (std::size_t a = 0; a < n; ++a) {
+    for (std::size_t b = a + 1; b < n; ++b) {
+      switch (acm_[a * n + b]) {
+        case AcmReason::kEnabled:
+          ++acm_stats_.enabled;
+          self_pairs_.emplace_back(static_cast<int>(a), static_cast<int>(b));
+          break;
+        case AcmReason::kAdjacent:
+          ++acm_stats_.adjacent;
+          break;
+        case AcmReason::kRigid:
+          ++acm_stats_.rigid;
+          break;
+        case AcmReason::kAlways:
+          ++acm_stats_.always;
+          break;
+        case AcmReason::kNever:
+          ++acm_stats_.never;
+          break;
+        default:
+          break;
+      }
+    }
+  }
+  world_geoms_.clear();
+  for (std::size_t g = 0; g < geoms_.size(); ++g) {
+    if (!model_.isStatic(geoms_[g].link)) world_geoms_.push_back(static_cast<int>(g));
+  }
+}
+
+std::size_t FclCollisionChecker::worldSize() const { return world_.size(); }
+
+AcmReason FclCollisionChecker::acmReason(const std::string& link_a, const std::string& link_b) const {
+  const int a = model_.linkIndex(link_a), b = model_.linkIndex(link_b);
+  if (a < 0 || b < 0 || a == b) return AcmReason::kNoGeometry;
+  return acm_[a * model_.linkNames().size() + b];
+}
+
+bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std::string* error) {
+  std::string dummy;
+  if (error == nullptr) error = &dummy;
+  std::vector<Obstacle> world;
+  world.reserve(objects.size());
+  const double p = options_.padding;
+  for (const WorldObject& o : objects) {
+    const std::vector<double>& d = o.dimensions;
+    auto bad = [&](const std::string& why) {
+      *error = "world object '" + o.id + "': " + why;
+      return false;
+    };
+    for (double v : d) {
+      if (!std::isfinite(v) || v <= 0.0) return bad("dimensions must be finite and > 0");
+    }
+    if (!o.pose.matrix().allFinite()) return bad("pose is not finite");
+    Obstacle ob;
+    ob.id = o.id;
+    ob.pose = o.pose;
+    switch (o.type) {
+      case ShapeType::kBox:
+        if (d.size() != 3) return bad("BOX needs 3 dimensions [x, y, z]");
+        ob.geom = std::make_shared<fcl::Boxd>(d[0] + 2 * p, d[1] + 2 * p, d[2] + 2 * p);
+        ob.radius = 0.5 * Eigen::Vector3d(d[0] + 2 * p, d[1] + 2 * p, d[2] + 2 * p).norm();
+        break;
+      case ShapeType::kSphere:
+        if (d.size() != 1) return bad("SPHERE needs 1 dimension [radius]");
+        ob.geom = std::make_shared<fcl::Sphered>(d[0] + p);
+        ob.radius = d[0] + p;
+        break;
+      case ShapeType::kCylinder:
+      case ShapeType::kCone:
+        if (d.size() != 2) return bad("CYLINDER/CONE needs 2 dimensions [height, radius]");
+        if (o.type == ShapeType::kCylinder) {
+          ob.geom = std::make_shared<fcl::Cylinderd>(d[1] + p, d[0] + 2 * p);
+        } else {
+          ob.geom = std::make_shared<fcl::Coned>(d[1] + p, d[0] + 2 * p);
+        }
+        ob.radius = std::hypot(d[1] + p, 0.5 * d[0] + p);
+        break;
+      default:
+        return bad("unsupported shape type");
+    }
+    ob.geom->computeLocalAABB();
+    world.push_back(std::move(ob));
+  }
+  world_.swap(world);
+  return true;
+}
+
+void FclCollisionChecker::checkState(const double* q, const CollisionRequest& request, CollisionResult* result) {
+  result->clear();
+  updateTransforms(q);
+  const auto& names = model_.linkNames();
+  if (request.check_self) {
+    for (const auto& lp : self_pairs_) {
+      double depth = 0.0;
+      bool hit = false;
+      for (int ga : link_geoms_[lp.first]) {
+        for (int gb : link_geoms_[lp.second]) {
+          if (geomPairCollides(geoms_[ga], geoms_[gb], request.compute_depth, &depth)) {
+            hit = true;
+            if (!request.compute_depth) break;
+          }
+        }
+        if (hit && !request.compute_depth) break;
+      }
+      if (!hit) continue;
+      result->status = CollisionStatus::kSelf;
+      if (request.max_pairs == 0) return;
+      result->pairs.push_back(ContactPair{names[lp.first], names[lp.second], depth});
+      if (result->pairs.size() >= request.max_pairs) return;
+    }
+    if (result->collision()) return;
+  }
+  if (!request.check_world) return;
+  for (const Obstacle& ob : world_) {
+    const Eigen::Vector3d oc = ob.pose.translation();
+    int last_link = -1;
+    for (int gi : world_geoms_) {
+      const Geom& g = geoms_[gi];
+      if (g.link == last_link) continue;  // this link already reported with this obstacle
+      const double r = g.radius + ob.radius;
+      if ((g.world_center - oc).squaredNorm() > r * r) continue;
+      fcl::CollisionRequestd req(1, request.compute_depth);
+      fcl::CollisionResultd res;
+      fcl::collide(g.geom.get(), g.world_tf, ob.geom.get(), ob.pose, req, res);
+      if (!res.isCollision()) continue;
+      result->status = CollisionStatus::kWorld;
+      if (request.max_pairs == 0) return;
+      const double depth = request.compute_depth && res.numContacts() > 0 ? res.getContact(0).penetration_depth : 0.0;
+      result->pairs.push_back(ContactPair{names[g.link], ob.id, depth});
+      last_link = g.link;
+      if (result->pairs.size() >= request.max_pairs) return;
+    }
+  }
+}
+
+std::size_t FclCollisionChecker::interiorStateCount(const double* q0, const double* q1) const {
+  double motion = 0.0;
+  for (std::size_t i = 0; i < joint_radius_.size(); ++i) motion += joint_radius_[i] * std::fabs(q1[i] - q0[i]);
+  const double n = std::ceil(motion / options_.path_resolution);
+  if (!(n >= 0.0)) return 0;  // NaN guard (inputs are validated by callers)
+  return n > static_cast<double>(kMaxInteriorStates) ? kMaxInteriorStates : static_cast<std::size_t>(n);
+}
+
+void FclCollisionChecker::checkPath(const double* q0, const double* q1, const PathCheckRequest& request,
+                                    PathCheckResult* result) {
+  result->clear();
+  const std::size_t dof = model_.dof();
+  const std::size_t n = interiorStateCount(q0, q1);
+  const double denom = static_cast<double>(n + 1);
+  double last_valid = 0.0;
+  // Checks the state at t; returns true when it collides (and fills the result).
+  auto check_at = [&](double t) {
+    for (std::size_t i = 0; i < dof; ++i) q_scratch_[i] = q0[i] + t * (q1[i] - q0[i]);
+    if (t == 1.0) std::memcpy(q_scratch_.data(), q1, dof * sizeof(double));
+    ++result->checked_states;
+    checkState(q_scratch_.data(), request.state, &state_scratch_);
+    if (!state_scratch_.collision()) return false;
+    result->status = state_scratch_.status;
+    result->pairs.swap(state_scratch_.pairs);
+    result->collision_fraction = t;
+    result->last_valid_fraction = last_valid;
+    return true;
+  };
+  if (request.find_first) {
+    if (request.check_start && check_at(0.0)) return;
+    for (std::size_t k = 1; k <= n; ++k) {
+      const double t = static_cast<double>(k) / denom;
+      if (check_at(t)) return;
+      last_valid = t;
+    }
+    if (request.check_goal && check_at(1.0)) return;
+    result->last_valid_fraction = 1.0;
+    return;
+  }
+  // Rejection-first order: goal, start, then interior indices by bisection (coarse to fine).
+  last_valid = 0.0;
+  if (request.check_goal && check_at(1.0)) return;
+  if (request.check_start && check_at(0.0)) return;
+  if (n > 0) {
+    // Coarse-to-fine bisection: at level `step`, the odd multiples of step (even ones were done at coarser levels).
+    std::size_t step = 1;
+    while (step < n + 1) step <<= 1;
+    for (; step >= 1; step >>= 1) {
+      for (std::size_t k = step; k <= n; k += 2 * step) {
+        if (check_at(static_cast<double>(k) / denom)) {
+          result->last_valid_fraction = 0.0;  // unknown in this order: be conservative
+          return;
+        }
+      }
+    }
+  }
+  result->last_valid_fraction = 1.0;
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,262 @@
+#include "moverl_planning_scene/planning_scene.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace moverl_planning_scene {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr std::size_t kAllPairs = std::numeric_limits<std::size_t>::max();
+
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+CheckOutcome toOutcome(CollisionStatus s) {
+  switch (s) {
+    case CollisionStatus::kSelf:
+      return CheckOutcome::kSelfCollision;
+    case CollisionStatus::kWorld:
+      return CheckOutcome::kWorldCollision;
+    default:
+      return CheckOutcome::kValid;
+  }
+}
+
+std::string describe(const std::vector<ContactPair>& pairs) {
+  std::string s;
+  for (std::size_t i = 0; i < pairs.size(); ++i) {
+    if (i > 0) s += ", ";
+    s += pairs[i].a + " / " + pairs[i].b;
+  }
+  return s;
+}
+
+}  // namespace
+
+std::unique_ptr<PlanningScene> PlanningScene::create(const std::string& urdf_xml, const PlanningSceneOptions& options,
+                                                     std::string* error) {
+  std::string dummy;
+  if (error == nullptr) error = &dummy;
+  if (!MotionPlanner::isKnownPlanner(options.planner.planner)) {
+    *error = "unknown planner '" + options.planner.planner + "'";
+    return nullptr;
+  }
+  if (!(options.planner.planning_time > 0.0) || options.planner.planning_time > kMaxPlanningTime) {
+    *error = "planning_time must be in (0, 60] s";
+    return nullptr;
+  }
+  if (!(options.planner.range >= 0.0) || !std::isfinite(options.planner.range)) {
+    *error = "planner_range must be >= 0";
+    return nullptr;
+  }
+  std::unique_ptr<PlanningScene> s(new PlanningScene());
+  s->model_ = RobotModel::fromUrdf(urdf_xml, options.robot, error);
+  if (!s->model_) return nullptr;
+  s->checker_ = FclCollisionChecker::create(*s->model_, options.checker, error);
+  if (!s->checker_) return nullptr;
+  s->planner_ = std::make_unique<MotionPlanner>(*s->model_, s->checker_.get(), options.planner);
+  s->all_pairs_.max_pairs = kAllPairs;
+  s->start_.resize(s->model_->dof());
+  s->goal_.resize(s->model_->dof());
+  return s;
+}
+
+std::string PlanningScene::validateConfiguration(const std::vector<double>& q, const char* what) const {
+  const std::size_t dof = model_->dof();
+  if (q.size() != dof) {
+    std::ostringstream m;
+    m << what << " has " << q.size() << " values, expected " << dof << " (one per joint of ~joint_names)";
+    return m.str();
+  }
+  for (std::size_t i = 0; i < dof; ++i) {
+    if (!std::isfinite(q[i])) {
+      std::ostringstream m;
+      m << what << "[" << i << "] (" << model_->jointNames()[i] << ") is not finite";
+      return m.str();
+    }
+    const double lo = model_->lowerLimits()[i], hi = model_->upperLimits()[i];
+    if (q[i] < lo - kLimitTolerance || q[i] > hi + kLimitTolerance) {
+      std::ostringstream m;
+      m << what << "[" << i << "] = " << q[i] << " is outside the limits [" << lo << ", " << hi << "] of joint "
+        << model_->jointNames()[i];
+      return m.str();
+    }
+  }
+  return "";
+}
+
+std::string PlanningScene::prepare(const std::vector<double>& q, const char* what,
+                                   std::vector<double>* clamped) const {
+  std::string error = validateConfiguration(q, what);
+  if (!error.empty()) return error;
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    (*clamped)[i] = std::min(std::max(q[i], model_->lowerLimits()[i]), model_->upperLimits()[i]);
+  }
+  return error;
+}
+
+void PlanningScene::checkState(const std::vector<double>& q, StateCheck* out, bool compute_depth) {
+  const auto t0 = Clock::now();
+  out->pairs.clear();
+  out->message = prepare(q, "positions", &start_);
+  if (!out->message.empty()) {
+    out->outcome = CheckOutcome::kInvalidRequest;
+    out->check_time = since(t0);
+    return;
+  }
+  CollisionRequest request = all_pairs_;
+  request.compute_depth = compute_depth;
+  checker_->checkState(start_.data(), request, &state_result_);
+  out->outcome = toOutcome(state_result_.status);
+  out->pairs = state_result_.pairs;
+  if (state_result_.collision()) {
+    out->message = (state_result_.status == CollisionStatus::kSelf ? "self collision: " : "world collision: ") +
+                   describe(out->pairs);
+  }
+  out->check_time = since(t0);
+}
+
+void PlanningScene::checkPath(const std::vector<double>& start, const std::vector<double>& goal, PathCheck* out) {
+  const auto t0 = Clock::now();
+  out->pairs.clear();
+  out->collision_fraction = -1.0;
+  out->checked_states = 0;
+  out->message = prepare(start, "start", &start_);
+  if (out->message.empty()) out->message = prepare(goal, "goal", &goal_);
+  if (!out->message.empty()) {
+    out->outcome = CheckOutcome::kInvalidRequest;
+    out->check_time = since(t0);
+    return;
+  }
+  PathCheckRequest request;
+  request.state = all_pairs_;
+  checker_->checkPath(start_.data(), goal_.data(), request, &path_result_);
+  out->outcome = toOutcome(path_result_.status);
+  out->pairs = path_result_.pairs;
+  out->collision_fraction = path_result_.collision_fraction;
+  out->checked_states = path_result_.checked_states;
+  if (path_result_.status != CollisionStatus::kFree) {
+    std::ostringstream m;
+    m << (path_result_.status == CollisionStatus::kSelf ? "self" : "world") << " collision at fraction "
+      << path_result_.collision_fraction << ": " << describe(out->pairs);
+    out->message = m.str();
+  }
+  out->check_time = since(t0);
+}
+
+void PlanningScene::plan(const std::vector<double>& start, const std::vector<double>& goal, const std::string& planner,
+                         double time_limit, PlanResult* out) {
+  const auto t0 = Clock::now();
+  out->waypoints.clear();
+  out->path_length = 0.0;
+  std::string error = prepare(start, "start", &start_);
+  if (error.empty()) error = prepare(goal, "goal", &goal_);
+  if (error.empty() && !MotionPlanner::isKnownPlanner(planner)) error = "unknown planner '" + planner + "'";
+  if (error.empty() && (!std::isfinite(time_limit) || time_limit < 0.0 || time_limit > kMaxPlanningTime)) {
+    error = "time_limit must be in [0, 60] s (0: default)";
+  }
+  if (!error.empty()) {
+    out->status = PlanStatus::kInvalidRequest;
+    out->message = error;
+    out->planning_time = since(t0);
+    return;
+  }
+  planner_->plan(start_, goal_, planner, time_limit, out);
+  out->planning_time = since(t0);
+}
+
+bool PlanningScene::fk(const std::vector<double>& q, const std::vector<std::string>& links,
+                       std::vector<Eigen::Isometry3d>* poses, std::string* error) {
+  *error = prepare(q, "positions", &start_);
+  if (!error->empty()) return false;
+  model_->computeLinkTransforms(start_.data(), &link_poses_);
+  poses->clear();
+  if (links.empty()) {
+    poses->push_back(link_poses_[model_->linkIndex(model_->eeLink())]);
+    return true;
+  }
+  for (const std::string& l : links) {
+    const int index = model_->linkIndex(l);
+    if (index < 0) {
+      *error = "unknown link '" + l + "'";
+      poses->clear();
+      return false;
+    }
+    poses->push_back(link_poses_[index]);
+  }
+  return true;
+}
+
+void PlanningScene::validateMotion(const std::vector<double>& start, const std::vector<double>& goal,
+                                   bool plan_on_path_collision, MotionCheck* out) {
+  auto t0 = Clock::now();
+  out->replanned = false;
+  out->path.clear();
+  out->pairs.clear();
+  out->message.clear();
+  out->state_check_time = out->path_check_time = out->planning_time = 0.0;
+  std::string error = prepare(start, "start", &start_);
+  if (error.empty()) error = prepare(goal, "goal", &goal_);
+  if (!error.empty()) {
+    out->outcome = MotionOutcome::kInvalidRequest;
+    out->message = error;
+    out->state_check_time = since(t0);
+    return;
+  }
+  // Goal: self then world (one state check), then the start.
+  checker_->checkState(goal_.data(), all_pairs_, &state_result_);
+  if (state_result_.status == CollisionStatus::kSelf) {
+    out->outcome = MotionOutcome::kSelfCollision;
+    out->message = "goal in self collision: " + describe(state_result_.pairs);
+  } else if (state_result_.status == CollisionStatus::kWorld) {
+    out->outcome = MotionOutcome::kPoseCollision;
+    out->message = "goal collides with the world: " + describe(state_result_.pairs);
+  } else {
+    checker_->checkState(start_.data(), all_pairs_, &state_result_);
+    if (state_result_.collision()) {
+      out->outcome = MotionOutcome::kStartInCollision;
+      out->message = std::string("start state not free (") +
+                     (state_result_.status == CollisionStatus::kSelf ? "self" : "world") +
+                     "): " + describe(state_result_.pairs);
+    }
+  }
+  out->state_check_time = since(t0);
+  if (state_result_.collision()) {
+    out->pairs = state_result_.pairs;
+    return;
+  }
+  // Straight path (interior states only: both ends are free).
+  t0 = Clock::now();
+  PathCheckRequest request;
+  request.state = all_pairs_;
+  request.check_start = false;
+  request.check_goal = false;
+  checker_->checkPath(start_.data(), goal_.data(), request, &path_result_);
+  out->path_check_time = since(t0);
+  if (path_result_.status == CollisionStatus::kFree) {
+    out->outcome = MotionOutcome::kValid;
+    return;
+  }
+  out->outcome = MotionOutcome::kPathCollision;
+  out->pairs = path_result_.pairs;
+  std::ostringstream m;
+  m << "straight path collides at fraction " << path_result_.collision_fraction << " ("
+    << describe(path_result_.pairs) << ")";
+  if (plan_on_path_collision) {
+    t0 = Clock::now();
+    planner_->plan(start_, goal_, "", 0.0, &plan_result_, /*try_straight=*/false);
+    out->planning_time = since(t0);
+    out->replanned = plan_result_.status == PlanStatus::kSuccess;
+    if (out->replanned) {
+      out->path.swap(plan_result_.waypoints);
+      m << "; replanned: " << out->path.size() << " waypoints";
+    } else {
+      m << "; no plan: " << plan_result_.message;
+    }
+  }
+  out->message = m.str();
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,152 @@
+/**
+ * \file scene_benchmark.cpp
+ * \brief Timing of the hot-path queries on the Panda (pybullet_data URDF, table + thin wall worlds).
+ *        Usage: scene_benchmark [panda.urdf|""] [acm_samples] [planner] [planning_time]
+ */
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include "moverl_planning_scene/planning_scene.h"
+
+namespace mps = moverl_planning_scene;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr int kStateSamples = 5000;
+constexpr int kPathSamples = 2000;
+constexpr int kPlanSamples = 30;
+constexpr double kStepRad = 0.1;
+
+void report(const char* what, std::vector<double> t) {
+  if (t.empty()) return;
+  std::sort(t.begin(), t.end());
+  auto pct = [&](double p) { return t[std::min(t.size() - 1, static_cast<std::size_t>(p * t.size()))]; };
+  std::printf("%-44s n=%5zu  p50 %9.1f us  p99 %9.1f us  max %9.1f us\n", what, t.size(), pct(0.5) * 1e6,
+              pct(0.99) * 1e6, t.back() * 1e6);
+}
+
+mps::WorldObject box(const std::string& id, double sx, double sy, double sz, double x, double y, double z) {
+  mps::WorldObject o;
+  o.id = id;
+  o.type = mps::ShapeType::kBox;
+  o.dimensions = {sx, sy, sz};
+  o.pose.translation() = Eigen::Vector3d(x, y, z);
+  return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string urdf_file = argc > 1 && argv[1][0] != '\0' ? argv[1] : MOVERL_PANDA_URDF;
+  if (urdf_file.empty()) {
+    std::fprintf(stderr, "usage: scene_benchmark panda.urdf [acm_samples] (pybullet_data not found at build time)\n");
+    return 1;
+  }
+  std::ifstream in(urdf_file);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  mps::PlanningSceneOptions o;
+  o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
+                         "panda_joint5", "panda_joint6", "panda_joint7"};
+  o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
+  o.robot.base_link = "panda_link0";
+  o.robot.ee_link = "panda_link8";
+  o.robot.mesh_base_dir = urdf_file.substr(0, urdf_file.rfind('/'));
+  o.checker.acm_samples = argc > 2 ? std::atoi(argv[2]) : 20000;
+  if (argc > 3) o.planner.planner = argv[3];
+  if (argc > 4) o.planner.planning_time = std::atof(argv[4]);
+  std::string error;
+  const auto t0 = Clock::now();
+  auto scene = mps::PlanningScene::create(ss.str(), o, &error);
+  if (!scene) {
+    std::fprintf(stderr, "error: %s\n", error.c_str());
+    return 1;
+  }
+  const auto& acm = scene->checker().acmStats();
+  std::printf("scene built in %.3f s; ACM (%d samples, no cache) %.3f s: adjacent %d rigid %d always %d never %d "
+              "checked %d\n",
+              std::chrono::duration<double>(Clock::now() - t0).count(), o.checker.acm_samples, acm.seconds,
+              acm.adjacent, acm.rigid, acm.always, acm.never, acm.enabled);
+  std::printf("joint radius bounds r_i:");
+  for (std::size_t i = 0; i < scene->model().dof(); ++i) std::printf(" %.3f", scene->checker().jointRadiusBound(i));
+  std::printf("\n");
+
+  const std::vector<double> home = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
+  scene->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.5, 0.5);
+  auto near_home = [&] {
+    std::vector<double> q = home;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      q[i] = std::min(std::max(q[i] + jitter(rng), scene->model().lowerLimits()[i]), scene->model().upperLimits()[i]);
+    }
+    return q;
+  };
+  std::vector<double> times;
+  mps::StateCheck sc;
+  int free_states = 0;
+  for (int k = 0; k < kStateSamples; ++k) {
+    const auto q = near_home();
+    const auto t = Clock::now();
+    scene->checkState(q, &sc);
+    times.push_back(std::chrono::duration<double>(Clock::now() - t).count());
+    free_states += sc.outcome == mps::CheckOutcome::kValid;
+  }
+  std::printf("(%d of %d states near home free)\n", free_states, kStateSamples);
+  report("checkState (table world, near home)", times);
+
+  times.clear();
+  std::vector<double> vtimes, ptimes;
+  std::uniform_int_distribution<int> sign(0, 1);
+  mps::MotionCheck mc;
+  mps::PathCheck pc;
+  std::size_t states = 0;
+  for (int k = 0; k < kPathSamples; ++k) {
+    const auto q0 = near_home();
+    auto q1 = q0;
+    for (std::size_t i = 0; i < q1.size(); ++i) {
+      q1[i] = std::min(std::max(q0[i] + (sign(rng) ? kStepRad : -kStepRad), scene->model().lowerLimits()[i]),
+                       scene->model().upperLimits()[i]);
+    }
+    scene->checkPath(q0, q1, &pc);
+    if (pc.outcome != mps::CheckOutcome::kValid) continue;
+    times.push_back(pc.check_time);
+    states += pc.checked_states;
+    const auto t = Clock::now();
+    scene->validateMotion(q0, q1, false, &mc);
+    vtimes.push_back(std::chrono::duration<double>(Clock::now() - t).count());
+    ptimes.push_back(mc.path_check_time);
+  }
+  std::printf("(0.1 rad per joint moves: %.1f checked states on average)\n",
+              times.empty() ? 0.0 : static_cast<double>(states) / times.size());
+  report("checkPath, 0.1 rad/joint move (free)", times);
+  report("validateMotion path_check_time (same moves)", ptimes);
+  report("validateMotion total (same moves)", vtimes);
+
+  // Planning around a 5 mm wall.
+  scene->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015), box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)},
+                  &error);
+  std::vector<double> a = home, b = home;
+  a[0] = -0.8;
+  b[0] = 0.8;
+  times.clear();
+  int replanned = 0;
+  for (int k = 0; k < kPlanSamples; ++k) {
+    scene->validateMotion(a, b, true, &mc);
+    if (mc.outcome != mps::MotionOutcome::kPathCollision) {
+      std::printf("unexpected outcome %d: %s\n", static_cast<int>(mc.outcome), mc.message.c_str());
+      break;
+    }
+    times.push_back(mc.planning_time);
+    replanned += mc.replanned;
+  }
+  std::printf("(wall: %d of %d replanned with %s, time limit %.2f s)\n", replanned, kPlanSamples,
+              o.planner.planner.c_str(), o.planner.planning_time);
+  report("validateMotion planning_time (wall)", times);
+  return 0;
+}

@@ -1,0 +1,444 @@
+/**
+ * \file test_planning_scene.cpp
+ * \brief Core tests on the real Panda URDF from pybullet_data (no roscore). Skipped when pybullet_data was not found
+ *        at configure time.
+ */
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+
+#include "moverl_planning_scene/planning_scene.h"
+
+namespace mps = moverl_planning_scene;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+const std::string kPandaUrdf = MOVERL_PANDA_URDF;
+const std::vector<double> kHome = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
+// Elbow folded: the hand hits panda_link1 (found by sampling, stable).
+const std::vector<double> kSelfCollision = {0.0, 0.2, 0.0, -3.0, 0.0, 1.0, 0.785};
+// Leaning forward and down: the hand goes below the table top (z = 0).
+const std::vector<double> kIntoTable = {0.0, 1.0, 0.0, -1.5, 0.0, 1.571, 0.785};
+constexpr double kPlanTime = 1.0;     // s, around the wall
+constexpr double kTimeSlack = 0.15;   // s, allowed overrun of a planning time limit
+constexpr double kFkTolerance = 1e-9;
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+mps::PlanningSceneOptions pandaOptions() {
+  mps::PlanningSceneOptions o;
+  o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
+                         "panda_joint5", "panda_joint6", "panda_joint7"};
+  o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
+  o.robot.base_link = "panda_link0";
+  o.robot.ee_link = "panda_link8";
+  o.robot.mesh_base_dir = kPandaUrdf.substr(0, kPandaUrdf.rfind('/'));
+  o.planner.planner = "RRTConnect";
+  o.planner.planning_time = kPlanTime;
+  return o;
+}
+
+mps::WorldObject box(const std::string& id, double sx, double sy, double sz, double x, double y, double z) {
+  mps::WorldObject o;
+  o.id = id;
+  o.type = mps::ShapeType::kBox;
+  o.dimensions = {sx, sy, sz};
+  o.pose.translation() = Eigen::Vector3d(x, y, z);
+  return o;
+}
+
+mps::WorldObject table() { return box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015); }
+// 5 mm wall in the plane y = 0, in front of the robot, between kLeft and kRight.
+mps::WorldObject wall() { return box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45); }
+std::vector<double> withJoint1(double v) {
+  std::vector<double> q = kHome;
+  q[0] = v;
+  return q;
+}
+
+bool hasPair(const std::vector<mps::ContactPair>& pairs, const std::string& a, const std::string& b) {
+  for (const auto& p : pairs) {
+    if ((p.a == a && p.b == b) || (p.a == b && p.b == a)) return true;
+  }
+  return false;
+}
+
+class PandaScene : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    if (kPandaUrdf.empty()) return;
+    std::string error;
+    scene_ = mps::PlanningScene::create(readFile(kPandaUrdf), pandaOptions(), &error).release();
+    ASSERT_NE(scene_, nullptr) << error;
+  }
+  static void TearDownTestSuite() {
+    delete scene_;
+    scene_ = nullptr;
+  }
+  void SetUp() override {
+    if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
+    ASSERT_NE(scene_, nullptr);
+    std::string error;
+    ASSERT_TRUE(scene_->setWorld({}, &error)) << error;
+  }
+  void setWorld(const std::vector<mps::WorldObject>& objects) {
+    std::string error;
+    ASSERT_TRUE(scene_->setWorld(objects, &error)) << error;
+  }
+  /// Every segment of a plan passes the (guaranteed) path check.
+  void expectPathValid(const std::vector<std::vector<double>>& path) {
+    ASSERT_GE(path.size(), 2u);
+    for (std::size_t k = 0; k + 1 < path.size(); ++k) {
+      mps::PathCheck pc;
+      scene_->checkPath(path[k], path[k + 1], &pc);
+      EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << "segment " << k << ": " << pc.message;
+    }
+  }
+  static mps::PlanningScene* scene_;
+};
+mps::PlanningScene* PandaScene::scene_ = nullptr;
+
+TEST_F(PandaScene, HomeIsFree) {
+  setWorld({table()});
+  mps::StateCheck sc;
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  EXPECT_TRUE(sc.pairs.empty());
+}
+
+TEST_F(PandaScene, FoldedElbowSelfCollides) {
+  mps::StateCheck sc;
+  scene_->checkState(kSelfCollision, &sc);
+  ASSERT_EQ(sc.outcome, mps::CheckOutcome::kSelfCollision) << sc.message;
+  EXPECT_TRUE(hasPair(sc.pairs, "panda_link1", "panda_hand")) << sc.message;
+  // No pair the ACM disables may be reported.
+  for (const auto& p : sc.pairs) {
+    EXPECT_EQ(scene_->checker().acmReason(p.a, p.b), mps::AcmReason::kEnabled) << p.a << " / " << p.b;
+  }
+}
+
+TEST_F(PandaScene, TableCollision) {
+  mps::StateCheck sc;
+  scene_->checkState(kIntoTable, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << "no world yet: " << sc.message;
+  setWorld({table()});
+  scene_->checkState(kIntoTable, &sc);
+  ASSERT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  ASSERT_FALSE(sc.pairs.empty());
+  for (const auto& p : sc.pairs) {
+    EXPECT_EQ(p.b, "table");
+    EXPECT_EQ(p.depth, 0.0);  // not computed by default
+  }
+  // The base link sits on the table (static links are never checked against the world).
+  EXPECT_FALSE(hasPair(sc.pairs, "panda_link0", "table"));
+}
+
+TEST_F(PandaScene, PaddingInflatesObstacles) {
+  // A sphere just above the flange at home: free without padding margin, colliding once inflated more.
+  std::vector<Eigen::Isometry3d> poses;
+  std::string error;
+  ASSERT_TRUE(scene_->fk(kHome, {"panda_link1"}, &poses, &error)) << error;
+  mps::WorldObject s;
+  s.id = "ball";
+  s.type = mps::ShapeType::kSphere;
+  // panda_link1 is a column of radius < 0.1 around the z axis; a ball centred 0.25 m away (radius 0.14 + padding
+  // 0.01) reaches 0.1 m from the axis (no contact expected within 0.1, contact expected with radius 0.2).
+  s.pose.translation() = Eigen::Vector3d(-0.25, 0.0, 0.25);
+  s.dimensions = {0.14};
+  setWorld({s});
+  mps::StateCheck sc;
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  s.dimensions = {0.2};
+  setWorld({s});
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  EXPECT_TRUE(hasPair(sc.pairs, "panda_link1", "ball"));
+}
+
+TEST_F(PandaScene, ThinWallPathCollidesAndPlanningGoesAround) {
+  setWorld({table(), wall()});
+  const auto left = withJoint1(-0.8), right = withJoint1(0.8);
+  mps::StateCheck sc;
+  scene_->checkState(left, &sc);
+  ASSERT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  scene_->checkState(right, &sc);
+  ASSERT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+
+  mps::PathCheck pc;
+  scene_->checkPath(left, right, &pc);
+  ASSERT_EQ(pc.outcome, mps::CheckOutcome::kWorldCollision) << pc.message;
+  EXPECT_TRUE(pc.collision_fraction > 0.0 && pc.collision_fraction < 1.0) << pc.collision_fraction;
+  EXPECT_EQ(pc.pairs.front().b, "wall");
+  // First collision: the state just before it is free.
+  EXPECT_GT(pc.checked_states, 2u);
+
+  mps::PlanResult plan;
+  scene_->plan(left, right, "RRTConnect", kPlanTime, &plan);
+  ASSERT_EQ(plan.status, mps::PlanStatus::kSuccess) << plan.message;
+  EXPECT_LE(plan.planning_time, kPlanTime + kTimeSlack);
+  EXPECT_GT(plan.waypoints.size(), 2u);
+  EXPECT_EQ(plan.waypoints.front(), left);
+  EXPECT_EQ(plan.waypoints.back(), right);
+  EXPECT_GT(plan.path_length, 1.6 - 1e-9);  // at least the straight distance
+  expectPathValid(plan.waypoints);
+}
+
+TEST_F(PandaScene, ResolutionGuarantee) {
+  // n = ceil(sum_i r_i |dq_i| / resolution) interior states; no robot point moves more than the resolution between
+  // consecutive states: verify on sampled points (mesh-free bound check with link origins).
+  const auto q0 = kHome;
+  auto q1 = kHome;
+  for (double& v : q1) v += 0.1;
+  q1[3] = std::min(q1[3], scene_->model().upperLimits()[3]);
+  double motion = 0.0;
+  for (std::size_t i = 0; i < q0.size(); ++i) motion += scene_->checker().jointRadiusBound(i) * std::fabs(q1[i] - q0[i]);
+  const std::size_t n = scene_->checker().interiorStateCount(q0.data(), q1.data());
+  EXPECT_EQ(n, static_cast<std::size_t>(std::ceil(motion / scene_->checker().options().path_resolution)));
+  mps::PathCheck pc;
+  scene_->checkPath(q0, q1, &pc);
+  EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << pc.message;
+  EXPECT_EQ(pc.checked_states, n + 2);  // interior + both ends
+  // Empirical: the fingertip (farthest point) moves less than the resolution between consecutive states.
+  std::vector<Eigen::Isometry3d> a, b;
+  std::string error;
+  const std::vector<std::string> links = {"panda_leftfinger", "panda_rightfinger", "panda_grasptarget"};
+  for (std::size_t k = 0; k <= n; ++k) {
+    std::vector<double> qa(7), qb(7);
+    for (std::size_t i = 0; i < 7; ++i) {
+      qa[i] = q0[i] + (q1[i] - q0[i]) * k / (n + 1.0);
+      qb[i] = q0[i] + (q1[i] - q0[i]) * (k + 1) / (n + 1.0);
+    }
+    ASSERT_TRUE(scene_->fk(qa, links, &a, &error));
+    ASSERT_TRUE(scene_->fk(qb, links, &b, &error));
+    for (std::size_t l = 0; l < links.size(); ++l) {
+      EXPECT_LE((a[l].translation() - b[l].translation()).norm(), scene_->checker().options().path_resolution);
+    }
+  }
+}
+
+TEST_F(PandaScene, ValidateMotionOutcomes) {
+  setWorld({table()});
+  mps::MotionCheck mc;
+  auto goal = kHome;
+  goal[0] += 0.1;
+  scene_->validateMotion(kHome, goal, true, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  EXPECT_FALSE(mc.replanned);
+  EXPECT_GT(mc.path_check_time, 0.0);
+
+  scene_->validateMotion(kHome, kSelfCollision, true, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kSelfCollision) << mc.message;
+  EXPECT_TRUE(hasPair(mc.pairs, "panda_link1", "panda_hand"));
+
+  scene_->validateMotion(kHome, kIntoTable, true, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  ASSERT_FALSE(mc.pairs.empty());
+  EXPECT_EQ(mc.pairs.front().b, "table");
+
+  scene_->validateMotion(kIntoTable, kHome, true, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision) << mc.message;
+
+  setWorld({table(), wall()});
+  scene_->validateMotion(withJoint1(-0.8), withJoint1(0.8), false, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  EXPECT_FALSE(mc.replanned);
+  EXPECT_TRUE(mc.path.empty());
+  scene_->validateMotion(withJoint1(-0.8), withJoint1(0.8), true, &mc);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  ASSERT_TRUE(mc.replanned) << mc.message;
+  EXPECT_GT(mc.planning_time, 0.0);
+  expectPathValid(mc.path);
+}
+
+TEST_F(PandaScene, BadInputsAreInvalidRequests) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  auto with = [](std::size_t i, double v) {
+    auto q = kHome;
+    q[i] = v;
+    return q;
+  };
+  const std::vector<std::vector<double>> bad = {{0.0, 0.0}, with(2, nan), with(3, 0.5), with(0, 3.5),
+                                                with(1, std::numeric_limits<double>::infinity())};
+  for (const auto& q : bad) {
+    mps::StateCheck sc;
+    scene_->checkState(q, &sc);
+    EXPECT_EQ(sc.outcome, mps::CheckOutcome::kInvalidRequest);
+    EXPECT_FALSE(sc.message.empty());
+    mps::PathCheck pc;
+    scene_->checkPath(kHome, q, &pc);
+    EXPECT_EQ(pc.outcome, mps::CheckOutcome::kInvalidRequest);
+    mps::MotionCheck mc;
+    scene_->validateMotion(q, kHome, true, &mc);
+    EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest);
+    EXPECT_FALSE(mc.message.empty());
+    mps::PlanResult pr;
+    scene_->plan(kHome, q, "", 0.0, &pr);
+    EXPECT_EQ(pr.status, mps::PlanStatus::kInvalidRequest);
+    std::vector<Eigen::Isometry3d> poses;
+    std::string error;
+    EXPECT_FALSE(scene_->fk(q, {}, &poses, &error));
+    EXPECT_FALSE(error.empty());
+  }
+  // Within the 1e-6 tolerance of a limit: accepted.
+  mps::StateCheck sc;
+  scene_->checkState(with(3, scene_->model().upperLimits()[3] + 5e-7), &sc);
+  EXPECT_NE(sc.outcome, mps::CheckOutcome::kInvalidRequest) << sc.message;
+  mps::MotionCheck mc;
+  scene_->validateMotion(kHome, with(3, -3.2), false, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest);
+  EXPECT_NE(mc.message.find("panda_joint4"), std::string::npos) << mc.message;
+
+  mps::PlanResult pr;
+  scene_->plan(kHome, withJoint1(0.3), "NoSuchPlanner", 0.0, &pr);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kInvalidRequest);
+  EXPECT_NE(pr.message.find("NoSuchPlanner"), std::string::npos);
+  scene_->plan(kHome, withJoint1(0.3), "", -1.0, &pr);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kInvalidRequest);
+  scene_->plan(kHome, withJoint1(0.3), "", nan, &pr);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kInvalidRequest);
+  std::vector<Eigen::Isometry3d> poses;
+  std::string error;
+  EXPECT_FALSE(scene_->fk(kHome, {"no_such_link"}, &poses, &error));
+  // Invalid world objects are rejected and the previous world is kept.
+  setWorld({table()});
+  mps::WorldObject broken = box("broken", 0.1, -1.0, 0.1, 0, 0, 0);
+  EXPECT_FALSE(scene_->setWorld({broken}, &error));
+  EXPECT_NE(error.find("broken"), std::string::npos);
+  EXPECT_EQ(scene_->checker().worldSize(), 1u);
+}
+
+TEST_F(PandaScene, PlanningIsBounded) {
+  setWorld({table(), wall()});
+  // Colliding goal: rejected at once.
+  mps::PlanResult pr;
+  scene_->plan(withJoint1(-0.8), kIntoTable, "RRT", 0.5, &pr);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kGoalInvalid) << pr.message;
+  EXPECT_LT(pr.planning_time, 0.05);
+  scene_->plan(kIntoTable, withJoint1(-0.8), "RRT", 0.5, &pr);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kStartInvalid) << pr.message;
+  // Hard problems within a short limit, for several planners: return in time with NO_SOLUTION or a valid path.
+  const double limit = 0.1;
+  for (const std::string planner : {"RRT", "RRTConnect", "RRTstar", "BiTRRT", "PRM", "EST", "KPIECE1", "LBKPIECE1",
+                                    "SBL", "FMT", "TRRT", "PDST", "STRIDE"}) {
+    const auto t0 = Clock::now();
+    scene_->plan(withJoint1(-0.8), withJoint1(0.8), planner, limit, &pr);
+    const double elapsed = std::chrono::duration<double>(Clock::now() - t0).count();
+    EXPECT_LE(elapsed, limit + kTimeSlack) << planner;
+    EXPECT_TRUE(pr.status == mps::PlanStatus::kSuccess || pr.status == mps::PlanStatus::kNoSolution)
+        << planner << ": " << pr.message;
+    if (pr.status == mps::PlanStatus::kSuccess) expectPathValid(pr.waypoints);
+  }
+  // A free goal RRT cannot reach within a tiny limit: NO_SOLUTION, still within the bound.
+  const auto t0 = Clock::now();
+  scene_->plan(withJoint1(-0.8), withJoint1(0.8), "RRT", 0.01, &pr);
+  const double elapsed = std::chrono::duration<double>(Clock::now() - t0).count();
+  EXPECT_LE(elapsed, 0.01 + kTimeSlack);
+  EXPECT_EQ(pr.status, mps::PlanStatus::kNoSolution) << pr.message;
+}
+
+TEST_F(PandaScene, FkAgreesWithKdlAndHandValue) {
+  std::vector<Eigen::Isometry3d> poses;
+  std::string error;
+  // All joints at 0: flange at x = 0.0825 - 0.0825 + 0.088, z = 0.333 + 0.316 + 0.384 - 0.107 (pointing down).
+  ASSERT_TRUE(scene_->fk(std::vector<double>(7, 0.0), {}, &poses, &error)) << error;
+  EXPECT_NEAR(poses[0].translation().x(), 0.088, 1e-6);
+  EXPECT_NEAR(poses[0].translation().y(), 0.0, 1e-6);
+  EXPECT_NEAR(poses[0].translation().z(), 0.926, 1e-6);
+  EXPECT_NEAR(poses[0].linear()(2, 2), -1.0, 1e-6);  // flange z axis points down
+  std::mt19937 rng(42);
+  const auto& lo = scene_->model().lowerLimits();
+  const auto& hi = scene_->model().upperLimits();
+  for (int k = 0; k < 50; ++k) {
+    std::vector<double> q(7);
+    for (std::size_t i = 0; i < 7; ++i) q[i] = std::uniform_real_distribution<double>(lo[i], hi[i])(rng);
+    for (const std::string link : {"panda_link8", "panda_hand", "panda_leftfinger", "panda_link4"}) {
+      ASSERT_TRUE(scene_->fk(q, {link}, &poses, &error)) << error;
+      Eigen::Isometry3d kdl;
+      ASSERT_TRUE(scene_->model().linkPoseKdl(q, link, &kdl));
+      EXPECT_LT((poses[0].matrix() - kdl.matrix()).cwiseAbs().maxCoeff(), kFkTolerance) << link;
+    }
+  }
+}
+
+TEST_F(PandaScene, AcmDisablesAdjacentPairs) {
+  const auto& c = scene_->checker();
+  for (int i = 0; i < 7; ++i) {
+    const std::string a = "panda_link" + std::to_string(i), b = "panda_link" + std::to_string(i + 1);
+    EXPECT_EQ(c.acmReason(a, b), mps::AcmReason::kAdjacent) << a << " / " << b;
+  }
+  // Looking through panda_link8 (no geometry, fixed joint).
+  EXPECT_EQ(c.acmReason("panda_link7", "panda_hand"), mps::AcmReason::kAdjacent);
+  EXPECT_EQ(c.acmReason("panda_hand", "panda_leftfinger"), mps::AcmReason::kAdjacent);
+  // Fingers are held fixed: rigidly attached to each other.
+  EXPECT_EQ(c.acmReason("panda_leftfinger", "panda_rightfinger"), mps::AcmReason::kRigid);
+  // The hand can hit the base: checked.
+  EXPECT_EQ(c.acmReason("panda_link0", "panda_hand"), mps::AcmReason::kEnabled);
+  EXPECT_EQ(c.acmReason("panda_link1", "panda_hand"), mps::AcmReason::kEnabled);
+  EXPECT_EQ(c.acmReason("panda_link8", "panda_hand"), mps::AcmReason::kNoGeometry);
+}
+
+TEST(PandaModel, ErrorsNameTheProblem) {
+  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  std::string error;
+  auto o = pandaOptions();
+  EXPECT_EQ(mps::PlanningScene::create("<robot name='x'><link", o, &error), nullptr);
+  EXPECT_NE(error.find("URDF"), std::string::npos) << error;
+  o.robot.joint_names.push_back("no_such_joint");
+  EXPECT_EQ(mps::PlanningScene::create(readFile(kPandaUrdf), o, &error), nullptr);
+  EXPECT_NE(error.find("no_such_joint"), std::string::npos) << error;
+  o = pandaOptions();
+  o.robot.mesh_base_dir = "/nonexistent";
+  EXPECT_EQ(mps::PlanningScene::create(readFile(kPandaUrdf), o, &error), nullptr);
+  EXPECT_NE(error.find("mesh"), std::string::npos) << error;
+  o = pandaOptions();
+  o.planner.planner = "Nope";
+  EXPECT_EQ(mps::PlanningScene::create(readFile(kPandaUrdf), o, &error), nullptr);
+  EXPECT_NE(error.find("Nope"), std::string::npos) << error;
+}
+
+TEST(PandaModel, TriangleMeshModeAndAcmCache) {
+  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  auto o = pandaOptions();
+  o.checker.mesh_mode = mps::MeshMode::kTriangles;
+  o.checker.acm_samples = 2000;
+  char dir_template[] = "/tmp/moverl_acm_test_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  o.checker.acm_cache_dir = dir_template;
+  std::string error;
+  auto s = mps::PlanningScene::create(readFile(kPandaUrdf), o, &error);
+  ASSERT_NE(s, nullptr) << error;
+  EXPECT_FALSE(s->checker().acmStats().from_cache);
+  mps::StateCheck sc;
+  s->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  s->checkState(kSelfCollision, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kSelfCollision) << sc.message;
+  // Second build: the ACM comes from the cache and is identical.
+  auto s2 = mps::PlanningScene::create(readFile(kPandaUrdf), o, &error);
+  ASSERT_NE(s2, nullptr) << error;
+  EXPECT_TRUE(s2->checker().acmStats().from_cache);
+  EXPECT_EQ(s2->checker().acmStats().cache_file, s->checker().acmStats().cache_file);
+  EXPECT_EQ(s2->checker().acmStats().enabled, s->checker().acmStats().enabled);
+  EXPECT_EQ(s2->checker().acmStats().never, s->checker().acmStats().never);
+  std::remove(s->checker().acmStats().cache_file.c_str());
+  rmdir(dir_template);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

@@ -20,6 +20,7 @@ SELF_COLLIDING = [0.0, 0.3, 0.0, -3.0, 0.0, 0.0, 0.0]  # forearm folded back: ha
 TABLE_COLLIDING = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # arm bent down: fingers in the table
 WALL_LEFT = [-0.6] + HOME[1:]  # hand right of the wall
 WALL_RIGHT = [0.6] + HOME[1:]  # hand left of the wall; turning joint 1 sweeps the hand through it
+FREE = WALL_LEFT  # (the home posture itself has the hand in the wall of this test world)
 
 SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = 0, 1, 2, 3
 INVALID_REQUEST, SCENE_UNAVAILABLE = 10, 11
@@ -50,8 +51,8 @@ class ShieldLive(unittest.TestCase):
         np.testing.assert_allclose(res.state.position, q, atol=1e-9)
 
     def test_free_move_executes_directly(self):
-        self.place(HOME)
-        target = list(np.array(HOME) + 0.05)
+        self.place(FREE)
+        target = list(np.array(FREE) + 0.05)
         res = self.step(target=target, duration=0.05)
         self.assertEqual(res.verdict, SAFE, res.message)
         np.testing.assert_allclose(res.state.position, target, atol=1e-6)
@@ -60,20 +61,20 @@ class ShieldLive(unittest.TestCase):
 
     def test_self_collision_is_discarded(self):
         self.assertEqual(self.check_state(positions=SELF_COLLIDING).outcome, 1)  # SELF_COLLISION
-        self.place(HOME)
+        self.place(FREE)
         res = self.step(target=SELF_COLLIDING, duration=0.05)
         self.assertEqual(res.verdict, DISCARDED_SELF, res.message)
         self.assertTrue(res.pairs, "the colliding pair is reported")
         self.assertTrue(all(p.a.startswith("panda_") and p.b.startswith("panda_") for p in res.pairs), res.pairs)
-        self.assert_held(res, HOME)
+        self.assert_held(res, FREE)
 
     def test_table_collision_is_discarded(self):
         self.assertEqual(self.check_state(positions=TABLE_COLLIDING).outcome, 2)  # WORLD_COLLISION
-        self.place(HOME)
+        self.place(FREE)
         res = self.step(target=TABLE_COLLIDING, duration=0.05)
         self.assertEqual(res.verdict, DISCARDED_POSE, res.message)
         self.assertIn("table", {p.a for p in res.pairs} | {p.b for p in res.pairs})
-        self.assert_held(res, HOME)
+        self.assert_held(res, FREE)
 
     def test_path_collision_is_replanned_and_executes_without_contact(self):
         # Both ends free, the straight segment between them crosses the wall.
@@ -90,11 +91,11 @@ class ShieldLive(unittest.TestCase):
         self.assert_no_contacts(res)
 
     def test_bad_requests_get_clear_errors_and_nodes_survive(self):
-        self.place(HOME)
-        res = self.step(target=HOME[:6], duration=0.05)
+        self.place(FREE)
+        res = self.step(target=FREE[:6], duration=0.05)
         self.assertEqual(res.verdict, INVALID_REQUEST)
         self.assertIn("7 controlled joints", res.message)
-        res = self.step(target=[float("nan")] + HOME[1:], duration=0.05)
+        res = self.step(target=[float("nan")] + FREE[1:], duration=0.05)
         self.assertEqual(res.verdict, INVALID_REQUEST)
         self.assertIn("not finite", res.message)
         bad = self.check_state(positions=[0.0] * 3)
@@ -102,7 +103,7 @@ class ShieldLive(unittest.TestCase):
         self.assertTrue(bad.message)
         self.assertFalse(self.reset(positions=[0.0]).success)
         # Everything still answers.
-        self.assertEqual(self.step(target=HOME, duration=0.05).verdict, SAFE)
+        self.assertEqual(self.step(target=FREE, duration=0.05).verdict, SAFE)
 
     def test_z_scene_down_fails_closed(self):
         """Runs last (name order): kills the planning scene under a running env."""
@@ -114,7 +115,7 @@ class ShieldLive(unittest.TestCase):
         env = gym.make("MoveRL/PandaReachTable-v0", graph="attach", world="thin_wall")
         try:
             env.reset(seed=0)
-            self.place(HOME)
+            self.place(FREE)
             subprocess.run(["rosnode", "kill", "/planning_scene"], check=True, capture_output=True, timeout=30)
             deadline = time.monotonic() + 10
             while time.monotonic() < deadline:  # until the node is gone
@@ -123,11 +124,11 @@ class ShieldLive(unittest.TestCase):
                 except rospy.ROSException:
                     break
             t0 = time.monotonic()
-            res = self.step(target=list(np.array(HOME) + 0.05), duration=0.05)
+            res = self.step(target=list(np.array(FREE) + 0.05), duration=0.05)
             self.assertLess(time.monotonic() - t0, 5.0, "the shield answers within seconds")
             self.assertEqual(res.verdict, SCENE_UNAVAILABLE, res.message)
             self.assertIn("unreachable", res.message)
-            self.assert_held(res, HOME)
+            self.assert_held(res, FREE)
             t0 = time.monotonic()
             with self.assertRaisesRegex(MoveRLError, "scene_unavailable"):
                 env.step(np.zeros(7, dtype=np.float32))

@@ -6,6 +6,9 @@
 #include <assimp/Importer.hpp>
 #include <chrono>
 #include <cmath>
+#include <limits>
+#include <map>
+#include <array>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -80,6 +83,79 @@ bool loadMesh(const std::string& path, const Eigen::Vector3d& scale, MeshData* o
   return true;
 }
 
+/// Vertices whose convex hull contains every point within `padding` of the mesh's convex hull.
+///
+/// Each hull vertex v moves along m_v / k_v * padding, where m_v is the unit mean of the outward normals n_f of
+/// the supporting triangles around v (triangles whose plane has the whole mesh on one side: the hull's faces)
+/// and k_v = min_f m_v . n_f. Every direction u in v's normal cone is a non-negative combination of those n_f,
+/// so u . m_v / k_v >= |u| and the support function grows by at least padding in every direction: the new hull
+/// contains the Minkowski sum of the old one with a ball of radius padding. Vertices on no supporting triangle
+/// lie inside the hull and stay where they are.
+std::vector<fcl::Vector3d> inflateMesh(const MeshData& mesh, double padding) {
+  if (padding <= 0.0) return mesh.vertices;
+  const std::size_t nv = mesh.vertices.size();
+  // Weld duplicated vertices (OBJ exports often repeat them per face) so that normals gather per position.
+  std::map<std::array<long long, 3>, std::size_t> ids;
+  std::vector<std::size_t> weld(nv);
+  constexpr double kWeld = 1e-7;
+  for (std::size_t i = 0; i < nv; ++i) {
+    const auto& v = mesh.vertices[i];
+    const std::array<long long, 3> key{std::llround(v.x() / kWeld), std::llround(v.y() / kWeld),
+                                       std::llround(v.z() / kWeld)};
+    weld[i] = ids.emplace(key, ids.size()).first->second;
+  }
+  std::vector<std::vector<fcl::Vector3d>> normals(ids.size());
+  for (const auto& t : mesh.triangles) {
+    const fcl::Vector3d& a = mesh.vertices[t[0]];
+    const fcl::Vector3d n = (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a);
+    const double norm = n.norm();
+    if (norm < 1e-12) continue;  // degenerate triangle
+    fcl::Vector3d u = n / norm;
+    double lo = 0.0, hi = 0.0;
+    for (const auto& v : mesh.vertices) {
+      const double side = u.dot(v - a);
+      lo = std::min(lo, side);
+      hi = std::max(hi, side);
+    }
+    constexpr double kTolerance = 1e-6;
+    if (lo < -kTolerance && hi > kTolerance) continue;  // not a supporting plane: inside the hull
+    if (hi > kTolerance) u = -u;                       // outward: the mesh lies on the negative side
+    for (int k = 0; k < 3; ++k) normals[weld[t[k]]].push_back(u);
+  }
+  constexpr double kMaxStretch = 10.0;  // very sharp vertices: cap the offset at 10 * padding
+  std::vector<fcl::Vector3d> offset(ids.size(), fcl::Vector3d::Zero());
+  for (std::size_t w = 0; w < normals.size(); ++w) {
+    if (normals[w].empty()) continue;
+    fcl::Vector3d m = fcl::Vector3d::Zero();
+    for (const auto& n : normals[w]) m += n;
+    if (m.norm() < 1e-9) continue;
+    m.normalize();
+    double k = 1.0;
+    for (const auto& n : normals[w]) k = std::min(k, m.dot(n));
+    offset[w] = m * padding * std::min(1.0 / std::max(k, 1e-9), kMaxStretch);
+  }
+  std::vector<fcl::Vector3d> out(mesh.vertices);
+  for (std::size_t i = 0; i < nv; ++i) out[i] += offset[weld[i]];
+  return out;
+}
+
+std::shared_ptr<fcl::CollisionGeometry<double>> meshGeometry(const std::vector<fcl::Vector3d>& vertices,
+                                                             const std::vector<fcl::Triangle>& triangles,
+                                                             MeshMode mode) {
+  if (mode == MeshMode::kConvexHull) {
+    // No faces on purpose: FCL then uses an exhaustive support function over all vertices, which is exactly
+    // the support function of the convex hull of the mesh (correct even if the mesh is not convex).
+    auto verts = std::make_shared<const std::vector<fcl::Vector3d>>(vertices);
+    auto faces = std::make_shared<const std::vector<int>>();
+    return std::make_shared<fcl::Convexd>(verts, 0, faces);
+  }
+  auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
+  bvh->beginModel(static_cast<int>(triangles.size()), static_cast<int>(vertices.size()));
+  bvh->addSubModel(vertices, triangles);
+  bvh->endModel();
+  return bvh;
+}
+
 }  // namespace
 
 struct FclCollisionChecker::Geom {
@@ -90,6 +166,9 @@ struct FclCollisionChecker::Geom {
   double radius = 0.0;                                        // bounding sphere radius
   Eigen::Isometry3d world_tf = Eigen::Isometry3d::Identity();
   Eigen::Vector3d world_center = Eigen::Vector3d::Zero();
+  // The same shape inflated by >= self_padding, for self-collision checks (== geom when self_padding is 0).
+  std::shared_ptr<fcl::CollisionGeometry<double>> padded;
+  double padded_radius = 0.0;
 };
 
 struct FclCollisionChecker::Obstacle {
@@ -115,6 +194,10 @@ std::unique_ptr<FclCollisionChecker> FclCollisionChecker::create(const RobotMode
     *error = "path_resolution must be > 0";
     return nullptr;
   }
+  if (!(options.self_padding >= 0.0) || !std::isfinite(options.self_padding)) {
+    *error = "self_padding must be >= 0";
+    return nullptr;
+  }
   if (options.acm_samples < 0) {
     *error = "acm_samples must be >= 0";
     return nullptr;
@@ -135,22 +218,28 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
       g.link = static_cast<int>(l);
       g.origin = s.origin;
       Eigen::Vector3d center_shape = Eigen::Vector3d::Zero();
+      const double sp = options_.self_padding;
+      g.padded_radius = -1.0;  // primitives: radius + 2 * sp (set below); meshes compute it exactly
       switch (s.type) {
         case ShapeType::kBox:
           g.geom = std::make_shared<fcl::Boxd>(s.dims.x(), s.dims.y(), s.dims.z());
           g.radius = 0.5 * s.dims.norm();
+          g.padded = std::make_shared<fcl::Boxd>(s.dims.x() + 2 * sp, s.dims.y() + 2 * sp, s.dims.z() + 2 * sp);
           break;
         case ShapeType::kSphere:
           g.geom = std::make_shared<fcl::Sphered>(s.dims.x());
           g.radius = s.dims.x();
+          g.padded = std::make_shared<fcl::Sphered>(s.dims.x() + sp);
           break;
         case ShapeType::kCylinder:
           g.geom = std::make_shared<fcl::Cylinderd>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
+          g.padded = std::make_shared<fcl::Cylinderd>(s.dims.x() + sp, s.dims.y() + 2 * sp);
           break;
         case ShapeType::kCone:
           g.geom = std::make_shared<fcl::Coned>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
+          g.padded = std::make_shared<fcl::Coned>(s.dims.x() + sp, s.dims.y() + 2 * sp);
           break;
         case ShapeType::kMesh: {
           MeshData mesh;
@@ -162,23 +251,18 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
           }
           center_shape = 0.5 * (lo + hi);
           for (const auto& v : mesh.vertices) g.radius = std::max(g.radius, (v - center_shape).norm());
-          if (options_.mesh_mode == MeshMode::kConvexHull) {
-            // No faces on purpose: FCL then uses an exhaustive support function over all vertices, which is exactly
-            // the support function of the convex hull of the mesh (correct even if the mesh is not convex).
-            auto verts = std::make_shared<const std::vector<fcl::Vector3d>>(mesh.vertices);
-            auto faces = std::make_shared<const std::vector<int>>();
-            g.geom = std::make_shared<fcl::Convexd>(verts, 0, faces);
-          } else {
-            auto bvh = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
-            bvh->beginModel(static_cast<int>(mesh.triangles.size()), static_cast<int>(mesh.vertices.size()));
-            bvh->addSubModel(mesh.vertices, mesh.triangles);
-            bvh->endModel();
-            g.geom = bvh;
-          }
+          const std::vector<Eigen::Vector3d> inflated = inflateMesh(mesh, sp);
+          g.padded_radius = 0.0;
+          for (const auto& v : inflated) g.padded_radius = std::max(g.padded_radius, (v - center_shape).norm());
+          g.geom = meshGeometry(mesh.vertices, mesh.triangles, options_.mesh_mode);
+          g.padded = sp > 0.0 ? meshGeometry(inflated, mesh.triangles, options_.mesh_mode) : g.geom;
           break;
         }
       }
       g.geom->computeLocalAABB();
+      if (sp <= 0.0) g.padded = g.geom;
+      g.padded->computeLocalAABB();
+      if (g.padded_radius < 0.0) g.padded_radius = g.radius + 2.0 * sp;
       g.center_local = s.origin * center_shape;
       link_geoms_[l].push_back(static_cast<int>(geoms_.size()));
       geoms_.push_back(std::move(g));
@@ -212,12 +296,14 @@ void FclCollisionChecker::updateTransforms(const double* q) {
   }
 }
 
-bool FclCollisionChecker::geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth) const {
-  const double r = a.radius + b.radius;
+bool FclCollisionChecker::geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth,
+                                           bool padded) const {
+  const double r = padded ? a.padded_radius + b.padded_radius : a.radius + b.radius;
   if ((a.world_center - b.world_center).squaredNorm() > r * r) return false;
   fcl::CollisionRequestd req(1, compute_depth);
   fcl::CollisionResultd res;
-  fcl::collide(a.geom.get(), a.world_tf, b.geom.get(), b.world_tf, req, res);
+  fcl::collide(padded ? a.padded.get() : a.geom.get(), a.world_tf, padded ? b.padded.get() : b.geom.get(), b.world_tf,
+               req, res);
   if (!res.isCollision()) return false;
   if (compute_depth && depth != nullptr && res.numContacts() > 0) {
     *depth = std::max(*depth, res.getContact(0).penetration_depth);
@@ -225,10 +311,10 @@ bool FclCollisionChecker::geomPairCollides(const Geom& a, const Geom& b, bool co
   return true;
 }
 
-bool FclCollisionChecker::linkPairCollides(int la, int lb) {
+bool FclCollisionChecker::linkPairCollides(int la, int lb, bool padded) {
   for (int ga : link_geoms_[la]) {
     for (int gb : link_geoms_[lb]) {
-      if (geomPairCollides(geoms_[ga], geoms_[gb], false, nullptr)) return true;
+      if (geomPairCollides(geoms_[ga], geoms_[gb], false, nullptr, padded)) return true;
     }
   }
   return false;
@@ -246,6 +332,7 @@ std::uint64_t FclCollisionChecker::acmKey() const {
   }
   fnvValue(&h, options_.acm_samples);
   fnvValue(&h, options_.acm_seed);
+  fnvValue(&h, options_.self_padding);
   fnvValue(&h, static_cast<int>(options_.mesh_mode));
   // Geometry content (mesh files may change while the URDF text does not).
   for (const Geom& g : geoms_) {
@@ -334,7 +421,8 @@ void FclCollisionChecker::computeAcm() {
       }
     }
     if (options_.acm_samples > 0 && !candidates.empty()) {
-      std::vector<int> hits(candidates.size(), 0);
+      // "always": the real shapes touch in every sample; "never": even the padded shapes never touch.
+      std::vector<int> hits(candidates.size(), 0), padded_hits(candidates.size(), 0);
       std::mt19937_64 rng(options_.acm_seed);
       const std::size_t dof = model_.dof();
       std::vector<double> q(dof);
@@ -345,12 +433,15 @@ void FclCollisionChecker::computeAcm() {
         }
         updateTransforms(q.data());
         for (std::size_t c = 0; c < candidates.size(); ++c) {
-          if (linkPairCollides(candidates[c].first, candidates[c].second)) ++hits[c];
+          if (linkPairCollides(candidates[c].first, candidates[c].second, true)) {
+            ++padded_hits[c];
+            if (linkPairCollides(candidates[c].first, candidates[c].second, false)) ++hits[c];
+          }
         }
       }
       for (std::size_t c = 0; c < candidates.size(); ++c) {
         AcmReason r = AcmReason::kEnabled;
-        if (hits[c] == 0) r = AcmReason::kNever;
+        if (padded_hits[c] == 0) r = AcmReason::kNever;
         if (hits[c] == options_.acm_samples) r = AcmReason::kAlways;
         const int a = candidates[c].first, b = candidates[c].second;
         acm_[a * n + b] = acm_[b * n + a] = r;
@@ -463,7 +554,7 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
       bool hit = false;
       for (int ga : link_geoms_[lp.first]) {
         for (int gb : link_geoms_[lp.second]) {
-          if (geomPairCollides(geoms_[ga], geoms_[gb], request.compute_depth, &depth)) {
+          if (geomPairCollides(geoms_[ga], geoms_[gb], request.compute_depth, &depth, /*padded=*/true)) {
             hit = true;
             if (!request.compute_depth) break;
           }

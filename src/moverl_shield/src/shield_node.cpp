@@ -225,7 +225,13 @@ class ShieldNode {
       return true;
     }
     res = fwd.response;
-    if (res.success) adoptState(res.state);
+    if (res.success && adoptState(res.state)) {
+      // Report the controlled joints only, in their configured order (as ~step does).
+      res.state.name = joints_;
+      res.state.position = q_;
+      res.state.velocity.clear();
+      res.state.effort.clear();
+    }
     return true;
   }
 

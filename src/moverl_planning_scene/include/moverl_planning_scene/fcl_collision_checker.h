@@ -28,6 +28,9 @@ enum class AcmReason : std::uint8_t { kEnabled = 0, kAdjacent, kRigid, kAlways, 
 /// \brief Tunables of the FCL checker (defaults = config/planning_scene.yaml).
 struct FclCheckerOptions {
   double padding = 0.01;          ///< world obstacles inflated by this (m)
+  /// Robot links are inflated by at least this (m) in self-collision checks: covers the physics engine's
+  /// collision margins (PyBullet: 1 mm per convex hull) and motion between path samples (path_resolution / 2).
+  double self_padding = 0.0;
   double path_resolution = 0.01;  ///< max motion of any robot point between checked states (m)
   MeshMode mesh_mode = MeshMode::kConvexHull;
   int acm_samples = 20000;        ///< random configurations for the always/never-in-collision test (0: skip)
@@ -74,8 +77,8 @@ class FclCollisionChecker : public CollisionChecker {
   explicit FclCollisionChecker(const RobotModel& model);
   bool loadGeometry(std::string* error);
   void computeAcm();
-  bool geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth) const;
-  bool linkPairCollides(int la, int lb);
+  bool geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth, bool padded) const;
+  bool linkPairCollides(int la, int lb, bool padded);
   void updateTransforms(const double* q);
   std::uint64_t acmKey() const;
   bool loadAcm(const std::string& file);

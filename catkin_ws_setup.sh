@@ -43,7 +43,9 @@ stamp=.venv/.requirements.sha256
 want=$(sha256sum requirements.txt | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   log "installing Python requirements into .venv"
-  .venv/bin/pip install -q --disable-pip-version-check -r requirements.txt
+  # (this machine's pip configuration warns about local package folders it cannot use: harmless, filtered)
+  .venv/bin/pip install -q --disable-pip-version-check -r requirements.txt 2>&1 | grep -v "is ignored: it is neither" || true
+  .venv/bin/python -c "import torch, pybullet, gymnasium, stable_baselines3" || { echo "Python requirements failed to install"; exit 1; }
   echo "$want" > "$stamp"
 else
   log "Python requirements: up to date"

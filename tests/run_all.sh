@@ -19,11 +19,11 @@ suite() {
 }
 
 # Tier 1: C++ cores (gtest binaries built by catkin_ws_setup.sh).
-for bin in devel/lib/*/test_*; do
+for bin in devel/lib/*/test_* devel/lib/*/*_test; do
   [ -x "$bin" ] && suite "gtest $(basename "$bin")" "$bin"
 done
 # Tier 2: Python cores.
-suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_core.py
+suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_gym_core.py
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
   suite "rostest shield_live" rostest --text moverl_gym shield_live.test

@@ -442,3 +442,37 @@ int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
 }
+
+// Self padding inflates links for self checks: every configuration that self-collides unpadded still does, and
+// near misses (links closer than the padding) are now flagged too.
+TEST(SelfPadding, FlagsASupersetIncludingNearMisses) {
+  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  std::string error;
+  mps::PlanningSceneOptions plain = pandaOptions();
+  plain.checker.self_padding = 0.0;
+  mps::PlanningSceneOptions padded = pandaOptions();
+  padded.checker.self_padding = 0.008;
+  auto a = mps::PlanningScene::create(readFile(kPandaUrdf), plain, &error);
+  ASSERT_NE(a, nullptr) << error;
+  auto b = mps::PlanningScene::create(readFile(kPandaUrdf), padded, &error);
+  ASSERT_NE(b, nullptr) << error;
+  std::mt19937 rng(7);
+  int plain_hits = 0, padded_hits = 0;
+  for (int k = 0; k < 2000; ++k) {
+    std::vector<double> q(7);
+    for (int i = 0; i < 7; ++i) {
+      std::uniform_real_distribution<double> d(a->model().lowerLimits()[i], a->model().upperLimits()[i]);
+      q[i] = d(rng);
+    }
+    mps::StateCheck sa, sb;
+    a->checkState(q, &sa);
+    b->checkState(q, &sb);
+    const bool ha = sa.outcome == mps::CheckOutcome::kSelfCollision;
+    const bool hb = sb.outcome == mps::CheckOutcome::kSelfCollision;
+    plain_hits += ha;
+    padded_hits += hb;
+    EXPECT_TRUE(!ha || hb) << "padding lost a self collision at sample " << k;
+  }
+  EXPECT_GT(plain_hits, 0);
+  EXPECT_GT(padded_hits, plain_hits) << "8 mm of padding should flag some near misses";
+}

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import backend as ros
 from .graph import GraphError, LaunchedGraph, master_alive, service_exists
-from .paths import config_file
+from .paths import config_file, world_file
 from .robot import ActionScaler, JointLimits
 from .task import ReachTask, TaskConfig
 
@@ -79,6 +79,12 @@ class MoveRLReachEnv(gym.Env):
         if graph == "attach" and not attachable:
             raise GraphError(f"no MoveRL graph (service {ros.SHIELD_STEP}) at ROS_MASTER_URI={uri or '<unset>'}")
         if graph == "launch" or (graph == "auto" and not attachable):
+            wf = world_file(launch_args["world"])
+            if not wf.exists():
+                known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
+                raise ValueError(f"no world file {wf} (worlds available: {known})")
+            launch_args = {k: v for k, v in launch_args.items() if k != "world"}
+            launch_args["world_file"] = str(wf)
             port = None
             if ros._NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
                 port = int(ros._NODE_MASTER.rsplit(":", 1)[1])

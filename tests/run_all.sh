@@ -27,6 +27,7 @@ suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/te
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
   suite "pytest graph start-up errors" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py
+  suite "pytest train.py smoke (PPO, SAC)" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_train_smoke.py
   suite "rostest shield_live" rostest --text moverl_gym shield_live.test
   suite "rostest env_live (shield on)" rostest --text moverl_gym env_live.test shield:=true
   suite "rostest env_live (shield off)" rostest --text moverl_gym env_live.test shield:=false

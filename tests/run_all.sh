@@ -29,6 +29,8 @@ if [ "$live" = 1 ]; then
   suite "pytest graph start-up errors" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py
   suite "pytest train.py smoke (PPO, SAC)" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_train_smoke.py
   suite "rostest shield_live" rostest --text moverl_gym shield_live.test
+  suite "rostest scenario_human" rostest --text moverl_gym scenario_human.test
+  suite "rostest scenario_case" rostest --text moverl_gym scenario_case.test
   suite "rostest env_live (shield on)" rostest --text moverl_gym env_live.test shield:=true
   suite "rostest env_live (shield off)" rostest --text moverl_gym env_live.test shield:=false
 fi

@@ -8,7 +8,7 @@ from .paths import config_file
 from .task import TaskConfig
 
 #: Scenario name -> world file name in worlds/.
-SCENARIOS = {"Table": "table"}
+SCENARIOS = {"Table": "table", "Human": "human", "Case": "case"}
 #: Observation kind suffix -> obs_type.
 OBSERVATIONS = {"": "joints", "EE": "ee"}
 ROBOT = "Panda"

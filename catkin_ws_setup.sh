@@ -54,7 +54,10 @@ fi
 # 3. catkin build (Debian's python3 first on PATH, or catkin fails with "No module named ament_package").
 log "catkin build"
 export PATH="/usr/bin:$PATH"
-catkin_make -j2 -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 > "$ROOT/.catkin_build.log" 2>&1 || {
+# The planning scene's gtests run on pybullet_data's Panda URDF, which only the venv's Python knows.
+PANDA_URDF=$(.venv/bin/python -c "import pybullet_data, os; print(os.path.join(pybullet_data.getDataPath(), 'franka_panda', 'panda.urdf'))")
+catkin_make -j2 -DCMAKE_BUILD_TYPE=Release -DPYTHON_EXECUTABLE=/usr/bin/python3 -DPANDA_URDF="$PANDA_URDF" \
+  > "$ROOT/.catkin_build.log" 2>&1 || {
   tail -40 "$ROOT/.catkin_build.log"; echo "catkin build failed (full log: .catkin_build.log)"; exit 1; }
 catkin_make -j2 tests >> "$ROOT/.catkin_build.log" 2>&1 || {
   tail -40 "$ROOT/.catkin_build.log"; echo "building the C++ tests failed (full log: .catkin_build.log)"; exit 1; }

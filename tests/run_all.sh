@@ -23,7 +23,7 @@ for bin in devel/lib/*/test_* devel/lib/*/*_test; do
   [ -x "$bin" ] && suite "gtest $(basename "$bin")" "$bin"
 done
 # Tier 2: Python cores.
-suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_gym_core.py
+suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
   suite "pytest graph start-up errors" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py

@@ -124,7 +124,7 @@ class PlanningSceneNode {
     o.robot.package_resolver = resolvePackage;
 
     pnh_.param("padding", o.checker.padding, 0.01);                  // obstacle inflation (m)
-    pnh_.param("self_padding", o.checker.self_padding, 0.008);       // link inflation for self checks (m)
+    pnh_.param("self_padding", o.checker.self_padding, 0.004);       // link inflation for self checks (m)
     pnh_.param("path_resolution", o.checker.path_resolution, 0.01);  // max point motion between checks (m)
     pnh_.param("acm_samples", o.checker.acm_samples, 20000);         // random configs for the ACM
     int acm_seed = 1;

@@ -28,7 +28,7 @@ enum class AcmReason : std::uint8_t { kEnabled = 0, kAdjacent, kRigid, kAlways, 
 /// \brief Tunables of the FCL checker (defaults = config/planning_scene.yaml).
 struct FclCheckerOptions {
   double padding = 0.01;          ///< world obstacles inflated by this (m)
-  /// Robot links are inflated by at least this (m) in self-collision checks: covers the physics engine's
+  /// Each robot link is inflated by at least this (m) in self-collision checks (a pair: 2x); covers the physics engine's
   /// collision margins (PyBullet: 1 mm per convex hull) and motion between path samples (path_resolution / 2).
   double self_padding = 0.0;
   double path_resolution = 0.01;  ///< max motion of any robot point between checked states (m)

@@ -26,7 +26,8 @@ done
 suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
-  suite "pytest graph start-up errors" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py
+  suite "pytest graph start-up errors, real-time clock" python -m pytest -q -p no:cacheprovider \
+    src/moverl_gym/test/test_graph_errors.py src/moverl_gym/test/test_realtime_live.py
   suite "pytest train.py smoke (PPO, SAC)" python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_train_smoke.py
   suite "rostest shield_live" rostest --text moverl_gym shield_live.test
   suite "rostest scenario_human" rostest --text moverl_gym scenario_human.test

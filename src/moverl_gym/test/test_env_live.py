@@ -39,6 +39,17 @@ class EnvLive(unittest.TestCase):
 
         check_env(self.env.unwrapped, warn=True)
 
+    def test_ee_observation_variant_passes_check_env(self):
+        from gymnasium.utils.env_checker import check_env
+
+        env = gym.make("MoveRL/PandaReachTableEE-v0", graph="attach", shield=self.shield)
+        try:
+            check_env(env.unwrapped, skip_render_check=True)
+            obs, _ = env.reset(seed=4)
+            self.assertEqual(obs.shape, (10,))  # ee pose (7) + goal (3)
+        finally:
+            env.close()
+
     def test_same_seed_same_actions_same_observations(self):
         actions = np.random.default_rng(3).uniform(-1, 1, size=(40, 7)).astype(np.float32)
 

@@ -78,7 +78,10 @@ class RosBackend:
 
     def __init__(self, wait_timeout: float = 30.0):
         import rospy
+        from moverl_msgs import srv
         from moverl_msgs.srv import CheckState, GetFK, GetWorld, ResetRobot, ShieldStep
+
+        self._srv = srv
 
         for name in REQUIRED_SERVICES:
             try:
@@ -90,26 +93,24 @@ class RosBackend:
         self._check = _Proxy(SCENE_CHECK, CheckState)
         self._fk = _Proxy(SCENE_FK, GetFK)
         self._world = _Proxy(SIM_WORLD, GetWorld)
-        self._types = dict(step=ShieldStep, reset=ResetRobot, check=CheckState, fk=GetFK)
         self.robot_description = rospy.get_param("/robot_description")
         self.joints = list(rospy.get_param("/robot/joints"))
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
 
     def step(self, target: np.ndarray, duration: float):
-        req = self._types["step"]._request_class(target=list(map(float, target)), duration=float(duration))
-        return self._step(req)
+        return self._step(self._srv.ShieldStepRequest(target=list(map(float, target)), duration=float(duration)))
 
     def reset_robot(self, q: np.ndarray):
-        return self._reset(self._types["reset"]._request_class(positions=list(map(float, q))))
+        return self._reset(self._srv.ResetRobotRequest(positions=list(map(float, q))))
 
     def check_state(self, q: np.ndarray):
-        return self._check(self._types["check"]._request_class(positions=list(map(float, q))))
+        return self._check(self._srv.CheckStateRequest(positions=list(map(float, q))))
 
     def fk(self, q: np.ndarray):
-        return self._fk(self._types["fk"]._request_class(positions=list(map(float, q)), links=[]))
+        return self._fk(self._srv.GetFKRequest(positions=list(map(float, q)), links=[]))
 
     def world(self):
-        return self._world(self._world.type._request_class()).world
+        return self._world(self._srv.GetWorldRequest()).world
 
     def close(self):
         for p in (self._step, self._reset, self._check, self._fk, self._world):

@@ -17,11 +17,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
 import numpy as np
+
+from moverl_gym.workers import run_json_worker
 
 
 def _percentiles(xs):
@@ -131,12 +132,8 @@ def _count(items):
 
 
 def run_worker(name: str, args) -> dict:
-    cmd = [sys.executable, __file__, "--worker", name, "--steps", str(args.steps), "--seed", str(args.seed),
-           "--plans", str(args.plans)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=os.environ)
-    if proc.returncode != 0:
-        raise RuntimeError(f"benchmark worker {name} failed:\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run_json_worker(__file__, ["--worker", name, "--steps", args.steps, "--seed", args.seed, "--plans", args.plans],
+                           f"benchmark worker {name}", timeout=1800)
 
 
 def main(argv=None) -> int:

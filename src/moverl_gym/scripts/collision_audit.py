@@ -31,11 +31,11 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
+
+from moverl_gym.workers import run_json_worker
 
 # CheckState outcomes (moverl_msgs/CheckState)
 VALID, SELF, WORLD, INVALID = 0, 1, 2, 3
@@ -265,14 +265,8 @@ def worker(world_path: str, n: int, seed: int, robot: str, show: int) -> dict:
 
 # ----------------------------------------------------------------------------- main
 def run_world(world_path: str, args) -> dict:
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", world_path, "-n", str(args.n),
-           "--seed", str(args.seed), "--robot", args.robot, "--show", str(args.show)]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=3600, env=os.environ)
-    if proc.returncode != 0:
-        raise RuntimeError(f"audit worker for {world_path} failed:\n{proc.stderr[-3000:]}")
-    if proc.stderr.strip():
-        print(proc.stderr.strip()[-2000:], file=sys.stderr)
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run_json_worker(__file__, ["--worker", world_path, "-n", args.n, "--seed", args.seed, "--robot", args.robot,
+                                      "--show", args.show], f"audit worker for {world_path}")
 
 
 def main(argv=None) -> int:

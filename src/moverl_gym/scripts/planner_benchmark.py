@@ -27,11 +27,11 @@ import argparse
 import csv
 import json
 import math
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
+
+from moverl_gym.workers import run_json_worker
 
 DEFAULT_PLANNERS = ["RRT", "RRTConnect", "RRTstar", "BiTRRT", "PRM", "EST", "KPIECE1", "LBKPIECE1", "SBL", "TRRT"]
 SHORT_DELTA = 0.3           # rad per joint, short pairs
@@ -299,11 +299,8 @@ def read_rows(path: Path):
 
 # ----------------------------------------------------------------------------- main
 def run_world(world_path: str, argv) -> dict:
-    cmd = [sys.executable, os.path.abspath(__file__), "--worker", world_path] + argv
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=7200, env=os.environ)
-    if proc.returncode != 0:
-        raise RuntimeError(f"planner benchmark worker for {world_path} failed:\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run_json_worker(__file__, ["--worker", world_path, *argv], f"planner benchmark worker for {world_path}",
+                           timeout=7200)
 
 
 def main(argv=None) -> int:

@@ -189,10 +189,52 @@ bool PlanningScene::fk(const std::vector<double>& q, const std::vector<std::stri
   return true;
 }
 
+void PlanningScene::findLastFree(bool goal_checked, MotionCheck* out) {
+  // path_result_ holds a find_first check of start_ -> goal_ (start checked or known free).
+  double t;
+  if (path_result_.status != CollisionStatus::kFree) {
+    t = path_result_.collision_fraction <= 0.0 ? 0.0 : path_result_.last_valid_fraction;
+  } else if (goal_checked) {
+    t = 1.0;  // not reached by the callers (the path collided)
+  } else {
+    // All checked states free but the goal (unchecked here) collides: the last interior state.
+    const std::size_t n = checker_->interiorStateCount(start_.data(), goal_.data());
+    t = static_cast<double>(n) / static_cast<double>(n + 1);
+  }
+  const std::size_t dof = start_.size();
+  std::vector<double> q(dof);
+  auto at = [&](double f) {
+    for (std::size_t i = 0; i < dof; ++i) q[i] = start_[i] + f * (goal_[i] - start_[i]);
+  };
+  // Every state of start -> q(t) lies within the resolution of a state checked free above. Make the guarantee
+  // literal: q(t) passes the state check and start -> q(t) passes checkPath (own discretization); if not
+  // (rounding), fall back to that check's last free state.
+  for (int attempt = 0; attempt < 4 && t > 0.0; ++attempt) {
+    at(t);
+    PathCheckRequest request;
+    request.state = verdict_only_;
+    request.check_start = false;  // free (checked above)
+    request.check_goal = true;
+    request.find_first = true;
+    PathCheckResult verify;
+    checker_->checkPath(start_.data(), q.data(), request, &verify);
+    if (verify.status == CollisionStatus::kFree) {
+      out->last_free_fraction = t;
+      out->last_free_state = q;
+      return;
+    }
+    t *= verify.collision_fraction <= 0.0 ? 0.0 : verify.last_valid_fraction;
+  }
+  out->last_free_fraction = 0.0;
+  out->last_free_state = start_;
+}
+
 void PlanningScene::validateMotion(const std::vector<double>& start, const std::vector<double>& goal,
-                                   bool plan_on_path_collision, MotionCheck* out) {
+                                   bool plan_on_path_collision, MotionCheck* out, bool find_last_free) {
   auto t0 = Clock::now();
   out->replanned = false;
+  out->last_free_fraction = -1.0;
+  out->last_free_state.clear();
   out->path.clear();
   out->pairs.clear();
   out->message.clear();
@@ -225,6 +267,18 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   out->state_check_time = since(t0);
   if (state_result_.collision()) {
     out->pairs = state_result_.pairs;
+    if (find_last_free && out->outcome != MotionOutcome::kStartInCollision) {
+      // The goal collides: walk the straight segment from the start (checked too) to find its last free state.
+      t0 = Clock::now();
+      PathCheckRequest request;
+      request.state = verdict_only_;
+      request.check_start = true;
+      request.check_goal = false;  // known to collide
+      request.find_first = true;
+      checker_->checkPath(start_.data(), goal_.data(), request, &path_result_);
+      findLastFree(/*goal_checked=*/false, out);
+      out->path_check_time = since(t0);
+    }
     return;
   }
   // Straight path (interior states only: both ends are free).
@@ -244,6 +298,12 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   std::ostringstream m;
   m << "straight path collides at fraction " << path_result_.collision_fraction << " ("
     << describe(path_result_.pairs) << ")";
+  if (find_last_free) {
+    t0 = Clock::now();
+    findLastFree(/*goal_checked=*/true, out);
+    out->path_check_time += since(t0);
+    m << "; last free fraction " << out->last_free_fraction;
+  }
   if (plan_on_path_collision) {
     t0 = Clock::now();
     planner_->plan(start_, goal_, "", 0.0, &plan_result_, /*try_straight=*/false);

@@ -293,7 +293,7 @@ class PlanningSceneNode {
   bool validateMotion(moverl_msgs::ValidateMotion::Request& req, moverl_msgs::ValidateMotion::Response& res) {
     try {
       std::lock_guard<std::mutex> lock(mutex_);
-      scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_);
+      scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free);
       res.outcome = static_cast<uint8_t>(motion_.outcome);
       res.replanned = motion_.replanned;
       if (motion_.replanned) toTrajectory(motion_.path, scene_->model().jointNames(), &res.path);
@@ -302,9 +302,13 @@ class PlanningSceneNode {
       res.state_check_time = motion_.state_check_time;
       res.path_check_time = motion_.path_check_time;
       res.planning_time = motion_.planning_time;
+      res.last_free_fraction = motion_.last_free_fraction;
+      res.last_free_state = motion_.last_free_state;
     } catch (const std::exception& e) {
       res.outcome = moverl_msgs::ValidateMotion::Response::INVALID_REQUEST;
       res.message = std::string("internal error: ") + e.what();
+      res.last_free_fraction = -1.0;
+      res.last_free_state.clear();
     }
     return true;
   }

@@ -262,6 +262,63 @@ TEST_F(PandaScene, ValidateMotionOutcomes) {
   expectPathValid(mc.path);
 }
 
+// find_last_free (the shield's last_safe strategy): the last free checked state before the first collision.
+TEST_F(PandaScene, ValidateMotionLastFree) {
+  setWorld({table(), wall()});
+  mps::MotionCheck mc;
+  auto expectLastFreeSound = [&](const std::vector<double>& start, const std::vector<double>& goal) {
+    ASSERT_EQ(mc.last_free_state.size(), start.size());
+    for (std::size_t i = 0; i < start.size(); ++i) {
+      EXPECT_NEAR(mc.last_free_state[i], start[i] + mc.last_free_fraction * (goal[i] - start[i]), 1e-12);
+    }
+    mps::StateCheck sc;
+    scene_->checkState(mc.last_free_state, &sc);
+    EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+    mps::PathCheck pc;
+    scene_->checkPath(start, mc.last_free_state, &pc);
+    EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << pc.message;
+  };
+  // Not requested / valid motion: not computed.
+  scene_->validateMotion(withJoint1(-0.8), withJoint1(0.8), false, &mc);
+  EXPECT_EQ(mc.last_free_fraction, -1.0);
+  EXPECT_TRUE(mc.last_free_state.empty());
+  scene_->validateMotion(withJoint1(-0.8), withJoint1(-0.7), false, &mc, true);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  EXPECT_EQ(mc.last_free_fraction, -1.0);
+
+  // Path collision across the wall: stop before it (roughly half way, the wall is at joint1 = 0).
+  scene_->validateMotion(withJoint1(-0.8), withJoint1(0.8), false, &mc, true);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  EXPECT_FALSE(mc.replanned);
+  EXPECT_GT(mc.last_free_fraction, 0.1);
+  EXPECT_LT(mc.last_free_fraction, 0.5);
+  expectLastFreeSound(withJoint1(-0.8), withJoint1(0.8));
+  mps::PathCheck full;
+  scene_->checkPath(withJoint1(-0.8), withJoint1(0.8), &full);
+  EXPECT_LT(mc.last_free_fraction, full.collision_fraction);
+
+  // Goal into the table (pose collision): walk from the start to the last free state above the table.
+  setWorld({table()});
+  scene_->validateMotion(kHome, kIntoTable, true, &mc, true);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  EXPECT_FALSE(mc.replanned);
+  EXPECT_GT(mc.last_free_fraction, 0.0);
+  EXPECT_LT(mc.last_free_fraction, 1.0);
+  expectLastFreeSound(kHome, kIntoTable);
+
+  // Goal in self collision: the same.
+  scene_->validateMotion(kHome, kSelfCollision, false, &mc, true);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kSelfCollision) << mc.message;
+  EXPECT_GT(mc.last_free_fraction, 0.0);
+  EXPECT_LT(mc.last_free_fraction, 1.0);
+  expectLastFreeSound(kHome, kSelfCollision);
+
+  // Start not free: nothing computed (the shield holds still).
+  scene_->validateMotion(kIntoTable, kHome, false, &mc, true);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision);
+  EXPECT_EQ(mc.last_free_fraction, -1.0);
+}
+
 TEST_F(PandaScene, BadInputsAreInvalidRequests) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   auto with = [](std::size_t i, double v) {

@@ -22,6 +22,8 @@ std::string verdictName(Verdict verdict) {
       return "discarded_start";
     case Verdict::kUnchecked:
       return "unchecked";
+    case Verdict::kTruncated:
+      return "truncated";
     case Verdict::kInvalidRequest:
       return "invalid_request";
     case Verdict::kSceneUnavailable:
@@ -34,8 +36,35 @@ std::string verdictName(Verdict verdict) {
 
 bool isDiscarded(Verdict verdict) {
   return verdict == Verdict::kDiscardedSelf || verdict == Verdict::kDiscardedPose ||
-         verdict == Verdict::kDiscardedPath || verdict == Verdict::kDiscardedStart;
+         verdict == Verdict::kDiscardedPath || verdict == Verdict::kDiscardedStart || verdict == Verdict::kTruncated;
 }
+
+std::string strategyName(Strategy strategy) {
+  switch (strategy) {
+    case Strategy::kPlan:
+      return "plan";
+    case Strategy::kDiscard:
+      return "discard";
+    case Strategy::kLastSafe:
+      return "last_safe";
+  }
+  return "unknown";
+}
+
+bool parseStrategy(const std::string& name, Strategy* strategy) {
+  for (Strategy s : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe}) {
+    if (name == strategyName(s)) {
+      *strategy = s;
+      return true;
+    }
+  }
+  return false;
+}
+
+std::string strategyNames() { return "plan, discard, last_safe"; }
+
+bool wantsPlan(Strategy strategy) { return strategy == Strategy::kPlan; }
+bool wantsLastFree(Strategy strategy) { return strategy == Strategy::kLastSafe; }
 
 std::string validateTarget(const std::vector<double>& target, size_t num_joints) {
   if (target.size() != num_joints) {
@@ -48,40 +77,69 @@ std::string validateTarget(const std::vector<double>& target, size_t num_joints)
   return "";
 }
 
-Decision decide(SceneOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
+Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<double>& start,
                 const std::vector<double>& target) {
   Decision d;
+  const SceneOutcome outcome = answer.outcome;
+  // Unsafe outcomes: what was found, and the verdict when the robot holds still.
+  Verdict held;
   switch (outcome) {
     case SceneOutcome::kValid:
       d.verdict = Verdict::kSafe;
       d.waypoints = {start, target};
-      break;
+      return d;
     case SceneOutcome::kSelfCollision:
-      d.verdict = Verdict::kDiscardedSelf;
+      held = Verdict::kDiscardedSelf;
       break;
     case SceneOutcome::kPoseCollision:
-      d.verdict = Verdict::kDiscardedPose;
+      held = Verdict::kDiscardedPose;
       break;
     case SceneOutcome::kPathCollision:
-      if (replanned && plan.size() >= 2) {
-        d.verdict = Verdict::kReplanned;
-        d.waypoints = plan;
-        // The plan starts at the state the scene checked; execute from the measured state exactly.
-        d.waypoints.front() = start;
-      } else {
-        d.verdict = Verdict::kDiscardedPath;
-      }
+      held = Verdict::kDiscardedPath;
       break;
     case SceneOutcome::kStartInCollision:
       d.verdict = Verdict::kDiscardedStart;
-      break;
+      d.unsafe_cause = static_cast<uint8_t>(outcome);
+      return d;
     case SceneOutcome::kInvalidRequest:
       d.verdict = Verdict::kInvalidRequest;
-      break;
+      return d;
     default:
       d.verdict = Verdict::kSceneUnavailable;  // unknown code: fail closed
+      return d;
+  }
+  d.unsafe_cause = static_cast<uint8_t>(outcome);
+  d.verdict = held;
+  switch (strategy) {
+    case Strategy::kPlan:
+      if (outcome == SceneOutcome::kPathCollision && answer.replanned && answer.plan.size() >= 2) {
+        d.verdict = Verdict::kReplanned;
+        d.waypoints = answer.plan;
+        // The plan starts at the state the scene checked; execute from the measured state exactly.
+        d.waypoints.front() = start;
+      }
+      break;
+    case Strategy::kDiscard:
+      break;  // never execute anything for an unsafe action (a plan, if any, is ignored)
+    case Strategy::kLastSafe:
+      if (answer.last_free_fraction > 0.0 && answer.last_free_fraction <= 1.0 &&
+          answer.last_free_state.size() == start.size()) {
+        d.verdict = Verdict::kTruncated;
+        d.waypoints = {start, answer.last_free_state};
+        d.truncated_fraction = answer.last_free_fraction;
+      }
+      break;
   }
   return d;
+}
+
+Decision decide(SceneOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
+                const std::vector<double>& target) {
+  SceneAnswer answer;
+  answer.outcome = outcome;
+  answer.replanned = replanned;
+  answer.plan = plan;
+  return decide(Strategy::kPlan, answer, start, target);
 }
 
 Decision passThrough(const std::vector<double>& start, const std::vector<double>& target) {

@@ -1,8 +1,9 @@
 // The MoveRL shield node: a thin ROS shell around moverl_shield's core.
 //
 // Per env step (service ~step): read the current state, make ONE ValidateMotion call to the planning scene,
-// then execute the direct move or the replacement plan through the driver's ExecuteTrajectory service, or
-// hold still. Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
+// then execute the direct move, the replacement plan or the truncated straight move through the driver's
+// ExecuteTrajectory service, or hold still. ~strategy says what happens to an unsafe action (plan, discard,
+// last_safe; see config/shield.yaml). Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
 // be reached the shield fails closed: nothing moves and the verdict says SCENE_UNAVAILABLE.
 //
 // The shield talks to the robot only through what a driver offers: joint states in (the `joint_states`
@@ -66,8 +67,14 @@ class ShieldNode {
         reset_(nh_, pnh.param<std::string>("reset_service", "/sim/reset_robot")) {
     // false: pass targets straight to the driver without checks (the "shield off" baseline).
     enabled_ = pnh.param("enabled", true);
-    // Replace a colliding straight path by an OMPL plan (true) or discard the action (false).
-    plan_on_path_collision_ = pnh.param("plan_on_path_collision", true);
+    // What happens to an unsafe action: plan (default, the paper's), discard, last_safe.
+    const std::string strategy = pnh.param<std::string>("strategy", "plan");
+    if (!parseStrategy(strategy, &strategy_)) {
+      throw std::runtime_error("unknown ~strategy '" + strategy + "' (expected one of: " + strategyNames() + ")");
+    }
+    if (pnh.hasParam("plan_on_path_collision")) {
+      ROS_WARN("shield: ~plan_on_path_collision is obsolete and ignored; use ~strategy (plan, discard, last_safe)");
+    }
     // Fraction of the URDF velocity limits used to time plans and direct moves.
     velocity_scale_ = pnh.param("velocity_scale", 1.0);
 
@@ -87,8 +94,8 @@ class ShieldNode {
     state_sub_ = nh.subscribe("joint_states", 10, &ShieldNode::onJointState, this);
     step_srv_ = pnh.advertiseService("step", &ShieldNode::step, this);
     reset_srv_ = pnh.advertiseService("reset", &ShieldNode::reset, this);
-    ROS_INFO("shield ready (%s), %zu joints, scene %s, driver %s", enabled_ ? "enabled" : "DISABLED",
-             joints_.size(), scene_.name().c_str(), execute_.name().c_str());
+    ROS_INFO("shield ready (%s, strategy %s), %zu joints, scene %s, driver %s", enabled_ ? "enabled" : "DISABLED",
+             strategyName(strategy_).c_str(), joints_.size(), scene_.name().c_str(), execute_.name().c_str());
   }
 
  private:
@@ -130,6 +137,9 @@ class ShieldNode {
   }
 
   bool step(moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
+    res.strategy = enabled_ ? strategyName(strategy_) : "";
+    res.unsafe_cause = 0;
+    res.truncated_fraction = -1.0;
     res.verdict = static_cast<uint8_t>(run(req, res));
     if (have_state_) fillState(res.state, res.ee_pose);
     if (!res.contacts.header.stamp.isZero()) return true;
@@ -157,7 +167,8 @@ class ShieldNode {
       moverl_msgs::ValidateMotion vm;
       vm.request.start = q_;
       vm.request.goal = req.target;
-      vm.request.plan_on_path_collision = plan_on_path_collision_;
+      vm.request.plan_on_path_collision = wantsPlan(strategy_);
+      vm.request.find_last_free = wantsLastFree(strategy_);
       if (!scene_.call(vm)) {
         res.message = "planning scene service " + scene_.name() + " is unreachable: failing closed, robot held";
         ROS_WARN_THROTTLE(5.0, "%s", res.message.c_str());
@@ -168,10 +179,20 @@ class ShieldNode {
       res.path_check_time = vm.response.path_check_time;
       res.planning_time = vm.response.planning_time;
       res.message = vm.response.message;
-      Waypoints plan;
-      plan.reserve(vm.response.path.points.size());
-      for (const auto& p : vm.response.path.points) plan.push_back(p.positions);
-      decision = decide(static_cast<SceneOutcome>(vm.response.outcome), vm.response.replanned, plan, q_, req.target);
+      SceneAnswer answer;
+      answer.outcome = static_cast<SceneOutcome>(vm.response.outcome);
+      answer.replanned = vm.response.replanned;
+      answer.plan.reserve(vm.response.path.points.size());
+      for (const auto& p : vm.response.path.points) answer.plan.push_back(p.positions);
+      answer.last_free_fraction = vm.response.last_free_fraction;
+      answer.last_free_state = vm.response.last_free_state;
+      decision = decide(strategy_, answer, q_, req.target);
+      res.unsafe_cause = decision.unsafe_cause;
+      res.truncated_fraction = decision.truncated_fraction;
+      if (decision.verdict == Verdict::kTruncated) {
+        res.message += "; truncated: moved to the last safe state at fraction " +
+                       std::to_string(decision.truncated_fraction) + " of the straight path";
+      }
     }
     if (decision.waypoints.empty()) return decision.verdict;
     return execute(decision, req.duration, res);
@@ -244,7 +265,8 @@ class ShieldNode {
   std::unique_ptr<ChainKinematics> kinematics_;
   std::vector<std::string> joints_;
   std::map<std::string, size_t> index_;
-  bool enabled_ = true, plan_on_path_collision_ = true;
+  bool enabled_ = true;
+  Strategy strategy_ = Strategy::kPlan;
   double velocity_scale_ = 1.0;
   std::vector<double> q_;
   ros::Time state_stamp_;

@@ -50,6 +50,163 @@ TEST(Decide, UnknownSceneCodeFailsClosed) {
   EXPECT_TRUE(d.waypoints.empty());
 }
 
+// ---- Strategies x outcomes -------------------------------------------------------------------------------
+
+namespace {
+const std::vector<double> kLastFree{0.04, -0.08, 0.02};  // 40 % of the way to kTarget
+const Strategy kAllStrategies[] = {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe};
+
+// What a scene asked with the strategy's flags would answer (plan / last free state only when requested).
+SceneAnswer answer(Strategy s, SceneOutcome outcome, bool plan_found = true, double last_free = 0.4) {
+  SceneAnswer a;
+  a.outcome = outcome;
+  const bool unsafe = outcome == SceneOutcome::kSelfCollision || outcome == SceneOutcome::kPoseCollision ||
+                      outcome == SceneOutcome::kPathCollision;
+  if (outcome == SceneOutcome::kPathCollision && wantsPlan(s) && plan_found) {
+    a.replanned = true;
+    a.plan = {kStart, {0.05, 0.1, 0}, kTarget};
+  }
+  if (unsafe && wantsLastFree(s)) {
+    a.last_free_fraction = last_free;
+    a.last_free_state = last_free > 0.0 ? kLastFree : kStart;
+  }
+  return a;
+}
+}  // namespace
+
+TEST(Strategy, NamesParseAndRoundTrip) {
+  for (Strategy s : kAllStrategies) {
+    Strategy parsed = Strategy::kPlan;
+    ASSERT_TRUE(parseStrategy(strategyName(s), &parsed)) << strategyName(s);
+    EXPECT_EQ(parsed, s);
+  }
+  EXPECT_EQ(strategyName(Strategy::kPlan), "plan");
+  EXPECT_EQ(strategyName(Strategy::kDiscard), "discard");
+  EXPECT_EQ(strategyName(Strategy::kLastSafe), "last_safe");
+  Strategy s = Strategy::kDiscard;
+  EXPECT_FALSE(parseStrategy("Plan", &s));
+  EXPECT_FALSE(parseStrategy("hold", &s));
+  EXPECT_FALSE(parseStrategy("", &s));
+  EXPECT_EQ(s, Strategy::kDiscard);  // unchanged
+  EXPECT_TRUE(wantsPlan(Strategy::kPlan));
+  EXPECT_FALSE(wantsPlan(Strategy::kDiscard));
+  EXPECT_FALSE(wantsPlan(Strategy::kLastSafe));
+  EXPECT_TRUE(wantsLastFree(Strategy::kLastSafe));
+  EXPECT_FALSE(wantsLastFree(Strategy::kPlan));
+  EXPECT_FALSE(wantsLastFree(Strategy::kDiscard));
+}
+
+TEST(Strategy, ValidStartInvalidAndUnknownAreTheSameForEveryStrategy) {
+  for (Strategy s : kAllStrategies) {
+    Decision d = decide(s, answer(s, SceneOutcome::kValid), kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kSafe) << strategyName(s);
+    EXPECT_EQ(d.waypoints, (Waypoints{kStart, kTarget}));
+    EXPECT_EQ(d.unsafe_cause, 0);
+    EXPECT_EQ(d.truncated_fraction, -1.0);
+    // A start in collision is held even if the scene (wrongly) sent a last free state.
+    SceneAnswer start = answer(s, SceneOutcome::kStartInCollision);
+    start.last_free_fraction = 0.5;
+    start.last_free_state = kLastFree;
+    d = decide(s, start, kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kDiscardedStart);
+    EXPECT_TRUE(d.waypoints.empty());
+    EXPECT_EQ(d.unsafe_cause, 4);
+    d = decide(s, answer(s, SceneOutcome::kInvalidRequest), kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kInvalidRequest);
+    EXPECT_TRUE(d.waypoints.empty());
+    d = decide(s, answer(s, static_cast<SceneOutcome>(42)), kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kSceneUnavailable);
+    EXPECT_TRUE(d.waypoints.empty());
+  }
+}
+
+TEST(Strategy, PlanHoldsSelfAndPoseAndReplansThePath) {
+  const Strategy s = Strategy::kPlan;
+  Decision d = decide(s, answer(s, SceneOutcome::kSelfCollision), kStart, kTarget);
+  EXPECT_EQ(d.verdict, Verdict::kDiscardedSelf);
+  EXPECT_TRUE(d.waypoints.empty());
+  EXPECT_EQ(d.unsafe_cause, 1);
+  d = decide(s, answer(s, SceneOutcome::kPoseCollision), kStart, kTarget);
+  EXPECT_EQ(d.verdict, Verdict::kDiscardedPose);
+  EXPECT_TRUE(d.waypoints.empty());
+  EXPECT_EQ(d.unsafe_cause, 2);
+  d = decide(s, answer(s, SceneOutcome::kPathCollision), kStart, kTarget);
+  EXPECT_EQ(d.verdict, Verdict::kReplanned);
+  ASSERT_EQ(d.waypoints.size(), 3u);
+  EXPECT_EQ(d.waypoints.front(), kStart);
+  EXPECT_EQ(d.waypoints.back(), kTarget);
+  EXPECT_EQ(d.unsafe_cause, 3);
+  d = decide(s, answer(s, SceneOutcome::kPathCollision, /*plan_found=*/false), kStart, kTarget);
+  EXPECT_EQ(d.verdict, Verdict::kDiscardedPath);
+  EXPECT_TRUE(d.waypoints.empty());
+  // A last free state sent anyway is ignored by plan.
+  SceneAnswer a = answer(s, SceneOutcome::kPoseCollision);
+  a.last_free_fraction = 0.4;
+  a.last_free_state = kLastFree;
+  EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, Verdict::kDiscardedPose);
+}
+
+TEST(Strategy, DiscardNeverExecutesAPlanOrATruncatedMove) {
+  const Strategy s = Strategy::kDiscard;
+  const std::pair<SceneOutcome, Verdict> cases[] = {{SceneOutcome::kSelfCollision, Verdict::kDiscardedSelf},
+                                                    {SceneOutcome::kPoseCollision, Verdict::kDiscardedPose},
+                                                    {SceneOutcome::kPathCollision, Verdict::kDiscardedPath}};
+  for (const auto& c : cases) {
+    // Even if the scene sent a plan and a last free state (it was not asked to), nothing moves.
+    SceneAnswer a = answer(s, c.first);
+    a.replanned = true;
+    a.plan = {kStart, {0.05, 0.1, 0}, kTarget};
+    a.last_free_fraction = 0.4;
+    a.last_free_state = kLastFree;
+    Decision d = decide(s, a, kStart, kTarget);
+    EXPECT_EQ(d.verdict, c.second);
+    EXPECT_TRUE(d.waypoints.empty());
+    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(c.first));
+    EXPECT_EQ(d.truncated_fraction, -1.0);
+    EXPECT_TRUE(isDiscarded(d.verdict));
+  }
+}
+
+TEST(Strategy, LastSafeTruncatesEveryUnsafeActionWithProgress) {
+  const Strategy s = Strategy::kLastSafe;
+  for (SceneOutcome o : {SceneOutcome::kSelfCollision, SceneOutcome::kPoseCollision, SceneOutcome::kPathCollision}) {
+    Decision d = decide(s, answer(s, o), kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kTruncated) << static_cast<int>(o);
+    EXPECT_EQ(d.waypoints, (Waypoints{kStart, kLastFree}));
+    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(o));
+    EXPECT_DOUBLE_EQ(d.truncated_fraction, 0.4);
+    EXPECT_TRUE(isDiscarded(d.verdict));  // the action was unsafe: punished
+  }
+  // A plan sent anyway is never executed by last_safe.
+  SceneAnswer a = answer(s, SceneOutcome::kPathCollision);
+  a.replanned = true;
+  a.plan = {kStart, {0.05, 0.1, 0}, kTarget};
+  EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, Verdict::kTruncated);
+}
+
+TEST(Strategy, LastSafeWithoutProgressHoldsStill) {
+  const Strategy s = Strategy::kLastSafe;
+  const std::pair<SceneOutcome, Verdict> cases[] = {{SceneOutcome::kSelfCollision, Verdict::kDiscardedSelf},
+                                                    {SceneOutcome::kPoseCollision, Verdict::kDiscardedPose},
+                                                    {SceneOutcome::kPathCollision, Verdict::kDiscardedPath}};
+  for (const auto& c : cases) {
+    for (double t : {0.0, -1.0}) {  // no free state beyond the start; not computed
+      Decision d = decide(s, answer(s, c.first, true, t), kStart, kTarget);
+      EXPECT_EQ(d.verdict, c.second) << t;
+      EXPECT_TRUE(d.waypoints.empty());
+      EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(c.first));
+      EXPECT_EQ(d.truncated_fraction, -1.0);
+    }
+    // Malformed last free state (wrong size, fraction beyond 1): fail closed, hold still.
+    SceneAnswer a = answer(s, c.first);
+    a.last_free_state = {0.1};
+    EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, c.second);
+    a = answer(s, c.first);
+    a.last_free_fraction = 1.5;
+    EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, c.second);
+  }
+}
+
 TEST(ValidateTarget, RejectsWrongSizeAndNonFinite) {
   EXPECT_EQ(validateTarget(kTarget, 3), "");
   EXPECT_NE(validateTarget(kTarget, 7).find("3 values"), std::string::npos);
@@ -86,6 +243,7 @@ TEST(VerdictName, NamesAreStable) {
   EXPECT_EQ(verdictName(Verdict::kSafe), "safe");
   EXPECT_EQ(verdictName(Verdict::kDiscardedPath), "discarded_path");
   EXPECT_EQ(verdictName(Verdict::kSceneUnavailable), "scene_unavailable");
+  EXPECT_EQ(verdictName(Verdict::kTruncated), "truncated");
 }
 
 int main(int argc, char** argv) {

@@ -23,17 +23,30 @@ from .task import ReachTask, TaskConfig
 
 #: Shield verdicts (moverl_msgs/ShieldStep) by code.
 VERDICTS = {0: "safe", 1: "replanned", 2: "discarded_self", 3: "discarded_pose", 4: "discarded_path",
-            5: "discarded_start", 6: "unchecked", 10: "invalid_request", 11: "scene_unavailable",
-            12: "execution_failed"}
+            5: "discarded_start", 6: "unchecked", 7: "truncated", 10: "invalid_request",
+            11: "scene_unavailable", 12: "execution_failed"}
 #: The collision the shield found (and prevented or avoided) for each verdict.
-COLLISION_TYPES = {1: "path", 2: "self", 3: "pose", 4: "path", 5: "start"}
-DISCARDED = frozenset({2, 3, 4, 5})
+#: For 7 (truncated, strategy last_safe) it depends on the step: see _collision_type (unsafe_cause).
+COLLISION_TYPES = {1: "path", 2: "self", 3: "pose", 4: "path", 5: "start", 7: "path"}
+#: ShieldStep.unsafe_cause codes (ValidateMotion outcomes) -> collision type.
+UNSAFE_CAUSES = {1: "self", 2: "pose", 3: "path", 4: "start"}
+#: Verdicts that count as discarded (the action was unsafe: the agent gets safety_penalty). A truncated step
+#: (strategy last_safe) moved only along the safe part of the unsafe action: it counts too.
+DISCARDED = frozenset({2, 3, 4, 5, 7})
 FAILURES = frozenset({10, 11, 12})
 OBS_TYPES = ("joints", "ee")
 
 
 class MoveRLError(RuntimeError):
     """The shield or the driver failed: the robot did not move and the env cannot go on."""
+
+
+def _collision_type(verdict: int, res) -> "str | None":
+    """The collision the shield found for this step (None when none): from the verdict, and for a truncated
+    step from the response's unsafe_cause (self, pose or path), else "path"."""
+    if verdict == 7:
+        return UNSAFE_CAUSES.get(getattr(res, "unsafe_cause", 0), "path")
+    return COLLISION_TYPES.get(verdict)
 
 
 class MoveRLReachEnv(gym.Env):
@@ -184,9 +197,10 @@ class MoveRLReachEnv(gym.Env):
                                 execution=res.execution_time)
         info = {
             "verdict": VERDICTS.get(verdict, str(verdict)),
-            "collision_type": COLLISION_TYPES.get(verdict),
+            "collision_type": _collision_type(verdict, res),
             "discarded": discarded,
             "replanned": verdict == 1,
+            "strategy": res.strategy,
             "planning_time": float(res.planning_time),
             "contacts": int(contacts),
             "contact_substeps": int(c.substeps_in_contact) if c.available else -1,

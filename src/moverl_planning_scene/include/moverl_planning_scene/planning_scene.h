@@ -62,6 +62,10 @@ struct MotionCheck {
   std::vector<ContactPair> pairs;
   std::string message;
   double state_check_time = 0.0, path_check_time = 0.0, planning_time = 0.0;
+  /// find_last_free only: t (0..1) of the last free checked state of the straight segment before its first
+  /// collision (0: none beyond the start); -1 when not computed. last_free_state is the configuration at t.
+  double last_free_fraction = -1.0;
+  std::vector<double> last_free_state;
 };
 
 /// \brief The planning scene: robot model + FCL checker + OMPL planner. Not thread-safe (callers serialize).
@@ -90,8 +94,11 @@ class PlanningScene {
   bool fk(const std::vector<double>& q, const std::vector<std::string>& links, std::vector<Eigen::Isometry3d>* poses,
           std::string* error);
   /// \brief One shield query: goal self/world, start, straight path, optional replanning (see ValidateMotion.srv).
+  /// \param find_last_free for a goal or path collision (start free): also find the last collision-free checked
+  ///        state of the straight segment before its first collision (MotionCheck::last_free_*). That state
+  ///        passed the state check and the segment start -> it passes checkPath.
   void validateMotion(const std::vector<double>& start, const std::vector<double>& goal, bool plan_on_path_collision,
-                      MotionCheck* out);
+                      MotionCheck* out, bool find_last_free = false);
 
   const RobotModel& model() const { return *model_; }
   FclCollisionChecker& checker() { return *checker_; }
@@ -106,12 +113,15 @@ class PlanningScene {
   PlanningScene() = default;
   /// Validates and clamps into the scratch vector; returns the message ("" when fine).
   std::string prepare(const std::vector<double>& q, const char* what, std::vector<double>* clamped) const;
+  /// find_last_free: from a find_first check of start_ -> goal_ (path_result_), fill out->last_free_*.
+  void findLastFree(bool goal_checked, MotionCheck* out);
 
   std::unique_ptr<RobotModel> model_;
   std::unique_ptr<FclCollisionChecker> checker_;
   std::unique_ptr<MotionPlanner> planner_;
   std::vector<double> start_, goal_;
   CollisionRequest all_pairs_;
+  CollisionRequest verdict_only_{true, true, 0, false};  ///< self + world, no pairs (fast)
   CollisionResult state_result_;
   PathCheckResult path_result_;
   PlanResult plan_result_;

@@ -1,7 +1,8 @@
 // The ROS-free core of the MoveRL safety shield.
 //
 // The shield turns the planning scene's classification of one commanded move (ValidateMotion) into
-// what the robot does: the direct move, a collision-free replacement plan, or nothing. It also gives the
+// what the robot does: the direct move, a collision-free replacement plan, the straight move truncated
+// at its last safe state, or nothing. What happens to an unsafe action is the shield's Strategy. It also gives the
 // executed waypoints a timing that respects the joint velocity limits. No ROS headers here: the node in
 // shield_node.cpp is a thin shell around these functions.
 #pragma once
@@ -21,6 +22,7 @@ enum class Verdict : uint8_t {
   kDiscardedPath = 4,     ///< path collided and no plan was found: held still
   kDiscardedStart = 5,    ///< the current state is not free: held still
   kUnchecked = 6,         ///< shield disabled: executed straight without checks
+  kTruncated = 7,         ///< unsafe target (last_safe): moved straight to the last safe state before the collision
   kInvalidRequest = 10,   ///< malformed target: nothing moves
   kSceneUnavailable = 11, ///< planning scene unreachable or failed: fail closed
   kExecutionFailed = 12,  ///< the driver refused or failed the trajectory
@@ -36,28 +38,73 @@ enum class SceneOutcome : uint8_t {
   kInvalidRequest = 5,
 };
 
+/// What the shield does with an unsafe action (param ~strategy).
+enum class Strategy : uint8_t {
+  kPlan = 0,      ///< "plan" (the paper's): self/pose collisions held still; a path collision replaced by a plan
+  kDiscard = 1,   ///< "discard": every unsafe action held still, no planning
+  kLastSafe = 2,  ///< "last_safe": move straight to the last safe state before the first collision
+};
+
+/// \brief Name of a strategy as used in ~strategy and the ShieldStep response ("plan", "discard", "last_safe").
+std::string strategyName(Strategy strategy);
+/// \brief Parse a strategy name (exact, lower case). False for an unknown name (*strategy unchanged).
+bool parseStrategy(const std::string& name, Strategy* strategy);
+/// \brief The names accepted by parseStrategy, for messages ("plan, discard, last_safe").
+std::string strategyNames();
+
 using Waypoints = std::vector<std::vector<double>>;
+
+/// \brief The planning scene's answer for one move (the fields of ValidateMotion's response the shield uses).
+struct SceneAnswer {
+  SceneOutcome outcome = SceneOutcome::kInvalidRequest;
+  bool replanned = false;           ///< PATH_COLLISION: a replacement plan was found
+  Waypoints plan;                   ///< the replacement plan (start..goal) when replanned
+  double last_free_fraction = -1;   ///< t of the last free checked state before the first collision; -1: none
+  std::vector<double> last_free_state;  ///< the configuration at last_free_fraction
+};
+
+/// \brief What the scene must compute for a strategy (ValidateMotion request flags).
+bool wantsPlan(Strategy strategy);      ///< plan_on_path_collision
+bool wantsLastFree(Strategy strategy);  ///< find_last_free
 
 /// \brief What the shield does for one step.
 struct Decision {
   Verdict verdict = Verdict::kSceneUnavailable;  ///< fail closed unless decided otherwise
   Waypoints waypoints;  ///< joint configurations to execute, current state first; empty: hold still
+  /// The collision that made the action unsafe (SceneOutcome code: 1 self, 2 pose, 3 path, 4 start); 0: none.
+  uint8_t unsafe_cause = 0;
+  double truncated_fraction = -1.0;  ///< kTruncated: fraction of the straight path executed; else -1
 };
 
 /// \brief Short lower-case name of a verdict ("safe", "replanned", "discarded_self", ...).
 std::string verdictName(Verdict verdict);
 
-/// \brief True for the verdicts in which the robot was kept from an unsafe action (the agent is punished).
+/// \brief True for the verdicts in which the robot was kept from an unsafe action (the agent is punished),
+///        including kTruncated (the commanded action was unsafe; only its safe part was executed).
 bool isDiscarded(Verdict verdict);
 
 /// \brief Check a target: right size and finite values. Returns an empty string when fine, else the reason.
 std::string validateTarget(const std::vector<double>& target, size_t num_joints);
 
-/// \brief Map the scene's classification to the shield's decision.
+/// \brief Map the scene's classification to the shield's decision under a strategy.
+///
+/// | outcome         | plan                          | discard         | last_safe                              |
+/// |-----------------|-------------------------------|-----------------|----------------------------------------|
+/// | VALID           | SAFE (straight)               | SAFE            | SAFE                                   |
+/// | SELF_COLLISION  | DISCARDED_SELF                | DISCARDED_SELF  | TRUNCATED if t > 0, else DISCARDED_SELF|
+/// | POSE_COLLISION  | DISCARDED_POSE                | DISCARDED_POSE  | TRUNCATED if t > 0, else DISCARDED_POSE|
+/// | PATH_COLLISION  | REPLANNED if a plan, else     | DISCARDED_PATH  | TRUNCATED if t > 0, else DISCARDED_PATH|
+/// |                 | DISCARDED_PATH                | (plan ignored)  |                                        |
+/// | START_IN_COLL.  | DISCARDED_START               | DISCARDED_START | DISCARDED_START                        |
+/// t = last_free_fraction (with a last_free_state of the start's size); TRUNCATED executes start -> that state.
+/// \param start,target the current and the commanded configuration
+Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<double>& start,
+                const std::vector<double>& target);
+
+/// \brief decide() with the plan strategy (the paper's behaviour).
 /// \param outcome      ValidateMotion outcome
 /// \param replanned    whether the scene found a replacement plan (PATH_COLLISION only)
 /// \param plan         the replacement plan's waypoints (start..goal) when replanned
-/// \param start,target the current and the commanded configuration
 Decision decide(SceneOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
                 const std::vector<double>& target);
 

@@ -90,6 +90,30 @@ class ShieldLive(unittest.TestCase):
         np.testing.assert_allclose(res.state.position, WALL_RIGHT, atol=1e-6)
         self.assert_no_contacts(res)
 
+    def test_markers_show_the_scene_and_the_collision(self):
+        from visualization_msgs.msg import MarkerArray
+
+        world = rospy.wait_for_message("/shield_markers/world_markers", MarkerArray, timeout=30)
+        self.assertEqual({m.text for m in world.markers if m.ns == "obstacles"}, {"table", "wall"})
+        got = []
+        sub = rospy.Subscriber("/shield_markers/markers", MarkerArray, got.append)
+        try:
+            deadline = time.monotonic() + 10
+            while sub.get_num_connections() == 0 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            self.place(FREE)
+            self.step(target=TABLE_COLLIDING, duration=0.05)  # discarded: the fingers would be in the table
+            while not any(any(m.ns == "colliding" and m.action == m.ADD for m in a.markers) for a in got):
+                self.assertLess(time.monotonic(), deadline, "no collision markers after a discarded step")
+                time.sleep(0.05)
+        finally:
+            sub.unregister()
+        markers = [m for a in got for m in a.markers]
+        colliding = [m for m in markers if m.ns == "colliding" and m.action == m.ADD]
+        self.assertTrue(any(m.type == m.MESH_RESOURCE and m.header.frame_id.startswith("panda_") for m in colliding))
+        verdict = [m.text for m in markers if m.ns == "verdict"]
+        self.assertTrue(any(v.startswith("discarded_pose") for v in verdict), verdict)
+
     def test_bad_requests_get_clear_errors_and_nodes_survive(self):
         self.place(FREE)
         res = self.step(target=FREE[:6], duration=0.05)

@@ -17,6 +17,8 @@
 
 #include <moverl_msgs/ExecuteTrajectory.h>
 #include <moverl_msgs/ResetRobot.h>
+#include <moverl_msgs/ShieldEvent.h>
+#include <trajectory_msgs/JointTrajectory.h>
 #include <moverl_msgs/ShieldStep.h>
 #include <moverl_msgs/ValidateMotion.h>
 #include <ros/ros.h>
@@ -94,6 +96,7 @@ class ShieldNode {
     state_sub_ = nh.subscribe("joint_states", 10, &ShieldNode::onJointState, this);
     step_srv_ = pnh.advertiseService("step", &ShieldNode::step, this);
     reset_srv_ = pnh.advertiseService("reset", &ShieldNode::reset, this);
+    events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
     ROS_INFO("shield ready (%s, strategy %s), %zu joints, scene %s, driver %s", enabled_ ? "enabled" : "DISABLED",
              strategyName(strategy_).c_str(), joints_.size(), scene_.name().c_str(), execute_.name().c_str());
   }
@@ -140,7 +143,11 @@ class ShieldNode {
     res.strategy = enabled_ ? strategyName(strategy_) : "";
     res.unsafe_cause = 0;
     res.truncated_fraction = -1.0;
+    const std::vector<double> start = q_;
+    const ros::Time start_stamp = state_stamp_;
+    executed_.points.clear();
     res.verdict = static_cast<uint8_t>(run(req, res));
+    if (events_pub_.getNumSubscribers() > 0) publishEvent(req, res, start, start_stamp);
     if (have_state_) fillState(res.state, res.ee_pose);
     if (!res.contacts.header.stamp.isZero()) return true;
     // No motion this step: no contacts, as far as the driver's last report goes.
@@ -148,6 +155,21 @@ class ShieldNode {
     res.contacts.available = contacts_available_;
     res.contacts.total_contact_substeps = total_contact_substeps_;
     return true;
+  }
+
+  /// Tell visualisers and loggers what this step did (only called while ~events has subscribers).
+  void publishEvent(const moverl_msgs::ShieldStep::Request& req, const moverl_msgs::ShieldStep::Response& res,
+                    const std::vector<double>& start, const ros::Time& stamp) {
+    moverl_msgs::ShieldEvent ev;
+    ev.header.stamp = stamp;
+    ev.verdict = res.verdict;
+    ev.verdict_name = verdictName(static_cast<Verdict>(res.verdict));
+    ev.joint_names = joints_;
+    ev.start = start;
+    ev.target = req.target;
+    ev.executed = executed_;
+    ev.pairs = res.pairs;
+    events_pub_.publish(ev);
   }
 
   Verdict run(const moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
@@ -213,6 +235,7 @@ class ShieldNode {
       ex.request.trajectory.points[k].positions = decision.waypoints[k];
       ex.request.trajectory.points[k].time_from_start = ros::Duration(times[k]);
     }
+    executed_ = ex.request.trajectory;
     const auto start = std::chrono::steady_clock::now();
     const bool called = execute_.call(ex);
     res.execution_time = secondsSince(start);
@@ -261,6 +284,8 @@ class ShieldNode {
   PersistentClient<moverl_msgs::ExecuteTrajectory> execute_;
   PersistentClient<moverl_msgs::ResetRobot> reset_;
   ros::Subscriber state_sub_;
+  ros::Publisher events_pub_;
+  trajectory_msgs::JointTrajectory executed_;  // what this step sent to the driver
   ros::ServiceServer step_srv_, reset_srv_;
   std::unique_ptr<ChainKinematics> kinematics_;
   std::vector<std::string> joints_;

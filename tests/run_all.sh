@@ -6,7 +6,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck disable=SC1091
-source ./env.sh
+set +u; source ./env.sh; set -u  # ROS's setup scripts read unset variables
 export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
 live=1; [ "${1:-}" = "--no-live" ] && live=0
 passed=0; failed=0; failures=()

@@ -95,6 +95,7 @@ class RosBackend:
         self._world = _Proxy(SIM_WORLD, GetWorld)
         self.robot_description = rospy.get_param("/robot_description")
         self.joints = list(rospy.get_param("/robot/joints"))
+        self.home = list(rospy.get_param("/robot/home"))
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
 
     def step(self, target: np.ndarray, duration: float):

@@ -119,6 +119,7 @@ class MoveRLReachEnv(gym.Env):
                              f"but the env was asked for shield={shield}")
         self.shield_enabled = b.shield_enabled
         self.limits = JointLimits.from_urdf(b.robot_description, b.joints)
+        self._home = np.clip(np.asarray(b.home, dtype=np.float64), self.limits.lower, self.limits.upper)
         self.scaler = ActionScaler(self.limits, self.config.dt)
         w = b.world()
         self.world_name = w.name
@@ -162,7 +163,12 @@ class MoveRLReachEnv(gym.Env):
         return self._observation(), {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
 
     def _sample_start(self) -> np.ndarray:
+        """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform)."""
         lo, hi = self.limits.lower, self.limits.upper
+        noise = self.config.start_noise
+        if noise > 0:
+            lo = np.maximum(lo, self._home - noise)
+            hi = np.minimum(hi, self._home + noise)
         for _ in range(self.config.start_sampling_attempts):
             q = self.np_random.uniform(lo, hi)
             if self._backend.check_state(q).outcome != 0:

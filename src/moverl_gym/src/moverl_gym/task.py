@@ -20,6 +20,7 @@ class TaskConfig:
     safety_penalty: float = -1.0
     goal_tolerance: float = 0.10
     max_episode_steps: int = 100
+    start_noise: float = 0.2
     start_sampling_attempts: int = 1000
 
     @classmethod

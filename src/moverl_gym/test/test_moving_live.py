@@ -24,7 +24,6 @@ from moverl_msgs.msg import ObstacleMotion
 from moverl_msgs.srv import CheckState, GetWorld, ResetRobot, ShieldStep, ValidateMotion
 
 import moverl_gym  # noqa: F401
-from moverl_gym.robot import ActionScaler, JointLimits
 
 SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH, UNCHECKED = 0, 1, 3, 4, 6
 VALID = 0
@@ -122,7 +121,7 @@ class MovingObstacleLive(unittest.TestCase):
         try:
             env.action_space.seed(0)
             env.reset(seed=0, options={"start": NEAR})
-            counts, episode, wall_close = {}, 0, 0
+            counts, episode = {}, 0
             for _ in range(RANDOM_STEPS):
                 _, _, term, trunc, info = env.step(env.action_space.sample())
                 self.assertEqual(info["contacts"], 0, info)
@@ -134,7 +133,7 @@ class MovingObstacleLive(unittest.TestCase):
             rospy.loginfo(msg)
             print(msg)
             self.assertGreater(sum(v for k, v in counts.items() if k != "safe"), 0)   # the shield had work
-            limits, scaler = env.unwrapped.limits, env.unwrapped.scaler
+            scaler = env.unwrapped.scaler   # the env's action scaling, reused for the unchecked run
         finally:
             env.close()
         # The same kind of policy through the unchecked shield: it runs into the moving wall.
@@ -155,7 +154,6 @@ class MovingObstacleLive(unittest.TestCase):
         rospy.loginfo(msg)
         print(msg)
         self.assertGreater(wall, 0)
-        del limits
 
     # (e) ------------------------------------------------------------------------------------------------
     def test_e_seeding_is_deterministic_with_the_moving_wall(self):

@@ -6,8 +6,9 @@ The test node's private param ~world names the scenario the graph runs (worlds/<
   (b) case: a move through a case wall (both ends free) is a path collision, replaced by a plan that
       executes with zero contacts and ends at the target;
   (c) case: from above the opening the robot steps (<= 0.1 rad per joint) into the case to the goal;
-  (d) every env id of the scenario passes Gymnasium's check_env, random starts are collision-free, and a
-      random policy makes zero contacts with the shield on.
+  (d) every env id of the scenario passes Gymnasium's check_env, reset(seed) with the same actions gives the
+      same observations (the walking person included), random starts are collision-free, and a random policy
+      makes zero contacts with the shield on.
 """
 
 import time
@@ -137,6 +138,20 @@ class ScenarioLive(unittest.TestCase):
                 env = gym.make(env_id, graph="attach")
                 try:
                     check_env(env.unwrapped, skip_render_check=True)
+                    # Seeding is deterministic, moving obstacles (the walking person) included.
+                    actions = np.random.default_rng(1).uniform(-1, 1, (25, 7)).astype(np.float32)
+                    traces = []
+                    for _ in range(2):
+                        obs, _ = env.reset(seed=7)
+                        trace = [obs]
+                        for a in actions:
+                            trace.append(env.step(a)[0])
+                        traces.append(trace)
+                    for a, b in zip(*traces):
+                        np.testing.assert_array_equal(a, b)
+                    if self.world == "human":   # observed: torso, head, arms (7 each, last); torso y walks
+                        torso_y = [o[-28 + 1] for o in traces[0]]
+                        self.assertGreater(max(torso_y) - min(torso_y), 0.05, torso_y)
                     t0 = time.monotonic()
                     for seed in range(5):
                         env.reset(seed=seed)

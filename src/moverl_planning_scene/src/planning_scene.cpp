@@ -230,8 +230,11 @@ void PlanningScene::findLastFree(bool goal_checked, MotionCheck* out) {
 }
 
 void PlanningScene::validateMotion(const std::vector<double>& start, const std::vector<double>& goal,
-                                   bool plan_on_path_collision, MotionCheck* out, bool find_last_free) {
+                                   bool plan_on_path_collision, MotionCheck* out, bool find_last_free,
+                                   double start_time, double duration) {
   auto t0 = Clock::now();
+  const bool moving = checker_->hasMovingObstacles();
+  out->moving_obstacles = moving;
   out->replanned = false;
   out->last_free_fraction = -1.0;
   out->last_free_state.clear();
@@ -241,12 +244,16 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   out->state_check_time = out->path_check_time = out->planning_time = 0.0;
   std::string error = prepare(start, "start", &start_);
   if (error.empty()) error = prepare(goal, "goal", &goal_);
+  if (error.empty() && (!std::isfinite(start_time) || std::isnan(duration) || duration < 0.0)) {
+    error = "start_time must be finite and duration >= 0";
+  }
   if (!error.empty()) {
     out->outcome = MotionOutcome::kInvalidRequest;
     out->message = error;
     out->state_check_time = since(t0);
     return;
   }
+  // Moving obstacles are their whole motion envelope here (the checker's default), except for the straight path.
   // Goal: self then world (one state check), then the start.
   checker_->checkState(goal_.data(), all_pairs_, &state_result_);
   if (state_result_.status == CollisionStatus::kSelf) {
@@ -287,7 +294,9 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   request.state = all_pairs_;
   request.check_start = false;
   request.check_goal = false;
+  if (moving) checker_->setMotionWindow(start_time - kTimeSlack, start_time + duration + kTimeSlack);
   checker_->checkPath(start_.data(), goal_.data(), request, &path_result_);
+  if (moving) checker_->setMotionWindow(0.0, std::numeric_limits<double>::infinity());  // back to the envelope
   out->path_check_time = since(t0);
   if (path_result_.status == CollisionStatus::kFree) {
     out->outcome = MotionOutcome::kValid;

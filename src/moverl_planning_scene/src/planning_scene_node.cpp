@@ -58,6 +58,16 @@ bool toWorld(const moverl_msgs::World& msg, std::vector<mps::WorldObject>* out, 
     w.pose = Eigen::Isometry3d::Identity();
     w.pose.linear() = rot.toRotationMatrix();
     w.pose.translation() = Eigen::Vector3d(o.pose.position.x, o.pose.position.y, o.pose.position.z);
+    if (o.motion.type == moverl_msgs::ObstacleMotion::OSCILLATE) {
+      w.motion.type = mps::ObstacleMotion::Type::kOscillate;
+      w.motion.axis = Eigen::Vector3d(o.motion.axis[0], o.motion.axis[1], o.motion.axis[2]);
+      w.motion.amplitude = o.motion.amplitude;
+      w.motion.period = o.motion.period;
+      w.motion.phase = o.motion.phase;
+    } else if (o.motion.type != moverl_msgs::ObstacleMotion::NONE) {
+      *error = "world object '" + o.id + "': unknown motion type " + std::to_string(o.motion.type);
+      return false;
+    }
     out->push_back(std::move(w));
   }
   return true;
@@ -293,7 +303,9 @@ class PlanningSceneNode {
   bool validateMotion(moverl_msgs::ValidateMotion::Request& req, moverl_msgs::ValidateMotion::Response& res) {
     try {
       std::lock_guard<std::mutex> lock(mutex_);
-      scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free);
+      scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free,
+                             req.start_time, req.duration);
+      res.moving_obstacles = motion_.moving_obstacles;
       res.outcome = static_cast<uint8_t>(motion_.outcome);
       res.replanned = motion_.replanned;
       if (motion_.replanned) toTrajectory(motion_.path, scene_->model().jointNames(), &res.path);

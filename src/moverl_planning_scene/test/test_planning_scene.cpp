@@ -533,3 +533,198 @@ TEST(SelfPadding, FlagsASupersetIncludingNearMisses) {
   EXPECT_GT(plain_hits, 0);
   EXPECT_GT(padded_hits, plain_hits) << "8 mm of padding should flag some near misses";
 }
+
+// ------------------------------------------------------------------------------------------ moving obstacles
+namespace {
+
+mps::ObstacleMotion oscillation(const Eigen::Vector3d& axis, double amplitude, double period, double phase) {
+  mps::ObstacleMotion m;
+  m.type = mps::ObstacleMotion::Type::kOscillate;
+  m.axis = axis.normalized();
+  m.amplitude = amplitude;
+  m.period = period;
+  m.phase = phase;
+  return m;
+}
+
+// Vertical 5 mm wall in the plane y = 0 (x 0.25 .. 0.65), swinging along z: at t = 0 (phase pi/2) it is at its
+// top (centre z = 1.95, far above the arm), half a period later at its bottom (centre z = 0.45, across the path
+// of the arm's hand from joint1 = -0.8 to +0.8). Period 1 s.
+mps::WorldObject fallingWall() {
+  mps::WorldObject w = box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 1.95);
+  w.motion = oscillation(Eigen::Vector3d::UnitZ(), 0.75, 1.0, M_PI / 2);
+  return w;
+}
+
+}  // namespace
+
+TEST(ObstacleMotion, RangeIsExact) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const auto m = oscillation(Eigen::Vector3d::UnitY(), 0.05 + u(rng), 0.2 + 3 * u(rng), -4 + 8 * u(rng));
+    const double t0 = 10 * u(rng), t1 = t0 + (trial % 10 == 0 ? 2 * m.period : u(rng) * m.period);
+    double lo, hi;
+    m.range(t0, t1, &lo, &hi);
+    double mn = 1e9, mx = -1e9;
+    for (int k = 0; k <= 2000; ++k) {
+      const double d = m.displacement(t0 + (t1 - t0) * k / 2000.0);
+      mn = std::min(mn, d);
+      mx = std::max(mx, d);
+    }
+    ASSERT_LE(lo, mn + 1e-12);
+    ASSERT_GE(hi, mx - 1e-12);
+    ASSERT_NEAR(lo, mn, 1e-5 * m.amplitude * 10);  // tight (sampling error only)
+    ASSERT_NEAR(hi, mx, 1e-5 * m.amplitude * 10);
+  }
+  const auto m = oscillation(Eigen::Vector3d::UnitX(), 0.3, 2.0, 0.5);
+  double lo, hi;
+  m.range(1.0, std::numeric_limits<double>::infinity(), &lo, &hi);
+  EXPECT_NEAR(lo, 0.3 * (-1 - std::sin(0.5)), 1e-12);
+  EXPECT_NEAR(hi, 0.3 * (1 - std::sin(0.5)), 1e-12);
+  EXPECT_DOUBLE_EQ(m.displacement(0.0), 0.0);
+}
+
+// Every point of every shape at its pose at any time of a window lies inside the checker's swept obstacle
+// (padding included), and the aligned sweeps are tight.
+TEST_F(PandaScene, SweptInflationContainsTheMotion) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double pad = scene_->checker().options().padding;
+  for (int trial = 0; trial < 60; ++trial) {
+    mps::WorldObject o;
+    o.id = "o";
+    const int shape = trial % 3;
+    o.type = shape == 0 ? mps::ShapeType::kBox : shape == 1 ? mps::ShapeType::kSphere : mps::ShapeType::kCylinder;
+    o.dimensions = shape == 0 ? std::vector<double>{0.1 + 0.05 * u(rng), 0.2, 0.05}
+                   : shape == 1 ? std::vector<double>{0.07} : std::vector<double>{0.3, 0.05};
+    o.pose.linear() = Eigen::Quaterniond(Eigen::AngleAxisd(3 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()))
+                          .toRotationMatrix();
+    if (trial % 4 == 0) o.pose.linear().setIdentity();  // axis-aligned motions too
+    o.pose.translation() = Eigen::Vector3d(0.5 * u(rng), 0.5 * u(rng), 1.0 + 0.3 * u(rng));
+    Eigen::Vector3d axis = trial % 4 == 0 ? Eigen::Vector3d::Unit(trial % 3) : Eigen::Vector3d(u(rng), u(rng), u(rng));
+    o.motion = oscillation(axis, 0.2 + 0.1 * u(rng), 1.0 + 0.5 * u(rng), 3 * u(rng));
+    setWorld({o});
+    auto& checker = scene_->checker();
+    const double t0 = 2 + u(rng), t1 = trial % 5 == 0 ? std::numeric_limits<double>::infinity() : t0 + 0.2 + 0.2 * u(rng);
+    if (trial % 5 != 0) checker.setMotionWindow(t0, t1);
+    // Surface points of the padded shape in its own frame.
+    std::vector<Eigen::Vector3d> pts;
+    const auto& d = o.dimensions;
+    if (shape == 0) {
+      for (int c = 0; c < 8; ++c) {
+        pts.emplace_back((c & 1 ? 1 : -1) * (d[0] / 2 + pad), (c & 2 ? 1 : -1) * (d[1] / 2 + pad),
+                         (c & 4 ? 1 : -1) * (d[2] / 2 + pad));
+      }
+    } else if (shape == 1) {
+      for (int k = 0; k < 3; ++k) {
+        pts.push_back(Eigen::Vector3d::Unit(k) * (d[0] + pad));
+        pts.push_back(-Eigen::Vector3d::Unit(k) * (d[0] + pad));
+      }
+    } else {
+      for (int k = 0; k < 8; ++k) {
+        const double a = k * M_PI / 4;
+        for (double z : {-1.0, 1.0}) {
+          pts.emplace_back((d[1] + pad) * std::cos(a), (d[1] + pad) * std::sin(a), z * (d[0] / 2 + pad));
+        }
+      }
+    }
+    const double tend = std::isfinite(t1) ? t1 : t0 + 2 * o.motion.period;
+    for (int k = 0; k <= 40; ++k) {
+      const double t = t0 + (tend - t0) * k / 40.0;
+      Eigen::Isometry3d pose = o.pose;
+      pose.translation() += o.motion.axis * o.motion.displacement(t);
+      for (const auto& p : pts) {
+        const Eigen::Vector3d q = pose * (0.999 * p);
+        ASSERT_TRUE(checker.obstacleContains(0, q)) << "trial " << trial << " shape " << shape << " t " << t;
+      }
+    }
+  }
+  // Tight for a box moving along one of its axes: the swept box ends (padded) where the travel ends.
+  mps::WorldObject b = box("b", 0.1, 0.1, 0.1, 0.0, 0.0, 1.0);
+  b.motion = oscillation(Eigen::Vector3d::UnitX(), 0.2, 2.0, 0.0);
+  setWorld({b});
+  scene_->checker().setMotionWindow(0.0, 0.5);  // displacement 0 .. 0.2 along x
+  const double edge = 0.05 + pad;
+  EXPECT_TRUE(scene_->checker().obstacleContains(0, Eigen::Vector3d(0.2 + edge - 1e-4, 0, 1)));
+  EXPECT_FALSE(scene_->checker().obstacleContains(0, Eigen::Vector3d(0.2 + edge + 1e-3, 0, 1)));
+  EXPECT_FALSE(scene_->checker().obstacleContains(0, Eigen::Vector3d(-edge - 1e-3, 0, 1)));
+  EXPECT_FALSE(scene_->checker().obstacleContains(0, Eigen::Vector3d(0.1, edge + 1e-3, 1)));
+  scene_->checker().setMotionWindow(0.0, std::numeric_limits<double>::infinity());  // envelope: -0.2 .. 0.2
+  EXPECT_TRUE(scene_->checker().obstacleContains(0, Eigen::Vector3d(-0.2 - edge + 1e-4, 0, 1)));
+  EXPECT_FALSE(scene_->checker().obstacleContains(0, Eigen::Vector3d(-0.2 - edge - 1e-3, 0, 1)));
+}
+
+// The straight move is checked against where the obstacle will be DURING the move, not where it was when the move
+// began; the goal against the obstacle's whole motion envelope.
+TEST_F(PandaScene, ValidateMotionAgainstAMovingWall) {
+  const auto left = withJoint1(-0.8), right = withJoint1(0.8);
+  // Static wall at the bottom of the swing: the straight path collides (sanity check of the geometry).
+  setWorld({table(), box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)});
+  mps::MotionCheck mc;
+  scene_->validateMotion(left, right, false, &mc);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  EXPECT_FALSE(mc.moving_obstacles);
+  // The same wall up at z = 1.95: free.
+  setWorld({table(), box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 1.95)});
+  scene_->validateMotion(left, right, false, &mc);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+
+  setWorld({table(), fallingWall()});
+  // A check against the wall's pose at the start of the move (an instant) passes ...
+  scene_->validateMotion(left, right, false, &mc, false, 0.0, 0.0);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  EXPECT_TRUE(mc.moving_obstacles);
+  // ... a short move early in the swing too (wall still high: it falls 0.75 (1 - cos(2 pi 0.05)) = 3.6 cm) ...
+  scene_->validateMotion(left, right, false, &mc, false, 0.0, 0.05);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  // ... but a move lasting half a period meets the wall on its way down: caught.
+  scene_->validateMotion(left, right, false, &mc, false, 0.0, 0.5);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  ASSERT_FALSE(mc.pairs.empty());
+  EXPECT_EQ(mc.pairs.front().b, "wall") << mc.message;
+  // The same short move starting when the wall is at the bottom (t = 0.5) collides; a bit later (back up) it does not.
+  scene_->validateMotion(left, right, false, &mc, false, 0.5, 0.05);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  scene_->validateMotion(left, right, false, &mc, false, 0.95, 0.05);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  // Default (no window): the whole envelope.
+  scene_->validateMotion(left, right, false, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  // A goal inside the swing collides whatever the window (holding there would be hit later): home's hand (about
+  // (0.31, 0, 0.59)) is in the plane y = 0 under the wall's swing, though the wall is far above it now.
+  scene_->validateMotion(left, kHome, false, &mc, false, 0.0, 0.0);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  // Replanning avoids the whole envelope: its segments pass the (envelope) path check.
+  scene_->validateMotion(left, right, true, &mc, false, 0.0, 0.5);
+  ASSERT_EQ(mc.outcome, mps::MotionOutcome::kPathCollision) << mc.message;
+  if (mc.replanned) expectPathValid(mc.path);
+  // Bad times.
+  scene_->validateMotion(left, right, false, &mc, false, std::nan(""), 0.1);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest);
+  scene_->validateMotion(left, right, false, &mc, false, 0.0, -1.0);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest);
+}
+
+// A goal in the swing of a moving obstacle is a pose collision even when the obstacle is far away right now.
+TEST_F(PandaScene, GoalMustBeFreeOfTheWholeEnvelope) {
+  // A ball swinging along y through the resting hand at home (about (0.307, 0, 0.59)), now far away (y = 0.5).
+  mps::WorldObject ball;
+  ball.id = "ball";
+  ball.type = mps::ShapeType::kSphere;
+  ball.dimensions = {0.05};
+  ball.pose.translation() = Eigen::Vector3d(0.307, 0.5, 0.59);
+  ball.motion = oscillation(Eigen::Vector3d::UnitY(), 0.25, 2.0, M_PI / 2);  // y in [0.0, 0.5]
+  setWorld({table(), ball});
+  mps::MotionCheck mc;
+  scene_->validateMotion(withJoint1(-0.8), kHome, false, &mc, false, 0.0, 0.0);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  mps::StateCheck sc;
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  // A static ball at y = 0.5 leaves home free.
+  ball.motion = mps::ObstacleMotion();
+  setWorld({table(), ball});
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+}

@@ -3,7 +3,9 @@
 // Per env step (service ~step): read the current state, make ONE ValidateMotion call to the planning scene,
 // then execute the direct move, the replacement plan or the truncated straight move through the driver's
 // ExecuteTrajectory service, or hold still. ~strategy says what happens to an unsafe action (plan, discard,
-// last_safe; see config/shield.yaml). Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
+// last_safe; see config/shield.yaml). With moving obstacles the scene checks the straight move against where they
+// will be during its execution (motion time = state stamp - stamp of the last reset), and a held-still step
+// executes a zero-motion trajectory of the step's duration so the world keeps moving. Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
 // be reached the shield fails closed: nothing moves and the verdict says SCENE_UNAVAILABLE.
 //
 // The shield talks to the robot only through what a driver offers: joint states in (the `joint_states`
@@ -191,6 +193,16 @@ class ShieldNode {
       vm.request.goal = req.target;
       vm.request.plan_on_path_collision = wantsPlan(strategy_);
       vm.request.find_last_free = wantsLastFree(strategy_);
+      // Moving obstacles: the straight move is checked against where they will be while it executes, i.e. over
+      // [motion time of the current state, + the move's executed duration] (timed exactly as execute() will).
+      vm.request.start_time = (state_stamp_ - motion_epoch_).toSec();
+      try {
+        vm.request.duration =
+            timeWaypoints({q_, req.target}, kinematics_->velocityLimits(), req.duration, velocity_scale_).back();
+      } catch (const std::exception& e) {
+        res.message = std::string("cannot time the move: ") + e.what();
+        return Verdict::kExecutionFailed;
+      }
       if (!scene_.call(vm)) {
         res.message = "planning scene service " + scene_.name() + " is unreachable: failing closed, robot held";
         ROS_WARN_THROTTLE(5.0, "%s", res.message.c_str());
@@ -211,6 +223,12 @@ class ShieldNode {
       decision = decide(strategy_, answer, q_, req.target);
       res.unsafe_cause = decision.unsafe_cause;
       res.truncated_fraction = decision.truncated_fraction;
+      if (decision.waypoints.empty() && vm.response.moving_obstacles && req.duration > 0.0 &&
+          decision.verdict != Verdict::kSceneUnavailable) {
+        // Hold still for the step's duration through the driver, so that the obstacles keep moving in lockstep
+        // time. Safe: the robot rests at a state checked free of every obstacle's whole motion envelope.
+        decision.waypoints = {q_, q_};
+      }
       if (decision.verdict == Verdict::kTruncated) {
         res.message += "; truncated: moved to the last safe state at fraction " +
                        std::to_string(decision.truncated_fraction) + " of the straight path";
@@ -270,6 +288,7 @@ class ShieldNode {
     }
     res = fwd.response;
     if (res.success && adoptState(res.state)) {
+      motion_epoch_ = res.state.header.stamp;  // the driver restarted the obstacles' motions at this stamp
       // Report the controlled joints only, in their configured order (as ~step does).
       res.state.name = joints_;
       res.state.position = q_;
@@ -295,6 +314,7 @@ class ShieldNode {
   double velocity_scale_ = 1.0;
   std::vector<double> q_;
   ros::Time state_stamp_;
+  ros::Time motion_epoch_;  ///< stamp of the last successful reset: motion time 0 of moving obstacles
   bool have_state_ = false;
   bool contacts_available_ = false;
   uint64_t total_contact_substeps_ = 0;

@@ -9,6 +9,7 @@ max_episode_steps (by the TimeLimit wrapper that gym.make adds).
 
 from __future__ import annotations
 
+import math
 import os
 import time
 
@@ -127,13 +128,31 @@ class MoveRLReachEnv(gym.Env):
             raise GraphError(f"the attached graph runs world '{w.name}', the env was asked for '{world}'")
         self.task = ReachTask(self.config, goal if goal is not None else list(w.goal))
         self._observed = [o.id for o in w.objects if o.observed]
-        self._obstacles = self._obstacle_vector(w)
+        self._obstacles0 = self._obstacle_vector(w)          # observed poses at motion time 0
+        self._obstacles = self._obstacles0
+        # Observed moving obstacles: (offset of x in the obstacle vector, axis, amplitude, period, phase).
+        self._movers = []
+        for k, oid in enumerate(self._observed):
+            m = getattr(next(o for o in w.objects if o.id == oid), "motion", None)
+            if m is not None and m.type != 0 and m.amplitude > 0.0:
+                self._movers.append((7 * k, np.array(m.axis, dtype=np.float64), m.amplitude, m.period, m.phase))
+        self._motion_epoch = None   # stamp (s) of the last reset: motion time 0
         n = self.limits.size
         size = (n if obs_type_has_joints(self.obs_type) else 0) + 7 + 3 + 7 * len(self._observed)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         self.q = None
         self.last_timing = {}
+
+    def _obstacles_at(self, stamp) -> np.ndarray:
+        """Observed obstacle poses at the state stamp `stamp` (motion time = stamp - stamp of the last reset)."""
+        if not self._movers:
+            return self._obstacles0
+        t = (stamp - self._motion_epoch).to_sec()
+        out = self._obstacles0.copy()
+        for i, axis, amplitude, period, phase in self._movers:
+            out[i:i + 3] += axis * (amplitude * (math.sin(2.0 * math.pi * t / period + phase) - math.sin(phase)))
+        return out
 
     def _obstacle_vector(self, w) -> np.ndarray:
         poses = {o.id: o.pose for o in w.objects}
@@ -155,6 +174,8 @@ class MoveRLReachEnv(gym.Env):
         if not res.success:
             raise MoveRLError(f"could not place the robot at the start configuration: {res.message}")
         self.q = np.array(res.state.position, dtype=np.float64)
+        self._motion_epoch = res.state.header.stamp   # the reset restarted the obstacles' motions
+        self._obstacles = self._obstacles_at(res.state.header.stamp)
         fk = self._backend.fk(self.q)
         if not fk.success:
             raise MoveRLError(f"forward kinematics failed: {fk.message}")
@@ -191,6 +212,8 @@ class MoveRLReachEnv(gym.Env):
             raise MoveRLError(f"shield verdict {VERDICTS[verdict]}: {res.message}")
         self.q = np.array(res.state.position, dtype=np.float64)
         self.ee = _pose_array(res.ee_pose)
+        if self._movers:
+            self._obstacles = self._obstacles_at(res.state.header.stamp)
         d = self.task.distance(self.ee[:3])
         discarded = verdict in DISCARDED
         reward = self.task.reward(self.distance, d, discarded)

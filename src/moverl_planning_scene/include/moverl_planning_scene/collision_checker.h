@@ -17,6 +17,9 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -24,13 +27,59 @@
 
 namespace moverl_planning_scene {
 
+/// \brief How an obstacle moves over motion time t (moverl_msgs/ObstacleMotion): a translation along a unit axis,
+///        offset(t) = axis * amplitude * (sin(2 pi t / period + phase) - sin(phase)) from its pose at t = 0.
+struct ObstacleMotion {
+  enum class Type { kNone = 0, kOscillate = 1 };
+  Type type = Type::kNone;
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();  ///< unit vector, world frame
+  double amplitude = 0.0;                           ///< m
+  double period = 1.0;                              ///< s
+  double phase = 0.0;                               ///< rad
+
+  bool moving() const { return type != Type::kNone && amplitude > 0.0; }
+  /// \brief Scalar displacement along axis from the pose at t = 0.
+  double displacement(double t) const {
+    if (!moving()) return 0.0;
+    return amplitude * (std::sin(2.0 * M_PI * t / period + phase) - std::sin(phase));
+  }
+  /// \brief Exact range [*lo, *hi] of displacement(t) over t in [t0, t1]; t1 = +inf (or a window of a period or
+  ///        more): the whole motion envelope.
+  void range(double t0, double t1, double* lo, double* hi) const {
+    if (!moving()) {
+      *lo = *hi = 0.0;
+      return;
+    }
+    const double s0 = std::sin(phase);
+    if (!(t1 - t0 < period)) {  // a full period or more (or inf/NaN: be conservative)
+      *lo = amplitude * (-1.0 - s0);
+      *hi = amplitude * (1.0 - s0);
+      return;
+    }
+    const double w = 2.0 * M_PI / period;
+    const double a0 = w * t0 + phase, a1 = w * t1 + phase;
+    double mn = std::min(std::sin(a0), std::sin(a1)), mx = std::max(std::sin(a0), std::sin(a1));
+    // Extrema of sin at pi/2 + k pi inside [a0, a1].
+    for (double k = std::ceil((a0 - M_PI / 2) / M_PI); M_PI / 2 + k * M_PI <= a1; k += 1.0) {
+      if (std::fmod(std::fabs(k), 2.0) == 0.0) {
+        mx = 1.0;
+      } else {
+        mn = -1.0;
+      }
+    }
+    *lo = amplitude * (mn - s0);
+    *hi = amplitude * (mx - s0);
+  }
+};
+
 /// \brief One obstacle of the world (shape_msgs/SolidPrimitive conventions).
 struct WorldObject {
   std::string id;
   ShapeType type = ShapeType::kBox;  ///< kBox, kSphere, kCylinder or kCone
   /// BOX [x, y, z]; SPHERE [radius]; CYLINDER/CONE [height, radius].
   std::vector<double> dimensions;
-  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< pose of the shape's centre, base frame
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< pose of the shape's centre, base frame (at t = 0)
+  ObstacleMotion motion;                                    ///< kNone: static
 };
 
 /// \brief Verdict of a state or path check.
@@ -98,8 +147,14 @@ class CollisionChecker {
   virtual ~CollisionChecker() = default;
 
   /// \brief Replace all world objects (inflated by the checker's padding). Returns false and keeps the previous
-  ///        world when an object is invalid (message in *error).
+  ///        world when an object is invalid (message in *error). Moving objects start as their whole motion
+  ///        envelope (see setMotionWindow).
   virtual bool setWorld(const std::vector<WorldObject>& objects, std::string* error) = 0;
+  /// \brief What moving obstacles stand for in the following checks: the volume each sweeps over the motion-time
+  ///        window [t0, t1] (t1 = +inf: its whole motion envelope, the default). Static obstacles are unaffected.
+  virtual void setMotionWindow(double t0, double t1) = 0;
+  /// \brief True when the world has at least one moving obstacle.
+  virtual bool hasMovingObstacles() const = 0;
   /// \brief Check one configuration q (dof values, not validated).
   virtual void checkState(const double* q, const CollisionRequest& request, CollisionResult* result) = 0;
   /// \brief Check the straight segment q0 -> q1 with the resolution guarantee above.

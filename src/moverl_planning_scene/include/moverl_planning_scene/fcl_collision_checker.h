@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -56,6 +57,8 @@ class FclCollisionChecker : public CollisionChecker {
   ~FclCollisionChecker() override;
 
   bool setWorld(const std::vector<WorldObject>& objects, std::string* error) override;
+  void setMotionWindow(double t0, double t1) override;
+  bool hasMovingObstacles() const override { return !moving_.empty(); }
   void checkState(const double* q, const CollisionRequest& request, CollisionResult* result) override;
   void checkPath(const double* q0, const double* q1, const PathCheckRequest& request,
                  PathCheckResult* result) override;
@@ -69,6 +72,11 @@ class FclCollisionChecker : public CollisionChecker {
   double jointRadiusBound(std::size_t i) const { return joint_radius_[i]; }
   /// \brief Number of world objects.
   std::size_t worldSize() const;
+  /// \brief Bounding-sphere radius and centre of world object i as currently checked (tests: the swept inflation).
+  double obstacleRadius(std::size_t i) const;
+  Eigen::Vector3d obstacleCenter(std::size_t i) const;
+  /// \brief True when world object i (as currently checked, padded) contains point p (world frame).
+  bool obstacleContains(std::size_t i, const Eigen::Vector3d& p) const;
   const FclCheckerOptions& options() const { return options_; }
 
  private:
@@ -93,6 +101,8 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
+  std::vector<std::size_t> moving_;           // indices into world_ of moving obstacles
+  double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();
   std::vector<double> joint_radius_;
   std::vector<Eigen::Isometry3d> link_poses_;
   std::vector<double> q_scratch_;

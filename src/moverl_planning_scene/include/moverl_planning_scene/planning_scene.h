@@ -5,6 +5,7 @@
  */
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -66,6 +67,7 @@ struct MotionCheck {
   /// collision (0: none beyond the start); -1 when not computed. last_free_state is the configuration at t.
   double last_free_fraction = -1.0;
   std::vector<double> last_free_state;
+  bool moving_obstacles = false;  ///< the world has moving obstacles
 };
 
 /// \brief The planning scene: robot model + FCL checker + OMPL planner. Not thread-safe (callers serialize).
@@ -97,8 +99,13 @@ class PlanningScene {
   /// \param find_last_free for a goal or path collision (start free): also find the last collision-free checked
   ///        state of the straight segment before its first collision (MotionCheck::last_free_*). That state
   ///        passed the state check and the segment start -> it passes checkPath.
+  /// \param start_time, duration the motion-time window [start_time, start_time + duration] of the straight move:
+  ///        its interior states are checked against the volume each moving obstacle sweeps in that window (widened
+  ///        by kTimeSlack on both sides); the goal, the start, plans and the last free state against each moving
+  ///        obstacle's whole motion envelope. Ignored without moving obstacles. duration = +inf: envelope only.
   void validateMotion(const std::vector<double>& start, const std::vector<double>& goal, bool plan_on_path_collision,
-                      MotionCheck* out, bool find_last_free = false);
+                      MotionCheck* out, bool find_last_free = false, double start_time = 0.0,
+                      double duration = std::numeric_limits<double>::infinity());
 
   const RobotModel& model() const { return *model_; }
   FclCollisionChecker& checker() { return *checker_; }
@@ -106,6 +113,8 @@ class PlanningScene {
 
   /// Tolerance on joint limits for requests (rad or m); values within it are clamped to the limits.
   static constexpr double kLimitTolerance = 1e-6;
+  /// Motion-time slack (s) added on both sides of a straight move's window (stamp rounding, substep alignment).
+  static constexpr double kTimeSlack = 1e-3;
   /// Longest accepted planning time limit (s).
   static constexpr double kMaxPlanningTime = 60.0;
 

@@ -1,4 +1,8 @@
-"""ROS-free PyBullet simulator of one robot arm among static obstacles, with ground-truth contacts.
+"""ROS-free PyBullet simulator of one robot arm among obstacles, with ground-truth contacts.
+
+Obstacles with a motion (moverl_sim.world.ObjectMotion) are placed at their pose at the current motion time
+before collision detection at every physics substep. Motion time = simulated time since the last
+restart_motions() (or since the start).
 
 The Simulator owns its own BulletClient (never the global pybullet connection), so several
 simulators can live in one process. It is not thread safe: callers serialise access.
@@ -110,6 +114,7 @@ class Simulator:
         self.dt = 1.0 / physics_hz
         self.world = world if world is not None else World(name="empty")
         self._substeps_total = 0
+        self._motion_epoch = 0         # substeps_total at the last restart_motions()
         self._total_contact_substeps = 0
         self._q = None                 # cached controlled positions (kinematic mode, at rest)
 
@@ -300,6 +305,19 @@ class Simulator:
                                      basePosition=list(obj.xyz), baseOrientation=list(obj.quaternion))
             self._object_bodies[obj.id] = body
             self._body_object[body] = obj.id
+        # Moving obstacles: (body, centre xyz, quaternion, motion)
+        self._movers = [(self._object_bodies[o.id], o.xyz, list(o.quaternion), o.motion)
+                        for o in self.world.objects if o.motion is not None]
+        self._place_movers(0.0)
+
+    def _place_movers(self, t):
+        """Put every moving obstacle at its pose at motion time t."""
+        cid = self._cid if hasattr(self, "_cid") else self._p._client
+        for body, (x, y, z), quat, motion in self._movers:
+            s = motion.amplitude * math.sin(2.0 * math.pi * t / motion.period + motion.phase)
+            a = motion.axis
+            pybullet.resetBasePositionAndOrientation(body, [x + a[0] * s, y + a[1] * s, z + a[2] * s], quat,
+                                                     physicsClientId=cid)
 
     def _setup_collision_filters(self):
         p, robot = self._p, self.robot
@@ -330,6 +348,25 @@ class Simulator:
     def sim_time(self):
         """Simulated seconds since start: substeps / physics_hz."""
         return self._substeps_total / self.physics_hz
+
+    @property
+    def motion_time(self):
+        """Motion time (s) of the moving obstacles: simulated seconds since the last restart_motions()."""
+        return (self._substeps_total - self._motion_epoch) / self.physics_hz
+
+    @property
+    def has_moving_obstacles(self):
+        return bool(self._movers)
+
+    def restart_motions(self):
+        """Restart the obstacles' motions: motion time 0 now (sim time is unchanged)."""
+        self._motion_epoch = self._substeps_total
+        self._place_movers(0.0)
+
+    def obstacle_positions(self):
+        """{object id: (x, y, z)} of every obstacle now (moving ones at the current motion time)."""
+        t = self.motion_time
+        return {o.id: o.position_at(t) for o in self.world.objects}
 
     @property
     def substeps_total(self):
@@ -499,7 +536,14 @@ class Simulator:
         k0 = motion.k
         k1 = min(motion.n, k0 + max(0, int(max_substeps)))
         in_contact = 0
+        movers = self._movers
+        if movers:
+            place = self._place_movers
+            t_base = self._substeps_total - self._motion_epoch - k0 + 1   # substep k runs at motion time (t_base + k)/hz
+            hz = self.physics_hz
         for k in range(k0, k1):
+            if movers:
+                place((t_base + k) / hz)
             if kinematic:
                 reset(robot, idx, targets[k], vels[k])
                 detect(physicsClientId=cid)
@@ -537,9 +581,13 @@ class Simulator:
         if substeps <= 0:
             return
         if self.control == "dynamic":
-            for _ in range(substeps):
+            for i in range(substeps):
+                if self._movers:
+                    self._place_movers((self._substeps_total - self._motion_epoch + i + 1) / self.physics_hz)
                 pybullet.stepSimulation(physicsClientId=self._cid)
         self._substeps_total += substeps
+        if self._movers:
+            self._place_movers(self.motion_time)
 
     def _accumulate(self, pts, stats):
         """Record penetrating contacts; True when at least one counted."""

@@ -5,6 +5,11 @@ Imports message modules only (no roscore needed), so it is unit-testable.
 import rospy
 from geometry_msgs.msg import Pose
 from moverl_msgs.msg import CollisionPair, ContactReport, World as WorldMsg, WorldObject as WorldObjectMsg
+
+try:  # added with moving obstacles
+    from moverl_msgs.msg import ObstacleMotion
+except ImportError:  # pragma: no cover - messages built before moving obstacles
+    ObstacleMotion = None
 from sensor_msgs.msg import JointState
 from shape_msgs.msg import SolidPrimitive
 
@@ -16,7 +21,9 @@ def sim_stamp(seconds):
 
 
 def world_to_msg(world, stamp_sec=0.0):
-    """moverl_sim.world.World -> moverl_msgs/World (SolidPrimitive conventions, rpy -> quaternion)."""
+    """moverl_sim.world.World -> moverl_msgs/World (SolidPrimitive conventions, rpy -> quaternion).
+
+    Poses are those at motion time 0; moving objects carry their motion (ObstacleMotion)."""
     msg = WorldMsg()
     msg.header.frame_id = world.frame
     msg.header.stamp = sim_stamp(stamp_sec)
@@ -28,11 +35,17 @@ def world_to_msg(world, stamp_sec=0.0):
         o.id = obj.id
         o.shape = SolidPrimitive(type=_SHAPE_TYPES[obj.shape], dimensions=list(obj.size))
         pose = Pose()
-        pose.position.x, pose.position.y, pose.position.z = obj.xyz
+        pose.position.x, pose.position.y, pose.position.z = obj.position_at(0.0)
         q = obj.quaternion
         pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = q
         o.pose = pose
         o.observed = bool(obj.observed)
+        if obj.motion is not None:
+            if ObstacleMotion is None:
+                raise ValueError("object %r has a motion but moverl_msgs has no ObstacleMotion: rebuild" % obj.id)
+            m = obj.motion
+            o.motion = ObstacleMotion(type=ObstacleMotion.OSCILLATE, axis=list(m.axis), amplitude=m.amplitude,
+                                      period=m.period, phase=m.phase)
         msg.objects.append(o)
     return msg
 

@@ -1,8 +1,8 @@
 """World files (worlds/*.yaml): parsing with strict validation into plain dataclasses.
 
 ROS-free. The format is documented in the header of worlds/table.yaml. Unknown keys are rejected so
-that a typo never goes unnoticed; new optional keys (e.g. ``motion:`` for moving obstacles) can be
-added later as dataclass fields with a default, which keeps every existing world file valid.
+that a typo never goes unnoticed; new optional keys are dataclass fields with a default, which keeps every
+existing world file valid. An object's optional ``motion:`` makes it a moving obstacle (ObjectMotion).
 """
 import math
 import os
@@ -11,14 +11,16 @@ from typing import Optional, Tuple
 
 import yaml
 
-__all__ = ["WorldFileError", "WorldObject", "World", "load_world", "parse_world", "rpy_to_quaternion",
-           "SHAPE_SIZES"]
+__all__ = ["WorldFileError", "WorldObject", "World", "ObjectMotion", "load_world", "parse_world",
+           "rpy_to_quaternion", "SHAPE_SIZES", "MOTION_TYPES"]
 
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
 _TOP_KEYS = {"name", "frame", "goal", "objects"}
-_OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed"}
+_OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
+MOTION_TYPES = ("oscillate",)
+_MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
 
 
 class WorldFileError(Exception):
@@ -36,6 +38,30 @@ def rpy_to_quaternion(rpy):
 
 
 @dataclass(frozen=True)
+class ObjectMotion:
+    """A translation of an obstacle over motion time t (s since the motions (re)started).
+
+    oscillate: centre + axis * amplitude * sin(2 pi t / period + phase), axis a unit vector; the object's
+    ``xyz`` is the centre of the swing, its orientation does not change.
+    """
+    type: str = "oscillate"
+    axis: Tuple[float, float, float] = (1.0, 0.0, 0.0)   # unit vector (normalised by the parser)
+    amplitude: float = 0.0                                # m
+    period: float = 1.0                                   # s
+    phase: float = 0.0                                    # rad
+
+    def offset(self, t):
+        """Displacement (dx, dy, dz) from the centre at motion time t."""
+        s = self.amplitude * math.sin(2.0 * math.pi * t / self.period + self.phase)
+        return (self.axis[0] * s, self.axis[1] * s, self.axis[2] * s)
+
+    @property
+    def max_speed(self):
+        """Largest speed (m/s) of any point of the object."""
+        return 2.0 * math.pi * self.amplitude / self.period
+
+
+@dataclass(frozen=True)
 class WorldObject:
     id: str
     shape: str                        # "box" | "sphere" | "cylinder"
@@ -43,11 +69,19 @@ class WorldObject:
     xyz: Tuple[float, float, float]   # centre, world frame
     rpy: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     observed: bool = True
+    motion: Optional[ObjectMotion] = None   # None: static
 
     @property
     def quaternion(self):
         """Orientation as (x, y, z, w)."""
         return rpy_to_quaternion(self.rpy)
+
+    def position_at(self, t):
+        """Centre position at motion time t (xyz for a static object)."""
+        if self.motion is None:
+            return self.xyz
+        d = self.motion.offset(t)
+        return (self.xyz[0] + d[0], self.xyz[1] + d[1], self.xyz[2] + d[2])
 
 
 @dataclass(frozen=True)
@@ -57,6 +91,11 @@ class World:
     goal: Optional[Tuple[float, float, float]] = None
     objects: Tuple[WorldObject, ...] = ()
     source: str = field(default="<memory>", compare=False)   # file it was read from
+
+    @property
+    def moving_objects(self):
+        """The objects that have a motion."""
+        return tuple(o for o in self.objects if o.motion is not None)
 
     def object(self, object_id):
         for obj in self.objects:
@@ -103,6 +142,45 @@ def _string(value, source, key):
     if not isinstance(value, str) or not value.strip():
         _fail(source, key, "expected a non-empty string, got %r" % (value,))
     return value
+
+
+def _number(value, source, key):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        _fail(source, key, "expected a finite number, got %r" % (value,))
+    return float(value)
+
+
+def _parse_motion(raw, source, where):
+    """Validate an object's ``motion:`` mapping -> ObjectMotion."""
+    if not isinstance(raw, dict):
+        _fail(source, where, "expected a mapping like {type: oscillate, axis: [0, 1, 0], amplitude: 0.1, "
+                             "period: 4.0}, got %r" % (raw,))
+    mtype = raw.get("type")
+    if mtype is None:
+        _fail(source, where + ".type", "missing required key (allowed: %s)" % ", ".join(MOTION_TYPES))
+    if mtype not in MOTION_TYPES:
+        _fail(source, where + ".type", "unknown motion type %r (allowed: %s)" % (mtype, ", ".join(MOTION_TYPES)))
+    allowed = _MOTION_KEYS[mtype]
+    unknown = set(map(str, raw)) - allowed
+    if unknown:
+        _fail(source, "%s.%s" % (where, sorted(unknown)[0]),
+              "unknown key for a %s motion (allowed: %s)" % (mtype, ", ".join(sorted(allowed))))
+    for key in ("axis", "amplitude", "period"):
+        if key not in raw:
+            _fail(source, "%s.%s" % (where, key), "missing required key")
+    axis = _numbers(raw["axis"], source, where + ".axis", 3)
+    norm = math.sqrt(sum(a * a for a in axis))
+    if norm < 1e-9:
+        _fail(source, where + ".axis", "must be a non-zero vector, got %r" % (list(axis),))
+    axis = tuple(a / norm for a in axis)
+    amplitude = _number(raw["amplitude"], source, where + ".amplitude")
+    if amplitude < 0.0:
+        _fail(source, where + ".amplitude", "must be >= 0 (metres), got %r" % (amplitude,))
+    period = _number(raw["period"], source, where + ".period")
+    if period <= 0.0:
+        _fail(source, where + ".period", "must be > 0 (seconds), got %r" % (period,))
+    phase = _number(raw.get("phase", 0.0), source, where + ".phase")
+    return ObjectMotion(type=mtype, axis=axis, amplitude=amplitude, period=period, phase=phase)
 
 
 def parse_world(data, source="<memory>"):
@@ -158,5 +236,9 @@ def parse_world(data, source="<memory>"):
         observed = raw.get("observed", True)
         if not isinstance(observed, bool):
             _fail(source, where + ".observed", "expected true or false, got %r" % (observed,))
-        objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed))
+        motion = None
+        if raw.get("motion") is not None:
+            motion = _parse_motion(raw["motion"], source, where + ".motion")
+        objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed,
+                                   motion=motion))
     return World(name=name, frame=frame, goal=goal, objects=tuple(objects), source=source)

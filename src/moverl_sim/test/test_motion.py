@@ -1,0 +1,117 @@
+"""Moving obstacles: the world file's `motion:` key, the motion model and the simulator placing them in sim time."""
+import math
+
+import pytest
+
+from conftest import HOME, make_sim
+from moverl_sim.world import ObjectMotion, WorldFileError, parse_world
+
+
+def _world(motion, **obj):
+    o = {"id": "ball", "shape": "sphere", "size": [0.05], "xyz": [0.307, 0.5, 0.59], "motion": motion}
+    o.update(obj)
+    return parse_world({"name": "m", "objects": [o]})
+
+
+def test_motion_is_parsed_and_the_axis_normalised():
+    w = _world({"type": "oscillate", "axis": [0, 2, 0], "amplitude": 0.5, "period": 2.0, "phase": 0.3})
+    m = w.objects[0].motion
+    assert m == ObjectMotion(type="oscillate", axis=(0.0, 1.0, 0.0), amplitude=0.5, period=2.0, phase=0.3)
+    assert w.moving_objects == w.objects
+    assert _world(None).objects[0].motion is None and _world(None).moving_objects == ()
+    assert _world({"type": "oscillate", "axis": [1, 0, 0], "amplitude": 1, "period": 3}).objects[0].motion.phase == 0
+
+
+def test_oscillation_model():
+    m = ObjectMotion(axis=(0.0, 1.0, 0.0), amplitude=0.5, period=2.0, phase=0.0)
+    assert m.offset(0.0) == pytest.approx((0, 0, 0))
+    assert m.offset(0.5) == pytest.approx((0, 0.5, 0))       # quarter period: +amplitude
+    assert m.offset(1.5) == pytest.approx((0, -0.5, 0))
+    assert m.offset(2.0) == pytest.approx((0, 0, 0), abs=1e-12)
+    assert m.max_speed == pytest.approx(math.pi * 0.5)
+    o = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0}).objects[0]
+    assert o.position_at(0.5) == pytest.approx((0.307, 1.0, 0.59))   # xyz is the centre of the swing
+    assert o.position_at(0.0) == pytest.approx(o.xyz)
+
+
+@pytest.mark.parametrize("motion, key, words", [
+    ("fast", "motion", "expected a mapping"),
+    ({"axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "missing required key"),
+    ({"type": "circle", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "unknown motion type"),
+    ({"type": "oscillate", "amplitude": 0.1, "period": 1}, "motion.axis", "missing required key"),
+    ({"type": "oscillate", "axis": [0, 0, 0], "amplitude": 0.1, "period": 1}, "motion.axis", "non-zero"),
+    ({"type": "oscillate", "axis": [0, 1], "amplitude": 0.1, "period": 1}, "motion.axis", "expected 3 numbers"),
+    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": -0.1, "period": 1}, "motion.amplitude", ">= 0"),
+    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 0}, "motion.period", "> 0"),
+    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": "big", "period": 1}, "motion.amplitude", "finite number"),
+    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": float("inf")}, "motion.period",
+     "finite number"),
+    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1, "speed": 2}, "motion.speed",
+     "unknown key"),
+])
+def test_malformed_motions_name_the_key(motion, key, words):
+    with pytest.raises(WorldFileError) as err:
+        _world(motion)
+    msg = str(err.value)
+    assert "objects[0] (id ball).%s" % key in msg and words in msg, msg
+
+
+def test_simulator_moves_obstacles_in_sim_time(panda_urdf):
+    # A ball swinging along y through the resting hand (home: hand at about (0.307, 0, 0.59)):
+    # y(t) = 0.5 + 0.5 sin(pi t): clear at t = 0, through the hand at t = 1.5 s.
+    w = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0})
+    s = make_sim(panda_urdf, w)
+    try:
+        s.reset_robot(HOME)
+        assert s.has_moving_obstacles and s.motion_time == 0.0
+        assert s.contacts_now().world_contacts == 0
+        # Hold still for 1 s (a zero-motion trajectory): sim time and motion time advance, the ball is not there yet.
+        r = s.execute([1.0], [HOME])
+        assert r.contacts.world_contacts == 0 and s.motion_time == pytest.approx(1.0)
+        assert s.obstacle_positions()["ball"] == pytest.approx((0.307, 0.5, 0.59), abs=1e-9)
+        # The next second sweeps the ball through the hand: contacts at the substeps, robot still.
+        r = s.execute([1.0], [HOME])
+        assert ("panda_hand", "ball") in r.contacts.world_pairs or r.contacts.world_contacts > 0
+        assert 0 < r.contacts.substeps_in_contact < r.contacts.substeps
+        # Restart: motion time 0 again (sim time keeps going), the ball is back at its start.
+        t = s.sim_time
+        s.restart_motions()
+        assert s.motion_time == 0.0 and s.sim_time == t
+        assert s.contacts_now().world_contacts == 0
+        # hold() (real-time idling) moves the obstacles too.
+        s.hold(int(1.5 * s.physics_hz))
+        assert s.obstacle_positions()["ball"] == pytest.approx((0.307, 0.0, 0.59), abs=1e-9)
+        assert s.contacts_now().world_contacts > 0
+    finally:
+        s.close()
+
+
+def test_moving_obstacles_are_deterministic(panda_urdf):
+    w = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0})
+    runs = []
+    for _ in range(2):
+        s = make_sim(panda_urdf, w)
+        try:
+            s.reset_robot(HOME)
+            out = []
+            for _ in range(5):
+                r = s.execute([0.37], [HOME])
+                out.append((s.obstacle_positions()["ball"], r.contacts.substeps_in_contact,
+                            sorted(r.contacts.world_pairs.items())))
+            runs.append(out)
+        finally:
+            s.close()
+    assert runs[0] == runs[1]
+
+
+def test_world_message_carries_the_motion():
+    pytest.importorskip("moverl_msgs", reason="moverl_msgs not built/sourced (source devel/setup.bash)")
+    from moverl_msgs.msg import ObstacleMotion
+    from moverl_sim.ros_conversions import world_to_msg
+    w = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0, "phase": math.pi / 2})
+    o = world_to_msg(w).objects[0]
+    assert o.motion.type == ObstacleMotion.OSCILLATE and list(o.motion.axis) == [0, 1, 0]
+    assert (o.motion.amplitude, o.motion.period, o.motion.phase) == (0.5, 2.0, math.pi / 2)
+    assert o.pose.position.y == pytest.approx(1.0)   # the pose at t = 0: centre + amplitude * sin(phase)
+    static = world_to_msg(_world(None)).objects[0]
+    assert static.motion.type == ObstacleMotion.NONE and static.pose.position.y == pytest.approx(0.5)

@@ -89,7 +89,7 @@ def main(argv=None) -> int:
           f"in {wall:.1f} s ({s['steps_per_second']:.0f} steps/s, training included)")
     print(f"episodes: {s['episodes']}   success rate (last {s['last_n']} episodes): {s['success_rate_last']:.1%}")
     print(f"shield interventions (discarded actions): {s['interventions']}  {s['by_type']}   "
-          f"replanned paths: {s['replanned']}")
+          f"replanned paths: {s['replanned']}   truncated moves: {s['truncated']}")
     print(f"ground-truth contacts (physics): {s['contacts']} contact pairs, {s['contact_substeps']} substeps")
     print(f"outputs: {run}/episodes.csv, TensorBoard in {run}, model {run}/model.zip")
     return 0

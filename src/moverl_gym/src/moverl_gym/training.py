@@ -14,7 +14,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[2] / "config" / "hyperparams"
 EPISODE_FIELDS = ["episode", "timesteps", "return", "length", "success", "interventions", "discarded_self",
                   "discarded_pose", "discarded_path", "discarded_start", "replanned", "contacts",
-                  "contact_substeps", "cost", "wall_time"]
+                  "contact_substeps", "cost", "wall_time", "truncated"]
 
 
 def load_hyperparams(algo: str, env_id: str, path: Path | None = None) -> dict:
@@ -58,7 +58,7 @@ class EpisodeLogger(BaseCallback):
             ep["return"] += float(rewards[i])
             ep["length"] += 1
             verdict = info.get("verdict", "")
-            if verdict.startswith("discarded") or verdict == "replanned":
+            if verdict.startswith("discarded") or verdict in ("replanned", "truncated"):
                 ep[verdict] += 1
             if info.get("discarded"):
                 ep["interventions"] += 1
@@ -78,8 +78,8 @@ class EpisodeLogger(BaseCallback):
         self.rows.append(row)
         self._writer.writerow(row)
         self._file.flush()
-        for key in ("interventions", "replanned", "contacts", "contact_substeps", "cost", "discarded_self",
-                    "discarded_pose", "discarded_path", "discarded_start"):
+        for key in ("interventions", "replanned", "truncated", "contacts", "contact_substeps", "cost",
+                    "discarded_self", "discarded_pose", "discarded_path", "discarded_start"):
             self.totals[key] += row[key]
         for key in ("return", "length", "success", "interventions", "contacts", "cost"):
             self.logger.record(f"episode/{key}", float(row[key]))
@@ -96,6 +96,7 @@ class EpisodeLogger(BaseCallback):
             "last_n": len(rows),
             "interventions": int(self.totals["interventions"]),
             "replanned": int(self.totals["replanned"]),
+            "truncated": int(self.totals["truncated"]),
             "by_type": {k: int(self.totals[k]) for k in ("discarded_self", "discarded_pose", "discarded_path",
                                                          "discarded_start")},
             "contacts": int(self.totals["contacts"]),

@@ -1,0 +1,124 @@
+#!/usr/bin/env python3
+"""Evaluate a trained MoveRL agent: run episodes with the run's env id and shield setting (own ROS graph).
+
+    python src/moverl_gym/scripts/evaluate.py runs/study/ppo_PandaReachTable-v0_on_s0 --episodes 50 --deterministic
+
+Reads config.yaml next to the model (algo, env, shield), prints and writes JSON (default <run>/eval.json):
+success rate, mean return and length, ground-truth contacts (total and per episode), shield interventions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import yaml
+
+import moverl_gym  # noqa: F401  (registers the env ids)
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", type=Path, help="a run folder (with model.zip and config.yaml) or a model .zip")
+    p.add_argument("--episodes", type=int, default=50)
+    p.add_argument("--deterministic", action="store_true", help="mean action instead of sampling")
+    p.add_argument("--seed", type=int, default=1000, help="env seed (start configurations); not a training seed")
+    p.add_argument("--shield", choices=("on", "off"), default=None, help="default: as in training")
+    p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"))
+    p.add_argument("--out", type=Path, default=None, help="JSON file (default <run>/eval.json)")
+    return p.parse_args(argv)
+
+
+def resolve(path: Path) -> tuple[Path, dict]:
+    """(model zip, training config) from a run folder or a model file."""
+    path = path.resolve()
+    model = path / "model.zip" if path.is_dir() else path
+    run = model.parent
+    if run.name == "checkpoints":  # a checkpoint: the config is in the run folder
+        run = run.parent
+    if not model.exists():
+        raise FileNotFoundError(f"no model at {model}")
+    cfg = run / "config.yaml"
+    if not cfg.exists():
+        raise FileNotFoundError(f"no config.yaml next to {model} (expected {cfg})")
+    return model, yaml.safe_load(cfg.read_text())
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    try:
+        model_path, config = resolve(args.model)
+    except FileNotFoundError as e:
+        print(e, file=sys.stderr)
+        return 2
+    from stable_baselines3 import PPO, SAC, TD3
+
+    algo = config["algo"]
+    shield = config["shield"] if args.shield is None else args.shield == "on"
+    model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(str(model_path), device="cpu")
+    env = gym.make(config["env"], shield=shield, graph=args.graph)
+    episodes = []
+    t0 = time.perf_counter()
+    try:
+        for i in range(args.episodes):
+            obs, _ = env.reset(seed=args.seed + i)
+            ep, done = Counter(), False
+            while not done:
+                action, _ = model.predict(obs, deterministic=args.deterministic)
+                obs, reward, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+                ep["return"] += float(reward)
+                ep["length"] += 1
+                ep["contacts"] += max(info.get("contacts", 0), 0)
+                ep["interventions"] += int(bool(info.get("discarded")))
+                ep["replanned"] += int(info.get("verdict") == "replanned")
+                ep["truncated"] += int(info.get("verdict") == "truncated")
+            ep["success"] = int(bool(info.get("is_success", False)))
+            episodes.append(dict(ep))
+    finally:
+        env.close()
+    wall = time.perf_counter() - t0
+
+    def col(k):
+        return np.array([e.get(k, 0) for e in episodes], dtype=float)
+
+    result = {
+        "model": str(model_path), "env": config["env"], "algo": algo, "shield": bool(shield),
+        "trained_with_shield": bool(config["shield"]), "deterministic": args.deterministic,
+        "episodes": len(episodes), "seed": args.seed,
+        "success_rate": float(col("success").mean()), "mean_return": float(col("return").mean()),
+        "std_return": float(col("return").std()), "mean_length": float(col("length").mean()),
+        "contacts_total": int(col("contacts").sum()), "contacts_per_episode": float(col("contacts").mean()),
+        "episodes_with_contacts": int((col("contacts") > 0).sum()),
+        "interventions_total": int(col("interventions").sum()),
+        "interventions_per_episode": float(col("interventions").mean()),
+        "replanned_total": int(col("replanned").sum()), "truncated_total": int(col("truncated").sum()),
+        "wall_time": wall, "steps_per_second": float(col("length").sum() / wall) if wall > 0 else float("nan"),
+        "per_episode": episodes,
+    }
+    out = args.out or model_path.parent / "eval.json"
+    if out.parent.name == "checkpoints":
+        out = out.parent.parent / f"eval_{model_path.stem}.json"
+    out.write_text(json.dumps(result, indent=2))
+    print(f"== {algo.upper()} {config['env']} (trained shield {'on' if config['shield'] else 'off'}), evaluated "
+          f"shield {'on' if shield else 'off'}, {'deterministic' if args.deterministic else 'stochastic'} policy, "
+          f"{len(episodes)} episodes")
+    print(f"success rate {result['success_rate']:.1%}   mean return {result['mean_return']:.2f} "
+          f"± {result['std_return']:.2f}   mean length {result['mean_length']:.1f}")
+    print(f"ground-truth contacts: {result['contacts_total']} total, {result['contacts_per_episode']:.2f} per "
+          f"episode ({result['episodes_with_contacts']} episodes with contacts)")
+    print(f"shield interventions (discarded): {result['interventions_total']} "
+          f"({result['interventions_per_episode']:.2f} per episode), replanned {result['replanned_total']}, "
+          f"truncated {result['truncated_total']}")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -7,6 +7,8 @@ master, per process: run parallel envs in separate processes (e.g. SB3's Subproc
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import os
 import shutil
 import signal
@@ -73,7 +75,8 @@ class LaunchedGraph:
         cmd += [f"{k}:={_launch_value(v)}" for k, v in launch_args.items()]
         self._log = open(self.log_dir / "roslaunch.log", "wb")
         self.proc = subprocess.Popen(cmd, env=env, stdout=self._log, stderr=subprocess.STDOUT,
-                                     stdin=subprocess.DEVNULL, start_new_session=True)
+                                     stdin=subprocess.DEVNULL, preexec_fn=_own_session_dies_with_parent)
+        atexit.register(self.close)
         try:
             self._wait(wait_for, timeout)
         except BaseException:
@@ -102,6 +105,8 @@ class LaunchedGraph:
         return self.proc.poll() is None
 
     def close(self) -> None:
+        if self._log.closed:
+            return
         if self.proc.poll() is None:
             try:
                 os.killpg(self.proc.pid, signal.SIGINT)
@@ -113,6 +118,14 @@ class LaunchedGraph:
                     pass
                 self.proc.wait(timeout=5)
         self._log.close()
+
+
+def _own_session_dies_with_parent() -> None:
+    """In the roslaunch child: its own process group (closed as a whole), and SIGTERM when the process that
+    launched it dies, even by SIGKILL, so that no graph outlives its env."""
+    os.setsid()
+    pr_set_pdeathsig = 1
+    ctypes.CDLL("libc.so.6", use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
 def _launch_value(v) -> str:

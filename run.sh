@@ -4,6 +4,8 @@
 #   ./run.sh test     every test: gtest (C++ cores), pytest (Python cores), rostest (live graph), env checks
 #   ./run.sh bench    speed benchmark (env steps/s shield on/off, bare PyBullet, panda-gym, check latencies)
 #   ./run.sh train .. moverl_gym's train.py with your arguments
+#   ./run.sh study .. the paper's Figures 6 and 7 (18 PPO runs; --quick for a short version)
+#   ./run.sh eval ..  evaluate a saved model (run folder or model.zip)
 set -eo pipefail
 cd "$(dirname "$0")"
 # shellcheck disable=SC1091
@@ -14,5 +16,7 @@ case "$cmd" in
   train) exec python src/moverl_gym/scripts/train.py "$@" ;;
   bench) exec python src/moverl_gym/scripts/benchmark.py "$@" ;;
   test)  exec bash tests/run_all.sh "$@" ;;
-  *) sed -n '2,7p' "$0"; exit 2 ;;
+  study) exec python src/moverl_gym/scripts/study.py "$@" ;;
+  eval)  exec python src/moverl_gym/scripts/evaluate.py "$@" ;;
+  *) sed -n '2,8p' "$0"; exit 2 ;;
 esac

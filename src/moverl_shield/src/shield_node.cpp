@@ -145,11 +145,13 @@ class ShieldNode {
     res.strategy = enabled_ ? strategyName(strategy_) : "";
     res.unsafe_cause = 0;
     res.truncated_fraction = -1.0;
-    const std::vector<double> start = q_;
+    const bool publish = events_pub_.getNumSubscribers() > 0;  // visualisation only: nothing extra otherwise
+    std::vector<double> start;
+    if (publish) start = q_;
     const ros::Time start_stamp = state_stamp_;
     executed_.points.clear();
     res.verdict = static_cast<uint8_t>(run(req, res));
-    if (events_pub_.getNumSubscribers() > 0) publishEvent(req, res, start, start_stamp);
+    if (publish) publishEvent(req, res, start, start_stamp);
     if (have_state_) fillState(res.state, res.ee_pose);
     if (!res.contacts.header.stamp.isZero()) return true;
     // No motion this step: no contacts, as far as the driver's last report goes.
@@ -253,7 +255,7 @@ class ShieldNode {
       ex.request.trajectory.points[k].positions = decision.waypoints[k];
       ex.request.trajectory.points[k].time_from_start = ros::Duration(times[k]);
     }
-    executed_ = ex.request.trajectory;
+    if (events_pub_.getNumSubscribers() > 0) executed_ = ex.request.trajectory;  // for ~events only
     const auto start = std::chrono::steady_clock::now();
     const bool called = execute_.call(ex);
     res.execution_time = secondsSince(start);

@@ -50,6 +50,17 @@ class EnvLive(unittest.TestCase):
         finally:
             env.close()
 
+    def test_goals_can_be_sampled_from_the_reachable_region(self):
+        env = gym.make("MoveRL/PandaReachTable-v0", graph="attach", shield=self.shield, task={"goal_noise": 0.6})
+        try:
+            goals = [env.reset(seed=s)[0][14:17] for s in (1, 2, 1)]
+            np.testing.assert_array_equal(goals[0], goals[2])  # the seed decides the goal
+            self.assertFalse(np.allclose(goals[0], goals[1]))
+            self.assertFalse(np.allclose(goals[0], [0.4, 0.2, 0.2]))
+            self.assertGreater(goals[0][2], 0.0)  # above the table top: the flange of a collision-free pose
+        finally:
+            env.close()
+
     def test_same_seed_same_actions_same_observations(self):
         actions = np.random.default_rng(3).uniform(-1, 1, size=(40, 7)).astype(np.float32)
 

@@ -1,4 +1,4 @@
-"""Smoke test of train.py (launches its own graph on a free port): a few hundred steps of PPO and of SAC,
+"""Smoke test of train.py (launches its own graph on a free port): a few hundred steps of PPO, SAC and TD3,
 unmodified, with the shield on; the run folder holds the CSV, TensorBoard events, model, config and summary."""
 
 import csv
@@ -13,10 +13,15 @@ import yaml
 TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 
 
-@pytest.mark.parametrize("algo", ["ppo", "sac"])
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_train_smoke(tmp_path, algo):
     cmd = [sys.executable, str(TRAIN), "--algo", algo, "-n", "300", "--seed", "1", "--log-folder", str(tmp_path),
            "--no-progress", "--checkpoint-freq", "0"]
+    if algo != "ppo":  # off-policy: start learning after 100 steps so that gradient updates run in the smoke test
+        hp = tmp_path / f"{algo}.yml"
+        hp.write_text(yaml.safe_dump({"default": {"policy": "MlpPolicy", "learning_starts": 100, "batch_size": 64,
+                                                  "buffer_size": 1000}}))
+        cmd += ["--hyperparams", str(hp)]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     run = tmp_path / f"{algo}_PandaReachTable-v0_on_s1"

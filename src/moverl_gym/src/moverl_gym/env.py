@@ -169,6 +169,8 @@ class MoveRLReachEnv(gym.Env):
         options = options or {}
         if "goal" in options:
             self.task = ReachTask(self.config, options["goal"])
+        elif self.config.goal_noise > 0:
+            self.task = ReachTask(self.config, self._sample_goal())
         q = np.asarray(options["start"], dtype=np.float64) if "start" in options else self._sample_start()
         res = self._backend.reset_robot(q)
         if not res.success:
@@ -182,6 +184,21 @@ class MoveRLReachEnv(gym.Env):
         self.ee = _pose_array(fk.poses[0])
         self.distance = self.task.distance(self.ee[:3])
         return self._observation(), {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
+
+    def _sample_goal(self) -> np.ndarray:
+        """A goal in the reachable region: the end-effector position of a random collision-free configuration
+        within +-goal_noise rad of home (config/env.yaml), so that every sampled goal can be reached."""
+        lo = np.maximum(self.limits.lower, self._home - self.config.goal_noise)
+        hi = np.minimum(self.limits.upper, self._home + self.config.goal_noise)
+        for _ in range(self.config.start_sampling_attempts):
+            q = self.np_random.uniform(lo, hi)
+            if self._backend.check_state(q).outcome != 0:
+                continue
+            fk = self._backend.fk(q)
+            if fk.success:
+                return _pose_array(fk.poses[0])[:3]
+        raise MoveRLError(f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
+                          f"random samples of world '{self.world_name}'")
 
     def _sample_start(self) -> np.ndarray:
         """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform)."""

@@ -21,6 +21,7 @@ class TaskConfig:
     goal_tolerance: float = 0.10
     max_episode_steps: int = 100
     start_noise: float = 0.2
+    goal_noise: float = 0.0
     start_sampling_attempts: int = 1000
 
     @classmethod

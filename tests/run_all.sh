@@ -28,7 +28,7 @@ suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/te
 if [ "$live" = 1 ]; then
   suite "pytest graph start-up errors, real-time clock" python -m pytest -q -p no:cacheprovider \
     src/moverl_gym/test/test_graph_errors.py src/moverl_gym/test/test_realtime_live.py
-  suite "pytest train.py smoke (PPO, SAC), study --quick" python -m pytest -q -p no:cacheprovider \
+  suite "pytest train.py smoke (PPO, SAC, TD3), study --quick" python -m pytest -q -p no:cacheprovider \
     src/moverl_gym/test/test_train_smoke.py src/moverl_gym/test/test_study.py
   suite "rostest shield_live" rostest --text moverl_gym shield_live.test
   suite "rostest scenario_human" rostest --text moverl_gym scenario_human.test

@@ -20,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 import rospy
 import rostest
+from live_helpers import LiveAssertions
 from moverl_msgs.msg import ObstacleMotion
 from moverl_msgs.srv import CheckState, GetWorld, ResetRobot, ShieldStep, ValidateMotion
 
@@ -37,7 +38,7 @@ OFF_STEPS = 400
 DT = 0.05
 
 
-class MovingObstacleLive(unittest.TestCase):
+class MovingObstacleLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("moving_obstacle_test", anonymous=True, disable_signals=True)
@@ -58,8 +59,7 @@ class MovingObstacleLive(unittest.TestCase):
         return res
 
     def assert_no_contacts(self, res):
-        self.assertTrue(res.contacts.available)
-        self.assertEqual(res.contacts.world_contacts + res.contacts.self_contacts, 0, res.contacts.pairs)
+        super().assert_no_contacts(res, substeps=False)
 
     @staticmethod
     def wall_contacts(res):
@@ -121,14 +121,7 @@ class MovingObstacleLive(unittest.TestCase):
         try:
             env.action_space.seed(0)
             env.reset(seed=0, options={"start": NEAR})
-            counts, episode = {}, 0
-            for _ in range(RANDOM_STEPS):
-                _, _, term, trunc, info = env.step(env.action_space.sample())
-                self.assertEqual(info["contacts"], 0, info)
-                counts[info["verdict"]] = counts.get(info["verdict"], 0) + 1
-                if term or trunc:
-                    episode += 1
-                    env.reset(options={"start": NEAR} if episode % 2 == 0 else None)
+            counts = self.random_rollout_without_contact(env, RANDOM_STEPS, NEAR)
             msg = "shield on: %d random steps, verdicts %s, zero contacts" % (RANDOM_STEPS, counts)
             rospy.loginfo(msg)
             print(msg)

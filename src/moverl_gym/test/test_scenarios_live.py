@@ -18,6 +18,7 @@ import gymnasium as gym
 import numpy as np
 import rospy
 import rostest
+from live_helpers import LiveAssertions
 from moverl_msgs.srv import CheckPath, CheckState, GetWorld, ResetRobot, ShieldStep
 
 import moverl_gym  # noqa: F401
@@ -40,7 +41,7 @@ RANDOM_STEPS = 300
 REPLAN_ATTEMPTS = 5   # the planner has a wall-clock budget (0.1 s): on a busy machine one attempt can time out
 
 
-class ScenarioLive(unittest.TestCase):
+class ScenarioLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("scenario_live_test", anonymous=True, disable_signals=True)
@@ -65,8 +66,7 @@ class ScenarioLive(unittest.TestCase):
         self.assertTrue(res.success, res.message)
 
     def assert_no_contacts(self, res):
-        self.assertTrue(res.contacts.available)
-        self.assertEqual(res.contacts.world_contacts + res.contacts.self_contacts, 0, res.contacts.pairs)
+        super().assert_no_contacts(res, substeps=False)
 
     @staticmethod
     def ids(pairs):
@@ -164,16 +164,9 @@ class ScenarioLive(unittest.TestCase):
                     near = {"human": HUMAN_NEAR, "case": CASE_ABOVE}[self.world]
                     self.assertEqual(self.check_state(positions=near).outcome, VALID)
                     env.action_space.seed(len(suffix))
-                    counts, episode = {}, 0
                     t0 = time.monotonic()
                     env.reset(seed=100 + len(suffix), options={"start": near})
-                    for _ in range(RANDOM_STEPS):
-                        _, _, term, trunc, info = env.step(env.action_space.sample())
-                        self.assertEqual(info["contacts"], 0, info)
-                        counts[info["verdict"]] = counts.get(info["verdict"], 0) + 1
-                        if term or trunc:
-                            episode += 1
-                            env.reset(options={"start": near} if episode % 2 == 0 else None)
+                    counts = self.random_rollout_without_contact(env, RANDOM_STEPS, near)
                     rospy.loginfo("%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts",
                                   env_id, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts)
                     print("%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts"

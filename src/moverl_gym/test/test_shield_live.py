@@ -13,6 +13,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from live_helpers import LiveAssertions
 from moverl_msgs.srv import CheckPath, CheckState, ResetRobot, ShieldStep
 
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
@@ -26,7 +27,7 @@ SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = 0, 1, 2, 3
 INVALID_REQUEST, SCENE_UNAVAILABLE = 10, 11
 
 
-class ShieldLive(unittest.TestCase):
+class ShieldLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("shield_live_test", anonymous=True, disable_signals=True)
@@ -41,11 +42,6 @@ class ShieldLive(unittest.TestCase):
         res = self.reset(positions=q)
         self.assertTrue(res.success, res.message)
         np.testing.assert_allclose(res.state.position[:7], q, atol=1e-9)
-
-    def assert_no_contacts(self, res):
-        self.assertTrue(res.contacts.available)
-        self.assertEqual(res.contacts.world_contacts + res.contacts.self_contacts, 0, res.contacts.pairs)
-        self.assertEqual(res.contacts.substeps_in_contact, 0)
 
     def assert_held(self, res, q):
         np.testing.assert_allclose(res.state.position, q, atol=1e-9)

@@ -11,6 +11,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from live_helpers import LiveAssertions
 from moverl_msgs.srv import CheckPath, CheckState, ResetRobot, ShieldStep
 
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
@@ -24,7 +25,7 @@ CAUSE_POSE, CAUSE_PATH = 2, 3
 SHIELDS = {"plan": "/shield", "discard": "/shield_discard", "last_safe": "/shield_last_safe"}
 
 
-class StrategiesLive(unittest.TestCase):
+class StrategiesLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         rospy.init_node("strategies_live_test", anonymous=True, disable_signals=True)
@@ -42,11 +43,6 @@ class StrategiesLive(unittest.TestCase):
         res = self.reset[strategy](positions=q)
         self.assertTrue(res.success, res.message)
         np.testing.assert_allclose(res.state.position[:7], q, atol=1e-9)
-
-    def assert_no_contacts(self, res):
-        self.assertTrue(res.contacts.available)
-        self.assertEqual(res.contacts.world_contacts + res.contacts.self_contacts, 0, res.contacts.pairs)
-        self.assertEqual(res.contacts.substeps_in_contact, 0)
 
     def test_each_shield_reports_its_strategy_on_a_safe_move(self):
         for strategy in SHIELDS:

@@ -24,7 +24,9 @@
 #include <fcl/geometry/shape/cylinder.h>
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
+#include <fcl/geometry/octree/octree.h>
 #include <fcl/narrowphase/collision.h>
+#include <octomap/OcTree.h>
 
 namespace moverl_planning_scene {
 namespace {
@@ -183,6 +185,8 @@ struct FclCollisionChecker::Geom {
   // The same shape inflated by >= self_padding, for self-collision checks (== geom when self_padding is 0).
   std::shared_ptr<fcl::CollisionGeometry<double>> padded;
   double padded_radius = 0.0;
+  // The same shape inflated by >= padding, checked against the sensed octree (whose cells cannot be inflated).
+  std::shared_ptr<fcl::CollisionGeometry<double>> octo;
 };
 
 struct FclCollisionChecker::Obstacle {
@@ -303,28 +307,32 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
       g.link = static_cast<int>(l);
       g.origin = s.origin;
       Eigen::Vector3d center_shape = Eigen::Vector3d::Zero();
-      const double sp = options_.self_padding;
+      const double sp = options_.self_padding, wp = options_.padding;
       g.padded_radius = -1.0;  // primitives: radius + 2 * sp (set below); meshes compute it exactly
       switch (s.type) {
         case ShapeType::kBox:
           g.geom = std::make_shared<fcl::Boxd>(s.dims.x(), s.dims.y(), s.dims.z());
           g.radius = 0.5 * s.dims.norm();
           g.padded = std::make_shared<fcl::Boxd>(s.dims.x() + 2 * sp, s.dims.y() + 2 * sp, s.dims.z() + 2 * sp);
+          g.octo = std::make_shared<fcl::Boxd>(s.dims.x() + 2 * wp, s.dims.y() + 2 * wp, s.dims.z() + 2 * wp);
           break;
         case ShapeType::kSphere:
           g.geom = std::make_shared<fcl::Sphered>(s.dims.x());
           g.radius = s.dims.x();
           g.padded = std::make_shared<fcl::Sphered>(s.dims.x() + sp);
+          g.octo = std::make_shared<fcl::Sphered>(s.dims.x() + wp);
           break;
         case ShapeType::kCylinder:
           g.geom = std::make_shared<fcl::Cylinderd>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
           g.padded = std::make_shared<fcl::Cylinderd>(s.dims.x() + sp, s.dims.y() + 2 * sp);
+          g.octo = std::make_shared<fcl::Cylinderd>(s.dims.x() + wp, s.dims.y() + 2 * wp);
           break;
         case ShapeType::kCone:
           g.geom = std::make_shared<fcl::Coned>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
           g.padded = std::make_shared<fcl::Coned>(s.dims.x() + sp, s.dims.y() + 2 * sp);
+          g.octo = std::make_shared<fcl::Coned>(s.dims.x() + wp, s.dims.y() + 2 * wp);
           break;
         case ShapeType::kMesh: {
           MeshData mesh;
@@ -343,12 +351,15 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
           g.geom = meshGeometry(hull ? inflateMesh(mesh, 0.0, true) : mesh.vertices, mesh.triangles,
                                 options_.mesh_mode);
           g.padded = sp > 0.0 ? meshGeometry(inflated, mesh.triangles, options_.mesh_mode) : g.geom;
+          g.octo = wp > 0.0 ? meshGeometry(inflateMesh(mesh, wp, hull), mesh.triangles, options_.mesh_mode) : g.geom;
           break;
         }
       }
       g.geom->computeLocalAABB();
       if (sp <= 0.0) g.padded = g.geom;
+      if (wp <= 0.0) g.octo = g.geom;
       g.padded->computeLocalAABB();
+      g.octo->computeLocalAABB();
       if (g.padded_radius < 0.0) g.padded_radius = g.radius + 2.0 * sp;
       g.center_local = s.origin * center_shape;
       link_geoms_[l].push_back(static_cast<int>(geoms_.size()));
@@ -701,6 +712,54 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
       result->pairs.push_back(ContactPair{names[g.link], ob.id, depth});
       last_link = g.link;
       if (result->pairs.size() >= request.max_pairs) return;
+    }
+  }
+  if (!octree_) return;
+  int last_link = -1;
+  for (int gi : world_geoms_) {
+    const Geom& g = geoms_[gi];
+    if (g.link == last_link) continue;
+    fcl::CollisionRequestd req(1, false);
+    fcl::CollisionResultd res;
+    fcl::collide(g.octo.get(), g.world_tf, octree_.get(), Eigen::Isometry3d::Identity(), req, res);
+    if (!res.isCollision()) continue;
+    result->status = CollisionStatus::kWorld;
+    if (request.max_pairs == 0) return;
+    result->pairs.push_back(ContactPair{names[g.link], kOctomapId, 0.0});
+    last_link = g.link;
+    if (result->pairs.size() >= request.max_pairs) return;
+  }
+}
+
+void FclCollisionChecker::setOctree(std::shared_ptr<const octomap::OcTree> tree) {
+  if (!tree) {
+    octree_.reset();
+    return;
+  }
+  auto o = std::make_shared<fcl::OcTree<double>>(tree);
+  o->computeLocalAABB();
+  octree_ = o;
+}
+
+void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
+                                         std::vector<std::uint8_t>* mask) const {
+  mask->assign(points.size(), 0);
+  std::vector<Eigen::Isometry3d> poses;
+  model_.computeLinkTransforms(q, &poses);
+  const double pad = std::max(padding, 1e-6);
+  auto probe = std::make_shared<fcl::Sphered>(pad);
+  fcl::CollisionRequestd req(1, false);
+  for (const Geom& g : geoms_) {
+    const Eigen::Isometry3d tf = poses[g.link] * g.origin;
+    const Eigen::Vector3d center = poses[g.link] * g.center_local;
+    const double r = g.radius + pad, r2 = r * r;
+    Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if ((*mask)[k] != 0 || !((points[k] - center).squaredNorm() <= r2)) continue;
+      at.translation() = points[k];
+      fcl::CollisionResultd res;
+      fcl::collide(probe.get(), at, g.geom.get(), tf, req, res);
+      if (res.isCollision()) (*mask)[k] = 1;
     }
   }
 }

@@ -1,24 +1,36 @@
 /**
  * \file planning_scene_node.cpp
- * \brief Thin ROS wrapper around moverl_planning_scene::PlanningScene: params, world mirroring, services.
+ * \brief Thin ROS wrapper around moverl_planning_scene::PlanningScene: params, world mirroring, services, and the
+ *        sensed-obstacle map (point clouds -> OccupancyMap) when ~obstacles is octomap or both.
  */
+#include <ros/callback_queue.h>
 #include <ros/package.h>
 #include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_msgs/Bool.h>
+#include <std_srvs/Empty.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+#include <visualization_msgs/Marker.h>
 
 #include <moverl_msgs/CheckPath.h>
 #include <moverl_msgs/CheckState.h>
 #include <moverl_msgs/GetFK.h>
 #include <moverl_msgs/GetWorld.h>
+#include <moverl_msgs/OctomapStatus.h>
 #include <moverl_msgs/PlanPath.h>
 #include <moverl_msgs/ValidateMotion.h>
 #include <moverl_msgs/World.h>
 #include <shape_msgs/SolidPrimitive.h>
 
 #include <cstdlib>
+#include <deque>
 #include <exception>
 #include <mutex>
 
+#include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
 
 namespace mps = moverl_planning_scene;
@@ -160,6 +172,11 @@ class PlanningSceneNode {
     int planner_seed = 1;
     pnh_.param("planner_seed", planner_seed, 1);  // OMPL RNG seed, 0: not seeded
     o.planner.seed = static_cast<unsigned>(planner_seed);
+    pnh_.param<std::string>("obstacles", obstacles_, "objects");  // objects | octomap | both
+    if (obstacles_ != "objects" && obstacles_ != "octomap" && obstacles_ != "both") {
+      ROS_FATAL("planning_scene: ~obstacles must be objects, octomap or both, not '%s'", obstacles_.c_str());
+      return false;
+    }
     std::string world_service, world_topic;
     double world_timeout = 30.0;
     pnh_.param<std::string>("world_service", world_service, "/sim/get_world");  // moverl_msgs/GetWorld
@@ -196,6 +213,7 @@ class PlanningSceneNode {
       return false;
     }
     world_sub_ = nh_.subscribe(world_topic, 1, &PlanningSceneNode::onWorld, this);
+    if (obstacles_ != "objects" && !initOctomap()) return false;
 
     services_.push_back(pnh_.advertiseService("check_state", &PlanningSceneNode::checkState, this));
     services_.push_back(pnh_.advertiseService("check_path", &PlanningSceneNode::checkPath, this));
@@ -207,14 +225,214 @@ class PlanningSceneNode {
     std_msgs::Bool ready;
     ready.data = true;
     ready_pub_.publish(ready);
-    ROS_INFO("planning_scene: ready (%zu world objects)", scene_->checker().worldSize());
+    ROS_INFO("planning_scene: ready (obstacles: %s, %zu world objects)", obstacles_.c_str(),
+             scene_->checker().worldSize());
     return true;
   }
 
  private:
+  /// Sensed obstacles: params, map, TF, subscriptions on their own callback queue and thread (a cloud takes tens of
+  /// ms; the services keep answering meanwhile and only wait for the short tree update).
+  bool initOctomap() {
+    mps::OccupancyMapOptions mo;
+    pnh_.param("octomap/resolution", mo.resolution, mo.resolution);
+    pnh_.param("octomap/max_range", mo.max_range, mo.max_range);
+    pnh_.param("octomap/prob_hit", mo.prob_hit, mo.prob_hit);
+    pnh_.param("octomap/prob_miss", mo.prob_miss, mo.prob_miss);
+    pnh_.param("octomap/clamp_min", mo.clamp_min, mo.clamp_min);
+    pnh_.param("octomap/clamp_max", mo.clamp_max, mo.clamp_max);
+    pnh_.param("octomap/occupancy_threshold", mo.occupancy_threshold, mo.occupancy_threshold);
+    pnh_.param("octomap/self_filter_padding", self_filter_padding_, 0.03);
+    pnh_.param("octomap/transform_timeout", transform_timeout_, 0.1);
+    std::string cloud_topic, joint_topic;
+    int queue = 4;
+    pnh_.param<std::string>("octomap/cloud_topic", cloud_topic, "/sim/points");
+    pnh_.param<std::string>("octomap/joint_states_topic", joint_topic, "/joint_states");
+    pnh_.param("octomap/queue_size", queue, 4);
+    if (!(self_filter_padding_ >= 0.0) || !std::isfinite(self_filter_padding_)) {
+      ROS_FATAL("planning_scene: ~octomap/self_filter_padding must be >= 0");
+      return false;
+    }
+    std::string error;
+    map_ = mps::OccupancyMap::create(mo, &error);
+    if (!map_) {
+      ROS_FATAL("planning_scene: %s", error.c_str());
+      return false;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      scene_->checker().setOctree(map_->tree());
+    }
+    const auto& joints = scene_->model().jointNames();
+    for (std::size_t i = 0; i < joints.size(); ++i) joint_index_[joints[i]] = i;
+    tf_buffer_.reset(new tf2_ros::Buffer(ros::Duration(30.0)));
+    tf_listener_.reset(new tf2_ros::TransformListener(*tf_buffer_, nh_));
+    status_pub_ = pnh_.advertise<moverl_msgs::OctomapStatus>("octomap_status", 1, /*latch=*/true);
+    marker_pub_ = pnh_.advertise<visualization_msgs::Marker>("octomap_markers", 1, /*latch=*/true);
+    services_.push_back(pnh_.advertiseService("clear_octomap", &PlanningSceneNode::clearOctomap, this));
+    ros::SubscribeOptions js = ros::SubscribeOptions::create<sensor_msgs::JointState>(
+        joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(), &sensor_queue_);
+    ros::SubscribeOptions pc = ros::SubscribeOptions::create<sensor_msgs::PointCloud2>(
+        cloud_topic, static_cast<uint32_t>(std::max(1, queue)), [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); },
+        ros::VoidPtr(), &sensor_queue_);
+    joint_sub_ = nh_.subscribe(js);
+    cloud_sub_ = nh_.subscribe(pc);
+    sensor_spinner_.reset(new ros::AsyncSpinner(1, &sensor_queue_));
+    sensor_spinner_->start();
+    publishStatus(ros::Time(0), "");
+    ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m)",
+             cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_);
+    return true;
+  }
+
+  void onJointState(const sensor_msgs::JointState::ConstPtr& msg) {
+    std::vector<double> q(joint_index_.size(), std::numeric_limits<double>::quiet_NaN());
+    std::size_t found = 0;
+    for (std::size_t k = 0; k < msg->name.size() && k < msg->position.size(); ++k) {
+      const auto it = joint_index_.find(msg->name[k]);
+      if (it == joint_index_.end()) continue;
+      q[it->second] = msg->position[k];
+      ++found;
+    }
+    if (found != q.size()) return;  // another robot's or a partial message
+    joint_history_.emplace_back(msg->header.stamp, std::move(q));
+    while (joint_history_.size() > kJointHistory) joint_history_.pop_front();
+  }
+
+  /// The robot configuration when the cloud was taken: the last joint state stamped at or before it.
+  const std::vector<double>* jointStateAt(const ros::Time& stamp) const {
+    if (joint_history_.empty()) return nullptr;
+    for (auto it = joint_history_.rbegin(); it != joint_history_.rend(); ++it) {
+      if (it->first <= stamp) return &it->second;
+    }
+    return &joint_history_.front().second;  // older than every state we kept: the oldest is the best guess
+  }
+
+  void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+    const ros::WallTime t0 = ros::WallTime::now();
+    geometry_msgs::TransformStamped tf;
+    const std::string& base = scene_->model().baseLink();
+    try {
+      tf = tf_buffer_->lookupTransform(base, msg->header.frame_id, msg->header.stamp,
+                                       ros::Duration(transform_timeout_));
+    } catch (const tf2::TransformException& e) {
+      ++dropped_;
+      ROS_WARN_THROTTLE(5.0, "planning_scene: cloud from '%s' dropped: %s", msg->header.frame_id.c_str(), e.what());
+      return;
+    }
+    const std::vector<double>* q = jointStateAt(msg->header.stamp);
+    if (q == nullptr) {
+      ++dropped_;
+      ROS_WARN_THROTTLE(5.0, "planning_scene: cloud dropped: no joint state yet (cannot filter the robot's points)");
+      return;
+    }
+    const auto& t = tf.transform;
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.linear() = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).toRotationMatrix();
+    pose.translation() = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+    points_.clear();
+    points_.reserve(static_cast<std::size_t>(msg->width) * msg->height);
+    try {
+      sensor_msgs::PointCloud2ConstIterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z");
+      for (; x != x.end(); ++x, ++y, ++z) points_.push_back(pose * Eigen::Vector3d(*x, *y, *z));
+    } catch (const std::exception& e) {
+      ++dropped_;
+      ROS_WARN_THROTTLE(5.0, "planning_scene: cloud without float32 x, y, z fields dropped: %s", e.what());
+      return;
+    }
+    scene_->checker().robotPointMask(q->data(), points_, self_filter_padding_, &mask_);
+    map_->computeUpdate(points_, mask_, pose.translation(), &update_);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      map_->apply(update_);
+    }
+    ++clouds_;
+    last_integration_ = (ros::WallTime::now() - t0).toSec();
+    publishStatus(msg->header.stamp, msg->header.frame_id);
+    publishMarkers();
+  }
+
+  bool clearOctomap(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+    std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      map_->clear();
+    }
+    clouds_ = 0;
+    update_.stats = mps::MapUpdateStats();
+    publishStatus(ros::Time(0), "");
+    publishMarkers();
+    return true;
+  }
+
+  void publishStatus(const ros::Time& stamp, const std::string& sensor_frame) {
+    moverl_msgs::OctomapStatus s;
+    s.header.stamp = stamp;
+    s.header.frame_id = scene_->model().baseLink();
+    s.resolution = map_->options().resolution;
+    s.clouds = clouds_;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      s.occupied_leaves = static_cast<uint32_t>(map_->occupiedLeafCount());
+    }
+    s.sensor_frame = sensor_frame;
+    const mps::MapUpdateStats& u = update_.stats;
+    s.points = static_cast<uint32_t>(u.points);
+    s.robot_points = static_cast<uint32_t>(u.robot);
+    s.beyond_range = static_cast<uint32_t>(u.beyond_range);
+    s.hit_cells = static_cast<uint32_t>(u.hit_cells);
+    s.free_cells = static_cast<uint32_t>(u.free_cells);
+    s.integration_time = last_integration_;
+    s.dropped = dropped_;
+    status_pub_.publish(s);
+  }
+
+  /// Occupied cells as one CUBE_LIST (only when someone listens, e.g. rviz).
+  void publishMarkers() {
+    if (marker_pub_.getNumSubscribers() == 0) return;
+    visualization_msgs::Marker m;
+    m.header.frame_id = scene_->model().baseLink();
+    m.header.stamp = ros::Time(0);
+    m.ns = "octomap";
+    m.type = visualization_msgs::Marker::CUBE_LIST;
+    m.action = visualization_msgs::Marker::ADD;
+    m.pose.orientation.w = 1.0;
+    m.scale.x = m.scale.y = m.scale.z = map_->options().resolution;
+    m.color.r = 0.2f;
+    m.color.g = 0.6f;
+    m.color.b = 1.0f;
+    m.color.a = 0.8f;
+    std::vector<Eigen::Vector3d> centers;
+    std::vector<double> sizes;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      map_->occupiedLeaves(&centers, &sizes);
+    }
+    const double r = map_->options().resolution;
+    for (std::size_t k = 0; k < centers.size(); ++k) {
+      // Pruned (larger) leaves: one cube per resolution cell inside them.
+      const int n = std::max(1, static_cast<int>(std::lround(sizes[k] / r)));
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          for (int l = 0; l < n; ++l) {
+            geometry_msgs::Point p;
+            p.x = centers[k].x() + (i - 0.5 * (n - 1)) * r;
+            p.y = centers[k].y() + (j - 0.5 * (n - 1)) * r;
+            p.z = centers[k].z() + (l - 0.5 * (n - 1)) * r;
+            m.points.push_back(p);
+          }
+        }
+      }
+    }
+    if (m.points.empty()) m.action = visualization_msgs::Marker::DELETE;
+    marker_pub_.publish(m);
+  }
+
   bool applyWorld(const moverl_msgs::World& msg, std::string* error) {
     std::vector<mps::WorldObject> objects;
     if (!toWorld(msg, &objects, error)) return false;
+    if (obstacles_ == "octomap") objects.clear();  // sensed only: the scene must not know the objects
     std::lock_guard<std::mutex> lock(mutex_);
     return scene_->setWorld(objects, error);
   }
@@ -325,8 +543,28 @@ class PlanningSceneNode {
     return true;
   }
 
+  static constexpr std::size_t kJointHistory = 400;  // joint states kept to match cloud stamps
+
   ros::NodeHandle nh_, pnh_;
+  std::string obstacles_ = "objects";
   std::unique_ptr<mps::PlanningScene> scene_;
+  // Sensed obstacles (obstacles: octomap | both). Everything below is used by the sensor thread only, except map_
+  // (tree updates under mutex_) and the publishers.
+  std::unique_ptr<mps::OccupancyMap> map_;
+  std::mutex sensor_mutex_;  // serializes cloud integration with ~clear_octomap (never held by the queries)
+  ros::CallbackQueue sensor_queue_;
+  std::unique_ptr<ros::AsyncSpinner> sensor_spinner_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::Subscriber joint_sub_, cloud_sub_;
+  ros::Publisher status_pub_, marker_pub_;
+  std::map<std::string, std::size_t> joint_index_;
+  std::deque<std::pair<ros::Time, std::vector<double>>> joint_history_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<std::uint8_t> mask_;
+  mps::MapUpdate update_;
+  double self_filter_padding_ = 0.03, transform_timeout_ = 0.1, last_integration_ = 0.0;
+  uint32_t clouds_ = 0, dropped_ = 0;
   std::mutex mutex_;  // serializes world updates and queries (the scene keeps scratch buffers)
   ros::Subscriber world_sub_;
   std::vector<ros::ServiceServer> services_;

@@ -16,6 +16,11 @@
 namespace fcl {
 template <typename S>
 class CollisionGeometry;
+template <typename S>
+class OcTree;
+}  // namespace fcl
+namespace octomap {
+class OcTree;
 }
 
 namespace moverl_planning_scene {
@@ -64,6 +69,18 @@ class FclCollisionChecker : public CollisionChecker {
                  PathCheckResult* result) override;
   std::size_t interiorStateCount(const double* q0, const double* q1) const override;
 
+  /// \brief Sensed obstacles: an occupancy octree in the base frame (occupied cells are obstacles, unknown cells
+  ///        free). Robot links are inflated by `padding` against it (its cells cannot be). nullptr removes it.
+  ///        The tree is read by every check: callers must not modify it while a check runs.
+  void setOctree(std::shared_ptr<const octomap::OcTree> tree);
+  bool hasOctree() const { return static_cast<bool>(octree_); }
+  /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
+  ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
+  void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
+                      std::vector<std::uint8_t>* mask) const;
+  /// Name reported for the octree in colliding pairs.
+  static constexpr const char* kOctomapId = "octomap";
+
   /// \brief Reason why the pair of links (by name) is (not) checked; kNoGeometry for unknown names.
   AcmReason acmReason(const std::string& link_a, const std::string& link_b) const;
   /// \brief How the ACM was obtained.
@@ -101,6 +118,7 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
+  std::shared_ptr<fcl::OcTree<double>> octree_;  // sensed obstacles (may be null)
   std::vector<std::size_t> moving_;           // indices into world_ of moving obstacles
   double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();
   std::vector<double> joint_radius_;

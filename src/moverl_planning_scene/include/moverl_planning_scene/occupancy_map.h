@@ -1,0 +1,88 @@
+/**
+ * \file occupancy_map.h
+ * \brief Sensed obstacles: an OctoMap occupancy octree updated from depth-camera point clouds. ROS-free.
+ *
+ * Update rule (octomap_server's sensor model): every beam from the sensor origin to a point marks the cells it
+ * crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than max_range mark free
+ * space up to max_range only (no-return readings at a camera's far plane clear space this way). Points that belong
+ * to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear the cells
+ * before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when other
+ * beams cross it. Cells never observed are unknown and count as free for collision checking (as in MoveIt).
+ * Clearing: when an obstacle moves away, beams now pass through its old cells and turn them free.
+ */
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace octomap {
+class OcTree;
+}
+
+namespace moverl_planning_scene {
+
+/// \brief Tunables of the occupancy map (defaults = config/planning_scene.yaml, octomap: section).
+struct OccupancyMapOptions {
+  double resolution = 0.02;           ///< leaf size (m)
+  double max_range = 3.0;             ///< beams are integrated up to this range (m); longer ones clear space only
+  double prob_hit = 0.7;              ///< occupancy probability of a hit
+  double prob_miss = 0.4;             ///< occupancy probability of a miss
+  double clamp_min = 0.12;            ///< clamping of cell probabilities (lets cells change state quickly)
+  double clamp_max = 0.97;
+  double occupancy_threshold = 0.5;   ///< a cell above this probability is an obstacle
+};
+
+/// \brief What one integration did (logs, tests, the status topic).
+struct MapUpdateStats {
+  std::size_t points = 0;         ///< points in the cloud
+  std::size_t invalid = 0;        ///< non-finite points (skipped)
+  std::size_t robot = 0;          ///< points on the robot (free space before them only)
+  std::size_t beyond_range = 0;   ///< points beyond max_range (free space only)
+  std::size_t hit_cells = 0;      ///< distinct cells marked occupied
+  std::size_t free_cells = 0;     ///< distinct cells marked free
+};
+
+/// \brief The cell updates computed from one cloud, applied later under the caller's lock.
+struct MapUpdate {
+  std::vector<std::uint64_t> hits;    ///< packed octomap keys
+  std::vector<std::uint64_t> misses;  ///< packed octomap keys (hits removed)
+  MapUpdateStats stats;
+};
+
+/// \brief Occupancy octree in the robot base frame.
+///        computeUpdate is const and may run concurrently with collision checks that read tree();
+///        apply and clear modify the tree and must be serialized with every reader by the caller.
+class OccupancyMap {
+ public:
+  /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).
+  static std::unique_ptr<OccupancyMap> create(const OccupancyMapOptions& options, std::string* error);
+  ~OccupancyMap();
+
+  /// \brief Beams from origin to every point (all in the map frame). robot_mask: empty, or one flag per point
+  ///        (non-zero: the point is on the robot).
+  void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
+                     const Eigen::Vector3d& origin, MapUpdate* out) const;
+  /// \brief Apply an update to the tree (hits, then misses).
+  void apply(const MapUpdate& update);
+  /// \brief Forget everything (all cells unknown).
+  void clear();
+
+  /// \brief The tree (for FCL). Stays the same object for the map's lifetime.
+  std::shared_ptr<const octomap::OcTree> tree() const;
+  /// \brief True when the cell containing p (map frame) is occupied.
+  bool occupied(const Eigen::Vector3d& p) const;
+  /// \brief Centre and edge length of every occupied leaf (pruned leaves may be larger than the resolution).
+  void occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const;
+  std::size_t occupiedLeafCount() const;
+  const OccupancyMapOptions& options() const { return options_; }
+
+ private:
+  OccupancyMap() = default;
+  OccupancyMapOptions options_;
+  std::shared_ptr<octomap::OcTree> tree_;
+};
+
+}  // namespace moverl_planning_scene

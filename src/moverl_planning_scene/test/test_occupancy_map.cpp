@@ -1,0 +1,226 @@
+/**
+ * \file test_occupancy_map.cpp
+ * \brief Sensed obstacles without a roscore: the occupancy map's update rule, clearing, robot self-filtering and
+ *        FCL checks of the Panda against the octree.
+ */
+#include <gtest/gtest.h>
+
+#include <octomap/OcTree.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+
+#include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/planning_scene.h"
+
+namespace mps = moverl_planning_scene;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+const std::string kPandaUrdf = MOVERL_PANDA_URDF;
+const std::vector<double> kHome = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
+const std::vector<double> kIntoTable = {0.0, 1.0, 0.0, -1.5, 0.0, 1.571, 0.785};  // the hand below z = 0
+const Eigen::Vector3d kCamera(0.35, 0.0, 1.5);
+
+std::unique_ptr<mps::OccupancyMap> makeMap(double resolution = 0.02, double max_range = 3.0) {
+  mps::OccupancyMapOptions o;
+  o.resolution = resolution;
+  o.max_range = max_range;
+  std::string error;
+  auto m = mps::OccupancyMap::create(o, &error);
+  EXPECT_TRUE(m) << error;
+  return m;
+}
+
+/// Points on the rectangle [x0, x1] x [y0, y1] at height z, spacing h.
+std::vector<Eigen::Vector3d> plane(double x0, double x1, double y0, double y1, double z, double h) {
+  std::vector<Eigen::Vector3d> pts;
+  for (double x = x0; x <= x1 + 1e-9; x += h) {
+    for (double y = y0; y <= y1 + 1e-9; y += h) pts.emplace_back(x, y, z);
+  }
+  return pts;
+}
+
+void integrate(mps::OccupancyMap* map, const std::vector<Eigen::Vector3d>& pts, const Eigen::Vector3d& origin,
+               const std::vector<std::uint8_t>& mask = {}) {
+  mps::MapUpdate u;
+  map->computeUpdate(pts, mask, origin, &u);
+  map->apply(u);
+}
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+}  // namespace
+
+TEST(OccupancyMap, RejectsBadOptions) {
+  std::string error;
+  mps::OccupancyMapOptions o;
+  o.resolution = 0.0;
+  EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
+  EXPECT_NE(error.find("resolution"), std::string::npos) << error;
+  o = mps::OccupancyMapOptions();
+  o.prob_hit = 0.4;
+  EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
+  EXPECT_NE(error.find("prob_hit"), std::string::npos) << error;
+  o = mps::OccupancyMapOptions();
+  o.max_range = -1.0;
+  EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
+  EXPECT_NE(error.find("max_range"), std::string::npos) << error;
+}
+
+TEST(OccupancyMap, HitsFreeSpaceRangeAndRobotPoints) {
+  auto map = makeMap();
+  const Eigen::Vector3d origin(0.0, 0.0, 1.0);
+  const std::vector<Eigen::Vector3d> pts = {{0.5, 0.0, 0.0},                   // obstacle
+                                            {-0.5, 0.0, 0.0},                  // on the robot (masked)
+                                            {0.0, 5.0, 1.0},                   // beyond max_range
+                                            {std::nan(""), 0.0, 0.0}};         // invalid
+  mps::MapUpdate u;
+  map->computeUpdate(pts, {0, 1, 0, 0}, origin, &u);
+  EXPECT_EQ(u.stats.points, 4u);
+  EXPECT_EQ(u.stats.robot, 1u);
+  EXPECT_EQ(u.stats.beyond_range, 1u);
+  EXPECT_EQ(u.stats.invalid, 1u);
+  EXPECT_EQ(u.stats.hit_cells, 1u);
+  map->apply(u);
+  EXPECT_TRUE(map->occupied({0.5, 0.0, 0.0}));
+  EXPECT_FALSE(map->occupied({-0.5, 0.0, 0.0}));   // robot point: nothing marked
+  EXPECT_FALSE(map->occupied({0.0, 2.9, 1.0}));    // cleared up to max_range, no end point
+  EXPECT_FALSE(map->occupied({0.25, 0.0, 0.5}));   // half way along the beam: free
+  EXPECT_EQ(map->occupiedLeafCount(), 1u);
+  // The half-way cell is known free, a cell off every beam is unknown.
+  EXPECT_NE(map->tree()->search(0.25, 0.0, 0.5), nullptr);
+  EXPECT_EQ(map->tree()->search(0.0, -1.0, 0.0), nullptr);
+}
+
+TEST(OccupancyMap, ForgetsAnObstacleThatMovedAway) {
+  auto map = makeMap();
+  const Eigen::Vector3d origin(0.4, 0.0, 1.0);
+  // A box face at z = 0.4 above a floor at z = 0: the camera right above sees the box top.
+  const auto box_top = plane(0.3, 0.5, -0.1, 0.1, 0.4, 0.01);
+  for (int k = 0; k < 3; ++k) integrate(map.get(), box_top, origin);
+  ASSERT_TRUE(map->occupied({0.4, 0.0, 0.4}));
+  // The box leaves: the same pixels now see the floor through the box's old cells.
+  int scans = 0;
+  const auto floor_below = plane(0.3, 0.5, -0.1, 0.1, 0.0, 0.01);
+  while (map->occupied({0.4, 0.0, 0.4}) && scans < 20) {
+    integrate(map.get(), floor_below, origin);
+    ++scans;
+  }
+  EXPECT_FALSE(map->occupied({0.4, 0.0, 0.4}));
+  EXPECT_LE(scans, 10) << "clamping should let a cell flip within a few scans";
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.0}));
+  map->clear();
+  EXPECT_EQ(map->occupiedLeafCount(), 0u);
+}
+
+class PandaOctomap : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    if (kPandaUrdf.empty()) return;
+    mps::PlanningSceneOptions o;
+    o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
+                           "panda_joint5", "panda_joint6", "panda_joint7"};
+    o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
+    o.robot.base_link = "panda_link0";
+    o.robot.ee_link = "panda_link8";
+    o.robot.mesh_base_dir = kPandaUrdf.substr(0, kPandaUrdf.rfind('/'));
+    o.planner.planner = "RRTConnect";
+    std::string error;
+    scene_ = mps::PlanningScene::create(readFile(kPandaUrdf), o, &error).release();
+    ASSERT_NE(scene_, nullptr) << error;
+  }
+  static void TearDownTestSuite() {
+    delete scene_;
+    scene_ = nullptr;
+  }
+  void SetUp() override {
+    if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
+    std::string error;
+    ASSERT_TRUE(scene_->setWorld({}, &error)) << error;
+    scene_->checker().setOctree(nullptr);
+  }
+  static mps::PlanningScene* scene_;
+};
+mps::PlanningScene* PandaOctomap::scene_ = nullptr;
+
+TEST_F(PandaOctomap, RobotPointMask) {
+  // Link origins are inside (or on) the robot; points far away are not.
+  std::vector<Eigen::Isometry3d> poses;
+  std::string error;
+  const auto& links = scene_->model().linkNames();
+  ASSERT_TRUE(scene_->fk(kHome, {"panda_link3", "panda_link5", "panda_hand"}, &poses, &error)) << error;
+  std::vector<Eigen::Vector3d> pts;
+  for (const auto& p : poses) pts.push_back(p.translation());
+  pts.emplace_back(0.8, 0.5, 0.1);
+  pts.emplace_back(0.35, 0.0, 0.0);  // table top in front of the base, ~25 cm from the link0 centre
+  std::vector<std::uint8_t> mask;
+  scene_->checker().robotPointMask(kHome.data(), pts, 0.03, &mask);
+  ASSERT_EQ(mask.size(), pts.size());
+  EXPECT_EQ(mask[0], 1);
+  EXPECT_EQ(mask[1], 1);
+  EXPECT_EQ(mask[2], 1);
+  EXPECT_EQ(mask[3], 0);
+  EXPECT_EQ(mask[4], 0);
+  EXPECT_GT(links.size(), 0u);
+}
+
+TEST_F(PandaOctomap, SensedTableBlocksTheRobot) {
+  auto map = makeMap();
+  // The table top as a camera above it sees it, minus what lies on the robot.
+  const auto top = plane(-0.4, 1.1, -0.4, 0.4, 0.0, 0.005);
+  std::vector<std::uint8_t> mask;
+  scene_->checker().robotPointMask(kHome.data(), top, 0.03, &mask);
+  std::size_t masked = 0;
+  for (auto m : mask) masked += m;
+  EXPECT_GT(masked, 0u) << "the base stands on the table: points around it belong to the robot";
+  EXPECT_LT(masked, top.size() / 10);
+  const auto t0 = Clock::now();
+  integrate(map.get(), top, kCamera, mask);
+  const double integrate_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  scene_->checker().setOctree(map->tree());
+  ASSERT_TRUE(scene_->checker().hasOctree());
+
+  mps::StateCheck sc;
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  scene_->checkState(kIntoTable, &sc);
+  ASSERT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  ASSERT_FALSE(sc.pairs.empty());
+  EXPECT_EQ(sc.pairs[0].b, "octomap");
+
+  mps::MotionCheck mc;
+  scene_->validateMotion(kHome, kIntoTable, /*plan=*/false, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+
+  // Speed of checks against the octree (printed, not asserted).
+  const int n = 200;
+  auto t1 = Clock::now();
+  for (int k = 0; k < n; ++k) scene_->checkState(kHome, &sc);
+  const double state_ms = 1e3 * std::chrono::duration<double>(Clock::now() - t1).count() / n;
+  std::vector<double> goal = kHome;
+  goal[0] = 0.5;
+  mps::PathCheck pc;
+  t1 = Clock::now();
+  for (int k = 0; k < 20; ++k) scene_->checkPath(kHome, goal, &pc);
+  const double path_ms = 1e3 * std::chrono::duration<double>(Clock::now() - t1).count() / 20;
+  EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << pc.message;
+  std::printf("[ octomap ] %zu points integrated in %.1f ms (%zu occupied leaves); state check %.3f ms, "
+              "path check (%zu states) %.3f ms\n",
+              top.size(), 1e3 * integrate_s, map->occupiedLeafCount(), state_ms, pc.checked_states, path_ms);
+  scene_->checker().setOctree(nullptr);
+  scene_->checkState(kIntoTable, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << "octree removed: " << sc.message;
+}
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

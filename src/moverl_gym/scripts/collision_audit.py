@@ -2,6 +2,7 @@
 """Collision audit: the planning scene's verdict against the physics engine's ground truth.
 
     python src/moverl_gym/scripts/collision_audit.py --worlds table human case -n 10000
+    python src/moverl_gym/scripts/collision_audit.py --worlds table human case -n 10000 --obstacles octomap
 
 For each world, n configurations are sampled uniformly within the joint limits (fixed seed). Each one is
 checked by the planning scene (/planning_scene/check_state: self + world, as the shield does) and by a
@@ -19,11 +20,16 @@ A self-split miss whose state the scene still rejects for the world (or vice ver
 the exit code counts only overall misses. Pair level: self pairs in contact in the physics engine that the
 scene did not name although it reported a self collision (ACM/pair coverage).
 
+Obstacle modes (--obstacles, the launch arg): objects (the world file's shapes) or octomap (the scene knows only
+what the world's depth cameras saw, integrated into its OctoMap; the graph starts with the robot at home, the
+scene integrates the cameras' first views, then the map stays fixed while the configurations are checked: one
+view per camera, the robot at home occluding what it occludes) or both. The ground truth is the same physics.
+
 Each world runs in its own process (rospy allows one ROS master per process) with its own graph
 (launch/moverl.launch on a free port). Worlds whose file does not exist are skipped with a note.
-Not covered: OctoMap (sensed point cloud) mode of the planning scene does not exist yet.
 
-Writes docs/audit/audit.csv (one row per world) and docs/audit/audit.md. Exit code 1 if any miss.
+Writes docs/audit/audit.csv and audit.md (objects mode; audit_<mode>.csv / .md for the other modes), one row per
+world. Exit code 1 if any miss.
 """
 
 from __future__ import annotations
@@ -48,8 +54,13 @@ FIELDS = ["world", "samples", "invalid_requests",
           "self_pairs_unnamed", "fa_self_gap_mm_p50", "fa_self_gap_mm_max", "fa_world_gap_mm_p50",
           "fa_world_gap_mm_max", "check_ms_p50", "seed"]
 
-OCTOMAP_NOTE = ("OctoMap (sensed point cloud) mode of the planning scene does not exist yet: "
-                "only the primitive-object world is audited.")
+MODE_NOTES = {
+    "objects": "obstacles: objects (the scene checks the world file's shapes, padded).",
+    "octomap": ("obstacles: octomap (the scene knows no object: only the occupied cells of the OctoMap built from "
+                "the world's depth cameras at start-up, robot at home, self-filtered; robot links padded against "
+                "the cells). Unknown (never seen) cells count as free."),
+    "both": "obstacles: both (the world file's shapes plus the OctoMap from the depth cameras).",
+}
 
 
 # ----------------------------------------------------------------------------- pure functions (tested)
@@ -140,8 +151,9 @@ def format_table(rows) -> str:
     return "\n".join(lines)
 
 
-def format_markdown(rows, command: str, skipped=(), extra_notes=()) -> str:
-    out = ["# Collision audit: planning scene vs physics ground truth", "",
+def format_markdown(rows, command: str, skipped=(), extra_notes=(), obstacles: str = "objects") -> str:
+    title = "" if obstacles == "objects" else f" ({obstacles} mode)"
+    out = [f"# Collision audit{title}: planning scene vs physics ground truth", "",
            "Command:", "", f"    {command}", "",
            "n random configurations per world, uniform within the joint limits (fixed seed). Scene: "
            "`/planning_scene/check_state` (self + world, as configured in config/planning_scene.yaml). Ground "
@@ -161,7 +173,7 @@ def format_markdown(rows, command: str, skipped=(), extra_notes=()) -> str:
             "- self split over all samples; world split only over samples the scene found self-free (the scene "
             "checks self first and stops). A self-split miss on a state the scene rejects for the world is not "
             "a safety miss.",
-            f"- {OCTOMAP_NOTE}"]
+            f"- {MODE_NOTES[obstacles]}"]
     for w, why in skipped:
         out.append(f"- world `{w}` skipped: {why}")
     out += [f"- {n}" for n in extra_notes]
@@ -188,10 +200,13 @@ def make_simulator(robot: str, world_path: str):
                      load_world(world_path))
 
 
+SENSED = "octomap"   # the scene's name for the sensed map in colliding pairs
+
+
 def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
-    """Physics distance (m) between robot link a and robot link b or world object b in the current
-    configuration (PyBullet closest points; negative when penetrating; horizon when farther). Uses the
-    Simulator's internals (diagnostics only)."""
+    """Physics distance (m) between robot link a and robot link b or world object b (SENSED: the nearest world
+    object) in the current configuration (PyBullet closest points; negative when penetrating; horizon when
+    farther). Uses the Simulator's internals (diagnostics only)."""
     import pybullet
 
     links = sim._link_index
@@ -199,16 +214,18 @@ def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
         a, b = b, a
     la = links[a]
     if b in links:
-        body, lb = sim.robot, links[b]
+        targets = [(sim.robot, links[b])]
+    elif b == SENSED:
+        targets = [(body, -1) for body in sim._object_bodies.values()]
     else:
-        body = sim._object_bodies[b]
-        lb = -1
-    pts = pybullet.getClosestPoints(sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb,
-                                    physicsClientId=sim._cid)
-    return min((pt[8] for pt in pts), default=horizon)
+        targets = [(sim._object_bodies[b], -1)]
+    gaps = [pt[8] for body, lb in targets
+            for pt in pybullet.getClosestPoints(sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb,
+                                                physicsClientId=sim._cid)]
+    return min(gaps, default=horizon)
 
 
-def worker(world_path: str, n: int, seed: int, robot: str, show: int) -> dict:
+def worker(world_path: str, n: int, seed: int, robot: str, show: int, obstacles: str = "objects") -> dict:
     import numpy as np
     import rospy
     from moverl_msgs.srv import CheckState
@@ -220,9 +237,16 @@ def worker(world_path: str, n: int, seed: int, robot: str, show: int) -> dict:
     lower, upper = np.array(sim.lower), np.array(sim.upper)
     rng = np.random.default_rng(seed)
     Q = rng.uniform(lower, upper, size=(n, lower.size))
-    g = LaunchedGraph({"world_file": world_path, "robot": robot}, wait_for=ros.REQUIRED_SERVICES)
+    # octomap/both: the scene offers its services only after integrating the cameras' first views (fail closed).
+    g = LaunchedGraph({"world_file": world_path, "robot": robot, "obstacles": obstacles},
+                      wait_for=ros.REQUIRED_SERVICES)
     try:
         ros.init_node(g.uri)
+        map_info = None
+        if obstacles != "objects":
+            from moverl_msgs.msg import OctomapStatus
+            st = rospy.wait_for_message("/planning_scene/octomap_status", OctomapStatus, timeout=30)
+            map_info = {"clouds": st.clouds, "occupied_leaves": st.occupied_leaves, "resolution": st.resolution}
         scene_joints = rospy.get_param("/planning_scene/joint_names", None)
         if scene_joints is not None and list(scene_joints) != list(sim.joint_names):
             raise RuntimeError(f"joint order differs: scene {scene_joints}, sim {sim.joint_names}")
@@ -259,14 +283,15 @@ def worker(world_path: str, n: int, seed: int, robot: str, show: int) -> dict:
     row = finish_row(world, counts, float(np.median(times) * 1e3) if times else float("nan"), seed,
                      self_gaps, world_gaps)
     top = sorted(fa_pairs.items(), key=lambda kv: -len(kv[1]))[:5]
-    return {"row": row, "misses": misses, "wall_s": wall,
+    return {"row": row, "misses": misses, "wall_s": wall, "map": map_info,
             "fa_pairs": [[k, len(v), *gap_stats(v)] for k, v in top]}
 
 
 # ----------------------------------------------------------------------------- main
 def run_world(world_path: str, args) -> dict:
     return run_json_worker(__file__, ["--worker", world_path, "-n", args.n, "--seed", args.seed, "--robot", args.robot,
-                                      "--show", args.show], f"audit worker for {world_path}")
+                                      "--show", args.show, "--obstacles", args.obstacles],
+                           f"audit worker for {world_path}")
 
 
 def main(argv=None) -> int:
@@ -277,11 +302,14 @@ def main(argv=None) -> int:
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
     p.add_argument("--show", type=int, default=5, help="print the first this many misses per world")
     p.add_argument("--out", default=None, help="output folder (default: <repo>/docs/audit)")
+    p.add_argument("--obstacles", choices=sorted(MODE_NOTES), default="objects",
+                   help="where the scene's obstacles come from (launch arg obstacles): the world file's objects, "
+                        "the OctoMap built from the world's depth cameras, or both")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
 
     if args.worker:
-        print(json.dumps(worker(args.worker, args.n, args.seed, args.robot, args.show)))
+        print(json.dumps(worker(args.worker, args.n, args.seed, args.robot, args.show, args.obstacles)))
         return 0
 
     from moverl_gym.paths import repo_root, world_file
@@ -301,6 +329,10 @@ def main(argv=None) -> int:
         rows.append(r["row"])
         all_misses[w] = r["misses"]
         fa_notes.append(fa_pairs_note(w, r["fa_pairs"], r["row"]["false_alarm"]))
+        if r.get("map"):
+            m = r["map"]
+            fa_notes.append(f"{w}: OctoMap of {m['clouds']} clouds, {m['occupied_leaves']} occupied cells of "
+                            f"{m['resolution']:.3f} m")
         print(f"  done in {r['wall_s']:.1f} s", flush=True)
 
     print("\n== Collision audit: planning scene (check_state) vs PyBullet ground truth "
@@ -308,7 +340,7 @@ def main(argv=None) -> int:
     print(format_table(rows))
     print("(false al. % of free: false alarms / physics-free configurations; self split over all samples, "
           "world split over scene-self-free samples; unnamed: physics self pairs the scene did not name)")
-    print(f"note: {OCTOMAP_NOTE}")
+    print(f"note: {MODE_NOTES[args.obstacles]}")
     for w, why in skipped:
         print(f"note: world '{w}' skipped: {why}")
     for note in fa_notes:
@@ -319,15 +351,18 @@ def main(argv=None) -> int:
                   f"world={m['physics_world']}")
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / "audit.csv", "w", newline="") as f:
+    stem = "audit" if args.obstacles == "objects" else f"audit_{args.obstacles}"
+    with open(out_dir / f"{stem}.csv", "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=FIELDS)
         wr.writeheader()
         wr.writerows(rows)
     command = "python src/moverl_gym/scripts/collision_audit.py --worlds " + " ".join(args.worlds) + f" -n {args.n}"
     if args.seed != 0:
         command += f" --seed {args.seed}"
-    (out_dir / "audit.md").write_text(format_markdown(rows, command, skipped, fa_notes))
-    print(f"\nwrote {out_dir / 'audit.csv'} and {out_dir / 'audit.md'}")
+    if args.obstacles != "objects":
+        command += f" --obstacles {args.obstacles}"
+    (out_dir / f"{stem}.md").write_text(format_markdown(rows, command, skipped, fa_notes, args.obstacles))
+    print(f"\nwrote {out_dir / (stem + '.csv')} and {out_dir / (stem + '.md')}")
     missed = sum(r["missed"] for r in rows)
     if missed:
         print(f"FAIL: {missed} missed collision(s)")

@@ -58,7 +58,9 @@ def test_finish_row_and_outputs():
     assert set(row) == set(audit.FIELDS)
     assert "table" in audit.format_table([row])
     md = audit.format_markdown([row], "cmd", skipped=[("case", "missing")])
-    assert "| table | 3 |" in md and "OctoMap" in md and "`case` skipped" in md
+    assert "| table | 3 |" in md and "obstacles: objects" in md and "`case` skipped" in md
+    md = audit.format_markdown([row], "cmd", obstacles="octomap")
+    assert md.startswith("# Collision audit (octomap mode)") and "OctoMap built from the world's depth cameras" in md
 
 
 # ----------------------------------------------------------------------------- planner benchmark

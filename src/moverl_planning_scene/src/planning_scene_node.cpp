@@ -25,6 +25,7 @@
 #include <moverl_msgs/World.h>
 #include <shape_msgs/SolidPrimitive.h>
 
+#include <atomic>
 #include <cstdlib>
 #include <deque>
 #include <exception>
@@ -212,8 +213,8 @@ class PlanningSceneNode {
       ROS_FATAL("planning_scene: invalid world from %s: %s", world_service.c_str(), error.c_str());
       return false;
     }
-    world_sub_ = nh_.subscribe(world_topic, 1, &PlanningSceneNode::onWorld, this);
     if (obstacles_ != "objects" && !initOctomap()) return false;
+    world_sub_ = nh_.subscribe(world_topic, 1, &PlanningSceneNode::onWorld, this);
 
     services_.push_back(pnh_.advertiseService("check_state", &PlanningSceneNode::checkState, this));
     services_.push_back(pnh_.advertiseService("check_path", &PlanningSceneNode::checkPath, this));
@@ -249,6 +250,10 @@ class PlanningSceneNode {
     pnh_.param<std::string>("octomap/cloud_topic", cloud_topic, "/sim/points");
     pnh_.param<std::string>("octomap/joint_states_topic", joint_topic, "/joint_states");
     pnh_.param("octomap/queue_size", queue, 4);
+    int startup_clouds = 2;
+    double startup_timeout = 30.0;
+    pnh_.param("octomap/startup_clouds", startup_clouds, 2);
+    pnh_.param("octomap/startup_timeout", startup_timeout, 30.0);
     if (!(self_filter_padding_ >= 0.0) || !std::isfinite(self_filter_padding_)) {
       ROS_FATAL("planning_scene: ~octomap/self_filter_padding must be >= 0");
       return false;
@@ -282,6 +287,21 @@ class PlanningSceneNode {
     publishStatus(ros::Time(0), "");
     ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m)",
              cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_);
+    // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
+    while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {
+      if (!ros::ok()) return false;
+      if (ros::WallTime::now() > deadline) {
+        ROS_FATAL("planning_scene: only %u of %d point clouds integrated from %s after %.1f s (dropped %u): is a depth "
+                  "camera publishing there, with TF for its frame and joint states on %s?",
+                  clouds_.load(), startup_clouds, cloud_sub_.getTopic().c_str(), startup_timeout, dropped_.load(),
+                  joint_sub_.getTopic().c_str());
+        return false;
+      }
+      ros::WallDuration(0.01).sleep();
+    }
+    ROS_INFO("planning_scene: %u clouds integrated at start-up, %zu occupied cells", clouds_.load(),
+             map_->occupiedLeafCount());
     return true;
   }
 
@@ -564,7 +584,7 @@ class PlanningSceneNode {
   std::vector<std::uint8_t> mask_;
   mps::MapUpdate update_;
   double self_filter_padding_ = 0.03, transform_timeout_ = 0.1, last_integration_ = 0.0;
-  uint32_t clouds_ = 0, dropped_ = 0;
+  std::atomic<uint32_t> clouds_{0}, dropped_{0};
   std::mutex mutex_;  // serializes world updates and queries (the scene keeps scratch buffers)
   ros::Subscriber world_sub_;
   std::vector<ros::ServiceServer> services_;

@@ -345,6 +345,11 @@ class Simulator:
 
     # ------------------------------------------------------------------ state
     @property
+    def client_id(self):
+        """PyBullet physicsClientId of this simulator's world (e.g. for moverl_sim.camera rendering)."""
+        return self._cid
+
+    @property
     def sim_time(self):
         """Simulated seconds since start: substeps / physics_hz."""
         return self._substeps_total / self.physics_hz

@@ -10,9 +10,10 @@ try:  # added with moving obstacles
     from moverl_msgs.msg import ObstacleMotion
 except ImportError:  # pragma: no cover - messages built before moving obstacles
     ObstacleMotion = None
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, PointCloud2, PointField
 from shape_msgs.msg import SolidPrimitive
 
+_XYZ_FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
 _SHAPE_TYPES = {"box": SolidPrimitive.BOX, "sphere": SolidPrimitive.SPHERE, "cylinder": SolidPrimitive.CYLINDER}
 
 
@@ -73,4 +74,25 @@ def joint_state_msg(names, positions, velocities, stamp_sec):
     msg.name = list(names)
     msg.position = list(positions)
     msg.velocity = list(velocities)
+    return msg
+
+
+def points_to_msg(points, width, height, frame_id, stamp_sec):
+    """(height * width) x 3 float32 points (row-major image order, moverl_sim.camera) -> an organised
+    sensor_msgs/PointCloud2 with float32 fields x, y, z (12 bytes per point, little endian, no NaN)."""
+    import numpy as np
+    pts = np.ascontiguousarray(points, dtype="<f4")
+    if pts.shape != (width * height, 3):
+        raise ValueError("expected %d x 3 points for a %d x %d image, got shape %s"
+                         % (width * height, width, height, pts.shape))
+    msg = PointCloud2()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = sim_stamp(stamp_sec)
+    msg.height, msg.width = height, width
+    msg.fields = _XYZ_FIELDS
+    msg.is_bigendian = False
+    msg.point_step = 12
+    msg.row_step = 12 * width
+    msg.data = pts.tobytes()
+    msg.is_dense = True
     return msg

@@ -2,25 +2,32 @@
 
 ROS-free. The format is documented in the header of worlds/table.yaml. Unknown keys are rejected so
 that a typo never goes unnoticed; new optional keys are dataclass fields with a default, which keeps every
-existing world file valid. An object's optional ``motion:`` makes it a moving obstacle (ObjectMotion).
+existing world file valid. An object's optional ``motion:`` makes it a moving obstacle (ObjectMotion); the
+optional top-level ``cameras:`` list declares simulated depth cameras (WorldCamera, rendered by moverl_sim.camera).
 """
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Optional, Tuple
 
 import yaml
 
-__all__ = ["WorldFileError", "WorldObject", "World", "ObjectMotion", "load_world", "parse_world",
-           "rpy_to_quaternion", "SHAPE_SIZES", "MOTION_TYPES"]
+__all__ = ["WorldFileError", "WorldObject", "World", "ObjectMotion", "WorldCamera", "load_world", "parse_world",
+           "rpy_to_quaternion", "SHAPE_SIZES", "MOTION_TYPES", "OPTICAL_FRAME_SUFFIX"]
 
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
-_TOP_KEYS = {"name", "frame", "goal", "objects"}
+_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
 MOTION_TYPES = ("oscillate",)
 _MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
+_CAMERA_KEYS = {"id", "xyz", "target", "up", "width", "height", "fov", "near", "far", "rate"}
+_CAMERA_REQUIRED = ("id", "xyz", "target", "width", "height", "fov", "near", "far", "rate")
+_CAMERA_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")   # becomes part of a TF frame name
+OPTICAL_FRAME_SUFFIX = "_optical_frame"
+MIN_UP_ANGLE_SIN = 1e-3   # up must be at least ~0.06 deg away from the view direction
 
 
 class WorldFileError(Exception):
@@ -85,12 +92,37 @@ class WorldObject:
 
 
 @dataclass(frozen=True)
+class WorldCamera:
+    """A static simulated depth camera (pinhole), looking from xyz at target, image "up" roughly along up.
+
+    Its TF frame is ``optical_frame`` (REP 103 optical: z forward, x right, y down); moverl_sim.camera
+    computes the pose and renders it.
+    """
+    id: str
+    xyz: Tuple[float, float, float]      # optical centre, world frame (m)
+    target: Tuple[float, float, float]   # look-at point, world frame (m); the optical axis passes through it
+    width: int                           # pixels
+    height: int                          # pixels
+    fov: float                           # vertical field of view (degrees), 0 < fov < 180
+    near: float                          # clip distances (m, along the optical axis), 0 < near < far
+    far: float
+    rate: float                          # renders per simulated second
+    up: Tuple[float, float, float] = (0.0, 0.0, 1.0)   # world direction that appears "up" in the image
+
+    @property
+    def optical_frame(self):
+        """TF frame of the camera: ``<id>_optical_frame``."""
+        return self.id + OPTICAL_FRAME_SUFFIX
+
+
+@dataclass(frozen=True)
 class World:
     name: str
     frame: str = "world"
     goal: Optional[Tuple[float, float, float]] = None
     objects: Tuple[WorldObject, ...] = ()
     source: str = field(default="<memory>", compare=False)   # file it was read from
+    cameras: Tuple[WorldCamera, ...] = ()
 
     @property
     def moving_objects(self):
@@ -102,6 +134,12 @@ class World:
             if obj.id == object_id:
                 return obj
         raise KeyError(object_id)
+
+    def camera(self, camera_id):
+        for cam in self.cameras:
+            if cam.id == camera_id:
+                return cam
+        raise KeyError(camera_id)
 
 
 def load_world(path):
@@ -183,6 +221,74 @@ def _parse_motion(raw, source, where):
     return ObjectMotion(type=mtype, axis=axis, amplitude=amplitude, period=period, phase=phase)
 
 
+def _positive_int(value, source, key):
+    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+        _fail(source, key, "expected a positive integer (pixels), got %r" % (value,))
+    return int(value)
+
+
+def _parse_cameras(raw_cameras, source):
+    """Validate the top-level ``cameras:`` list -> tuple of WorldCamera."""
+    if raw_cameras is None:
+        return ()
+    if not isinstance(raw_cameras, list):
+        _fail(source, "cameras", "expected a list of cameras, got %r" % (raw_cameras,))
+    cameras, seen = [], set()
+    for i, raw in enumerate(raw_cameras):
+        where = "cameras[%d]" % i
+        if not isinstance(raw, dict):
+            _fail(source, where, "expected a mapping, got %r" % (raw,))
+        if isinstance(raw.get("id"), str):
+            where = "cameras[%d] (id %s)" % (i, raw["id"])
+        unknown = set(map(str, raw)) - _CAMERA_KEYS
+        if unknown:
+            _fail(source, "%s.%s" % (where, sorted(unknown)[0]),
+                  "unknown key (allowed: %s)" % ", ".join(sorted(_CAMERA_KEYS)))
+        for key in _CAMERA_REQUIRED:
+            if key not in raw:
+                _fail(source, "%s.%s" % (where, key), "missing required key")
+        cid = _string(raw["id"], source, where + ".id")
+        if not _CAMERA_ID.match(cid):
+            _fail(source, where + ".id", "must start with a letter and contain only letters, digits and '_' "
+                                         "(it names the TF frame <id>%s), got %r" % (OPTICAL_FRAME_SUFFIX, cid))
+        if cid in seen:
+            _fail(source, where + ".id", "duplicate camera id %r" % cid)
+        seen.add(cid)
+        xyz = _numbers(raw["xyz"], source, where + ".xyz", 3)
+        target = _numbers(raw["target"], source, where + ".target", 3)
+        view = [t - x for t, x in zip(target, xyz)]
+        view_norm = math.sqrt(sum(v * v for v in view))
+        if view_norm < 1e-6:
+            _fail(source, where + ".target", "must differ from xyz (the view direction is target - xyz), got %r"
+                  % (list(target),))
+        up = _numbers(raw.get("up", [0.0, 0.0, 1.0]), source, where + ".up", 3)
+        up_norm = math.sqrt(sum(u * u for u in up))
+        if up_norm < 1e-9:
+            _fail(source, where + ".up", "must be a non-zero vector, got %r" % (list(up),))
+        cross = (view[1] * up[2] - view[2] * up[1], view[2] * up[0] - view[0] * up[2],
+                 view[0] * up[1] - view[1] * up[0])
+        if math.sqrt(sum(c * c for c in cross)) < MIN_UP_ANGLE_SIN * view_norm * up_norm:
+            _fail(source, where + ".up", "must not be parallel to the view direction target - xyz = %r, got %r"
+                  % ([round(v, 6) for v in view], list(up)))
+        width = _positive_int(raw["width"], source, where + ".width")
+        height = _positive_int(raw["height"], source, where + ".height")
+        fov = _number(raw["fov"], source, where + ".fov")
+        if not 0.0 < fov < 180.0:
+            _fail(source, where + ".fov", "vertical field of view must be in (0, 180) degrees, got %r" % (fov,))
+        near = _number(raw["near"], source, where + ".near")
+        far = _number(raw["far"], source, where + ".far")
+        if near <= 0.0:
+            _fail(source, where + ".near", "must be > 0 (metres), got %r" % (near,))
+        if far <= near:
+            _fail(source, where + ".far", "must be > near = %r (metres), got %r" % (near, far))
+        rate = _number(raw["rate"], source, where + ".rate")
+        if rate <= 0.0:
+            _fail(source, where + ".rate", "must be > 0 (renders per simulated second), got %r" % (rate,))
+        cameras.append(WorldCamera(id=cid, xyz=xyz, target=target, up=up, width=width, height=height, fov=fov,
+                                   near=near, far=far, rate=rate))
+    return tuple(cameras)
+
+
 def parse_world(data, source="<memory>"):
     """Validate an already-loaded YAML document (a dict) and build a World."""
     if not isinstance(data, dict):
@@ -241,4 +347,5 @@ def parse_world(data, source="<memory>"):
             motion = _parse_motion(raw["motion"], source, where + ".motion")
         objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed,
                                    motion=motion))
-    return World(name=name, frame=frame, goal=goal, objects=tuple(objects), source=source)
+    cameras = _parse_cameras(data.get("cameras"), source)
+    return World(name=name, frame=frame, goal=goal, objects=tuple(objects), source=source, cameras=cameras)

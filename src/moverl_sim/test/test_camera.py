@@ -81,6 +81,16 @@ def test_camera_world_file_is_parsed(tmp_path):
     assert parse_world({"name": "w"}).cameras == ()   # optional
 
 
+def test_repo_worlds_have_cameras():
+    import os
+    from conftest import REPO_DIR
+    for name in ("table", "human", "case"):
+        w = load_world(os.path.join(REPO_DIR, "worlds", name + ".yaml"))
+        assert 2 <= len(w.cameras) <= 3, name
+        for c in w.cameras:
+            assert c.far > 3.0, "%s/%s: far must exceed the planning scene's max_range (3.0 m)" % (name, c.id)
+
+
 def _cam_yaml(**kw):
     d = dict(CAM)
     d.update(kw)
@@ -265,3 +275,51 @@ def test_point_cloud_message():
     with pytest.raises(ValueError):
         points_to_msg(pts, 4, 2, "f", 0.0)
 
+
+# ---------------------------------------------------------------------- coverage of the repo worlds
+def test_coverage_reachable_surfaces():
+    from moverl_sim import coverage
+    w = parse_world({"name": "w", "objects": [
+        {"id": "table", "shape": "box", "size": [1.5, 0.8, 0.03], "xyz": [0.35, 0, -0.015]},
+        {"id": "near", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.5, 0, 0.05]},
+        {"id": "far_away", "shape": "sphere", "size": [0.1], "xyz": [2.0, 0, 0.5]}]})
+    s = coverage.surface_samples(w, 0.02)
+    reach = coverage.reachable_mask(s, w)
+    near = s.objects == 1
+    top = near & (s.normals[:, 2] > 0.5)
+    bottom = near & (s.normals[:, 2] < -0.5)
+    assert reach[top].all() and not reach[bottom].any()          # the bottom face sits on the table
+    assert not reach[s.objects == 2].any()                       # out of reach
+    table_top = (s.objects == 0) & (s.normals[:, 2] > 0.5)
+    under_box = table_top & (np.abs(s.points[:, 0] - 0.5) < 0.05) & (np.abs(s.points[:, 1]) < 0.05)
+    assert under_box.any() and not reach[under_box].any()         # covered by the box
+    assert not reach[(s.objects == 0) & (s.normals[:, 2] < -0.5)].any()   # the table's underside
+
+
+@pytest.mark.parametrize("name,minimum", [("table", 0.99), ("human", 0.98), ("case", 0.99)])
+def test_repo_world_cameras_see_the_reachable_obstacle_surface(panda_urdf, name, minimum):
+    """The worlds' cameras see (almost) all the obstacle surface the robot can reach, the robot at home (the
+    human at the centre and both ends of the walk). render_world --cameras prints the same figures."""
+    import os
+    from conftest import HOME, REPO_DIR, make_sim
+    from moverl_sim import coverage
+    w = load_world(os.path.join(REPO_DIR, "worlds", name + ".yaml"))
+    cams = [Camera(c) for c in w.cameras]
+    sim = make_sim(panda_urdf, w)
+    try:
+        sim.reset_robot(HOME)
+        times = [0.0]
+        if w.moving_objects:
+            period = w.moving_objects[0].motion.period
+            times = [0.0, 0.25 * period, 0.75 * period]
+        for t in times:
+            sim._place_movers(t)
+            samples = coverage.surface_samples(w, 0.02, t)
+            depths = [c.render_depth(sim.client_id) for c in cams]
+            table, _, _, _ = coverage.coverage_report(w, cams, depths, samples, t)
+            total = sum(a for a, _ in table.values())
+            seen = sum(b for _, b in table.values())
+            assert total > 1000
+            assert seen / total >= minimum, "%s at t = %g: %s" % (name, t, table)
+    finally:
+        sim.close()

@@ -35,6 +35,7 @@ if [ "$live" = 1 ]; then
   suite "rostest scenario_case" rostest --text moverl_gym scenario_case.test
   suite "rostest strategies_live" rostest --text moverl_gym strategies_live.test
   suite "rostest moving_obstacle" rostest --text moverl_gym moving_obstacle.test
+  suite "rostest sensed_obstacle (OctoMap)" rostest --text moverl_gym sensed_obstacle.test
   suite "rostest env_live (shield on)" rostest --text moverl_gym env_live.test shield:=true
   suite "rostest env_live (shield off)" rostest --text moverl_gym env_live.test shield:=false
 fi

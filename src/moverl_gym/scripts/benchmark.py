@@ -47,12 +47,13 @@ def _rollout(env, steps, seed):
     return steps / (time.perf_counter() - t0), infos
 
 
-def worker_graph(shield: bool, steps: int, seed: int, plans: int) -> dict:
+def worker_graph(shield: bool, steps: int, seed: int, plans: int, obstacles: str = "objects") -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
 
-    env = gym.make("MoveRL/PandaReachTable-v0", shield=shield, graph="launch")
+    env = gym.make("MoveRL/PandaReachTable-v0", shield=shield, graph="launch",
+                   launch_args={"obstacles": obstacles})
     try:
         _rollout(env, 200, seed)  # warm-up: connections, caches
         rate, infos = _rollout(env, steps, seed)
@@ -148,13 +149,14 @@ def main(argv=None) -> int:
     if args.worker:
         fn = {"shield_on": lambda: worker_graph(True, args.steps, args.seed, args.plans),
               "shield_off": lambda: worker_graph(False, args.steps, args.seed, 0),
+              "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
               "bullet": lambda: worker_bullet(args.steps, args.seed),
               "pandagym": lambda: worker_pandagym(args.steps, args.seed)}[args.worker]
         print(json.dumps(fn()))
         return 0
 
     results = {}
-    for name in ("shield_on", "shield_off", "bullet", "pandagym"):
+    for name in ("shield_on", "shield_octomap", "shield_off", "bullet", "pandagym"):
         print(f"measuring {name} ({args.steps} steps) ...", flush=True)
         results[name] = run_worker(name, args)
     on, off = results["shield_on"], results["shield_off"]
@@ -162,6 +164,8 @@ def main(argv=None) -> int:
           (args.seed, args.steps, os.cpu_count()))
     print(f"{'configuration':52s} {'env steps/s':>12s}")
     print(f"{'MoveRL, full ROS graph, shield ON':52s} {on['steps_per_s']:12.0f}")
+    octo = results["shield_octomap"]
+    print(f"{'  same, obstacles sensed (2 depth cameras + OctoMap)':52s} {octo['steps_per_s']:12.0f}")
     print(f"{'MoveRL, full ROS graph, shield OFF':52s} {off['steps_per_s']:12.0f}")
     print(f"{'same task in PyBullet, no ROS, no shield':52s} {results['bullet']['steps_per_s']:12.0f}")
     print(f"{'panda-gym PandaReachJoints-v3 (reference)':52s} {results['pandagym']['steps_per_s']:12.0f}")
@@ -171,6 +175,8 @@ def main(argv=None) -> int:
                        ("path_check", "path check (straight segment)"), ("planning", "OMPL planning, straight path colliding")):
         v = on[key]
         print(f"{label:32s} {v['p50_ms']:9.3f} {v['p99_ms']:9.3f} {v['n']:6d}")
+    print(f"OctoMap mode: state check p50 {octo['state_check']['p50_ms']:.3f} ms, path check p50 "
+          f"{octo['path_check']['p50_ms']:.3f} ms, contacts {octo['contacts']}")
     print(f"\nplanning solved {on['planning']['solved']}/{on['planning']['n']} (planner and time limit: "
           "config/planning_scene.yaml; the time includes path simplification)")
     print(f"verdicts shield on: {on['verdicts']}")

@@ -366,8 +366,27 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
       geoms_.push_back(std::move(g));
     }
   }
-  // r_i: bound on the distance of any geometry point moved by joint i from the joint axis.
   const std::size_t dof = model_.dof();
+  // Reach: bound on the distance of any collision-geometry point from the base origin, in every configuration.
+  {
+    std::vector<Eigen::Isometry3d> poses;
+    const std::vector<double> q0(dof, 0.0);
+    model_.computeLinkTransforms(q0.data(), &poses);
+    double d0 = 0.0;  // distance of joint 0's origin (= the origin of its child link) from the base origin
+    for (std::size_t l = 0; l < n_links; ++l) {
+      if (dof > 0 && model_.chainOffsetBound(0, static_cast<int>(l)) == 0.0) {
+        d0 = std::max(d0, poses[l].translation().norm());
+      }
+    }
+    reach_radius_ = 0.0;
+    for (const Geom& g : geoms_) {
+      const double c = dof > 0 ? model_.chainOffsetBound(0, g.link) : -1.0;
+      const double r = c < 0.0 ? (poses[g.link] * g.center_local).norm() + g.radius
+                               : d0 + c + g.center_local.norm() + g.radius;
+      reach_radius_ = std::max(reach_radius_, r);
+    }
+  }
+  // r_i: bound on the distance of any geometry point moved by joint i from the joint axis.
   joint_radius_.assign(dof, 0.0);
   for (std::size_t i = 0; i < dof; ++i) {
     if (model_.isPrismatic(i)) {

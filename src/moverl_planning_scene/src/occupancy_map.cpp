@@ -2,8 +2,10 @@
 
 #include <octomap/OcTree.h>
 
+#include <algorithm>
 #include <cmath>
-#include <unordered_set>
+#include <iterator>
+#include <unordered_map>
 
 namespace moverl_planning_scene {
 namespace {
@@ -55,16 +57,44 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
 
 OccupancyMap::~OccupancyMap() = default;
 
+namespace {
+
+/// Clips the segment a -> b to the box: the parameters [*t0, *t1] of the part inside. False when it misses the box.
+bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::AlignedBox3d& box, double* t0,
+               double* t1) {
+  *t0 = 0.0;
+  *t1 = 1.0;
+  if (box.isEmpty()) return true;  // unbounded map
+  const Eigen::Vector3d d = b - a;
+  for (int i = 0; i < 3; ++i) {
+    if (std::fabs(d[i]) < 1e-12) {
+      if (a[i] < box.min()[i] || a[i] > box.max()[i]) return false;
+      continue;
+    }
+    double u0 = (box.min()[i] - a[i]) / d[i], u1 = (box.max()[i] - a[i]) / d[i];
+    if (u0 > u1) std::swap(u0, u1);
+    *t0 = std::max(*t0, u0);
+    *t1 = std::min(*t1, u1);
+    if (*t0 > *t1) return false;
+  }
+  return true;
+}
+
+constexpr std::uint8_t kHit = 1, kRobot = 2;
+
+}  // namespace
+
 void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                                  const Eigen::Vector3d& origin, MapUpdate* out) const {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
-  std::unordered_set<std::uint64_t> hits, misses;
-  octomap::KeyRay ray;
-  const octomap::point3d o = toOcto(origin);
   const bool masked = robot_mask.size() == points.size();
+  // 1. End points (beyond max_range: cut there, free space only), grouped by cell as octomap's discretized
+  //    insertion does: one beam per end cell. A cell with any robot point marks nothing.
+  std::unordered_map<std::uint64_t, std::uint8_t> ends;
+  ends.reserve(points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
     if (!p.allFinite()) {
@@ -73,30 +103,41 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points, con
     }
     const Eigen::Vector3d d = p - origin;
     const double range = d.norm();
-    const bool robot = masked && robot_mask[k] != 0;
     Eigen::Vector3d end = p;
-    bool hit = !robot;
+    std::uint8_t flag = kHit;
     if (range > options_.max_range) {
       end = origin + d * (options_.max_range / range);
-      hit = false;
+      flag = 0;
       ++out->stats.beyond_range;
-    } else if (robot) {
+    } else if (masked && robot_mask[k] != 0) {
+      flag = kRobot;
       ++out->stats.robot;
     }
-    // computeRayKeys: the cells from the origin's up to, excluding, the end point's cell.
-    if (tree_->computeRayKeys(o, toOcto(end), ray)) {
-      for (const octomap::OcTreeKey& key : ray) misses.insert(pack(key));
-    }
-    if (hit) {
-      octomap::OcTreeKey key;
-      if (tree_->coordToKeyChecked(toOcto(end), key)) hits.insert(pack(key));
-    }
+    octomap::OcTreeKey key;
+    if (!tree_->coordToKeyChecked(toOcto(end), key)) continue;
+    ends[pack(key)] |= flag;
   }
-  out->hits.assign(hits.begin(), hits.end());
-  out->misses.reserve(misses.size());
-  for (std::uint64_t m : misses) {
-    if (hits.count(m) == 0) out->misses.push_back(m);
+  // 2. Beams from the origin to each end cell's centre, clipped to the map bounds.
+  std::vector<std::uint64_t> misses;
+  octomap::KeyRay ray;
+  for (const auto& e : ends) {
+    const octomap::point3d c = tree_->keyToCoord(unpack(e.first));
+    const Eigen::Vector3d end(c.x(), c.y(), c.z());
+    double t0, t1;
+    if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
+    const Eigen::Vector3d a = origin + t0 * (end - origin), b = origin + t1 * (end - origin);
+    // computeRayKeys: the cells from a's up to, excluding, b's cell.
+    if (tree_->computeRayKeys(toOcto(a), toOcto(b), ray)) {
+      for (const octomap::OcTreeKey& key : ray) misses.push_back(pack(key));
+    }
+    if (e.second == kHit && t1 >= 1.0) out->hits.push_back(e.first);
   }
+  std::sort(out->hits.begin(), out->hits.end());
+  std::sort(misses.begin(), misses.end());
+  misses.erase(std::unique(misses.begin(), misses.end()), misses.end());
+  // Occupied wins: a cell hit by one beam stays occupied even when others cross it.
+  std::set_difference(misses.begin(), misses.end(), out->hits.begin(), out->hits.end(),
+                      std::back_inserter(out->misses));
   out->stats.hit_cells = out->hits.size();
   out->stats.free_cells = out->misses.size();
 }

@@ -258,6 +258,9 @@ class PlanningSceneNode {
       ROS_FATAL("planning_scene: ~octomap/self_filter_padding must be >= 0");
       return false;
     }
+    // Map only what the robot can reach (padded): beams are clipped there, which keeps integration fast.
+    const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + 2 * mo.resolution;
+    mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
     std::string error;
     map_ = mps::OccupancyMap::create(mo, &error);
     if (!map_) {
@@ -285,8 +288,9 @@ class PlanningSceneNode {
     sensor_spinner_.reset(new ros::AsyncSpinner(1, &sensor_queue_));
     sensor_spinner_->start();
     publishStatus(ros::Time(0), "");
-    ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m)",
-             cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_);
+    ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
+             "mapped within +-%.2f m of the base)", cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range,
+             self_filter_padding_, reach);
     // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
     while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {

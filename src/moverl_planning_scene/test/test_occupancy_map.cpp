@@ -170,6 +170,28 @@ TEST_F(PandaOctomap, RobotPointMask) {
   EXPECT_EQ(mask[3], 0);
   EXPECT_EQ(mask[4], 0);
   EXPECT_GT(links.size(), 0u);
+  // The reach bound holds for every configuration (Panda: ~1.2 m from link0's origin incl. the hand).
+  const double reach = scene_->checker().reachRadius();
+  EXPECT_GT(reach, 0.9);
+  EXPECT_LT(reach, 2.0);
+}
+
+TEST(OccupancyMap, BeamsAreClippedToTheBounds) {
+  mps::OccupancyMapOptions o;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  // From outside the box: free cells only inside it, the hit inside it, a hit outside ignored.
+  const Eigen::Vector3d origin(2.0, 0.0, 0.0);
+  mps::MapUpdate u;
+  map->computeUpdate({{0.0, 0.0, 0.0}, {1.5, 0.5, 0.0}}, {}, origin, &u);
+  map->apply(u);
+  EXPECT_TRUE(map->occupied({0.0, 0.0, 0.0}));
+  EXPECT_FALSE(map->occupied({1.5, 0.5, 0.0}));
+  EXPECT_NE(map->tree()->search(0.5, 0.0, 0.0), nullptr);  // seen free inside
+  EXPECT_EQ(map->tree()->search(1.5, 0.0, 0.0), nullptr);  // outside: never touched
+  EXPECT_EQ(u.stats.hit_cells, 1u);
 }
 
 TEST_F(PandaOctomap, SensedTableBlocksTheRobot) {

@@ -78,6 +78,8 @@ class FclCollisionChecker : public CollisionChecker {
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
                       std::vector<std::uint8_t>* mask) const;
+  /// \brief Bound (m) on the distance of any robot collision point from the base origin over all configurations.
+  double reachRadius() const { return reach_radius_; }
   /// Name reported for the octree in colliding pairs.
   static constexpr const char* kOctomapId = "octomap";
 
@@ -122,6 +124,7 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::size_t> moving_;           // indices into world_ of moving obstacles
   double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();
   std::vector<double> joint_radius_;
+  double reach_radius_ = 0.0;
   std::vector<Eigen::Isometry3d> link_poses_;
   std::vector<double> q_scratch_;
   CollisionResult state_scratch_;

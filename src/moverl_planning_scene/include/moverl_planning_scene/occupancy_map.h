@@ -2,12 +2,13 @@
  * \file occupancy_map.h
  * \brief Sensed obstacles: an OctoMap occupancy octree updated from depth-camera point clouds. ROS-free.
  *
- * Update rule (octomap_server's sensor model): every beam from the sensor origin to a point marks the cells it
+ * Update rule (octomap_server's sensor model, discretized insertion): every beam from the sensor origin to a point marks the cells it
  * crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than max_range mark free
  * space up to max_range only (no-return readings at a camera's far plane clear space this way). Points that belong
  * to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear the cells
  * before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when other
- * beams cross it. Cells never observed are unknown and count as free for collision checking (as in MoveIt).
+ * beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with any
+ * robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Cells never observed are unknown and count as free for collision checking (as in MoveIt).
  * Clearing: when an obstacle moves away, beams now pass through its old cells and turn them free.
  */
 #pragma once
@@ -31,8 +32,11 @@ struct OccupancyMapOptions {
   double prob_hit = 0.7;              ///< occupancy probability of a hit
   double prob_miss = 0.4;             ///< occupancy probability of a miss
   double clamp_min = 0.12;            ///< clamping of cell probabilities (lets cells change state quickly)
-  double clamp_max = 0.97;
+  double clamp_max = 0.85;
   double occupancy_threshold = 0.5;   ///< a cell above this probability is an obstacle
+  /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Empty: unbounded.
+  /// The node sets it to the robot's reach (nothing outside can ever touch the robot).
+  Eigen::AlignedBox3d bounds;
 };
 
 /// \brief What one integration did (logs, tests, the status topic).

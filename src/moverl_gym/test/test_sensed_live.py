@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""rostest: an obstacle the planning scene knows only from depth-camera points (sensed_obstacle.test).
+
+The planning scene runs with obstacles:=octomap: it ignores the world file's objects and builds an OctoMap from the
+simulator's two depth cameras (/sim/points). Test world worlds/sensed_box.yaml: a box stands in front of the robot
+at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 20 s to 40 s.
+  (a) ground truth: the unchecked shield_off moving the hand into the box makes contact with it;
+  (b) the scene flags the target inside the box as a collision with the sensed map ("octomap", never "box"), and
+      the shield discards the step: no contact;
+  (c) after the box has moved away, new camera views clear its old cells: the same target becomes free and the
+      shield executes the move, without contact (the box is still far: the map only knows where things were
+      when last seen, so the sensed mode is for static or slow obstacles);
+  (d) the map filtered the robot's own points (the robot is not an obstacle to itself).
+"""
+
+import time
+import unittest
+
+import numpy as np
+import rospy
+import rostest
+from live_helpers import LiveAssertions
+from moverl_msgs.msg import OctomapStatus
+from moverl_msgs.srv import CheckState, ResetRobot, ShieldStep
+
+SAFE, REPLANNED, DISCARDED_POSE, UNCHECKED = 0, 1, 3, 6
+VALID, WORLD = 0, 2
+HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
+# The hand at (0.50, 0.01, 0.22): inside the box at motion time 0, clear of the table and of itself.
+Q_BOX = [-0.265, 0.294, 0.335, -2.261, -0.714, 2.151, -0.309]
+DT = 0.05
+WAIT = 30.0   # s (wall) for the map to take in new views
+
+
+class SensedObstacleLive(LiveAssertions, unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("sensed_obstacle_test", anonymous=True, disable_signals=True)
+        for name in ("/shield/step", "/shield/reset", "/shield_off/step", "/shield_off/reset",
+                     "/planning_scene/check_state"):
+            rospy.wait_for_service(name, timeout=60)
+        cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
+        cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)
+        cls.step_off = rospy.ServiceProxy("/shield_off/step", ShieldStep, persistent=True)
+        cls.reset_off = rospy.ServiceProxy("/shield_off/reset", ResetRobot, persistent=True)
+        cls.check_state = rospy.ServiceProxy("/planning_scene/check_state", CheckState)
+        cls.status = None
+        cls.status_sub = rospy.Subscriber("/planning_scene/octomap_status", OctomapStatus, cls._on_status)
+
+    @classmethod
+    def _on_status(cls, msg):
+        cls.status = msg
+
+    def place(self, q, reset=None):
+        res = (reset or self.reset)(positions=q)
+        self.assertTrue(res.success, res.message)
+        return res
+
+    def wait_for_clouds(self, n):
+        """One hold of a camera period (lockstep sim time moves on, so the cameras render again), then wait until
+        n more clouds were integrated."""
+        deadline = time.monotonic() + WAIT
+        while self.status is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        self.assertIsNotNone(self.status, "no /planning_scene/octomap_status")
+        start = self.status.clouds
+        self.assert_no_contacts(self.step(target=self.current, duration=0.25))
+        while self.status.clouds < start + n:
+            self.assertLess(time.monotonic(), deadline, "the map integrated %d of %d clouds in %.0f s"
+                            % (self.status.clouds - start, n, WAIT))
+            time.sleep(0.02)
+
+    def test_sensed_box(self):
+        # (a) ground truth: the box is physically there.
+        self.place(HOME, self.reset_off)
+        off = self.step_off(target=Q_BOX, duration=DT)
+        self.assertEqual(off.verdict, UNCHECKED, off.message)
+        self.assertGreater(sum(1 for p in off.contacts.pairs if p.b == "box"), 0, off.contacts.pairs)
+
+        # (b) motion time 0 again: the box stands in front of the robot; the cameras see it.
+        self.current = HOME
+        self.place(HOME)
+        self.wait_for_clouds(2)
+        res = self.check_state(positions=Q_BOX)
+        self.assertEqual(res.outcome, WORLD, res.message)
+        self.assertTrue(res.pairs and all(p.b == "octomap" for p in res.pairs), res.pairs)
+        step = self.step(target=Q_BOX, duration=DT)
+        self.assertEqual(step.verdict, DISCARDED_POSE, step.message)
+        self.assert_no_contacts(step)
+        np.testing.assert_allclose(step.state.position[:7], HOME, atol=1e-9)
+
+        # (c) 25 s later the box is 0.37 m to the side; fresh views clear its old cells.
+        for _ in range(25):
+            hold = self.step(target=HOME, duration=1.0)
+            self.assertEqual(hold.verdict, SAFE, hold.message)
+            self.assert_no_contacts(hold)
+        for _ in range(60):   # at most 15 s of motion time: the box stays > 0.3 m away
+            if self.check_state(positions=Q_BOX).outcome == VALID:
+                break
+            self.wait_for_clouds(2)
+        self.assertEqual(self.check_state(positions=Q_BOX).outcome, VALID, "the box's old cells were never cleared")
+        rospy.loginfo("sensed box forgotten after %d clouds", self.status.clouds)
+        step = self.step(target=Q_BOX, duration=DT)
+        self.assertIn(step.verdict, (SAFE, REPLANNED), step.message)
+        self.assert_no_contacts(step)
+        np.testing.assert_allclose(step.state.position[:7], Q_BOX, atol=1e-6)
+
+        # (d) the robot's own points were filtered, and the map holds the rest of the world.
+        self.assertGreater(self.status.robot_points, 0)
+        self.assertGreater(self.status.occupied_leaves, 100)
+        self.assertGreater(self.status.hit_cells, 0)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("moverl_gym", "sensed_obstacle", SensedObstacleLive)

@@ -230,6 +230,8 @@ def worker(world_path: str, n: int, seed: int, robot: str, show: int, obstacles:
     import rospy
     from moverl_msgs.srv import CheckState
 
+    from moverl_sim.world import load_world
+
     from moverl_gym import backend as ros
     from moverl_gym.graph import LaunchedGraph
 
@@ -245,7 +247,14 @@ def worker(world_path: str, n: int, seed: int, robot: str, show: int, obstacles:
         map_info = None
         if obstacles != "objects":
             from moverl_msgs.msg import OctomapStatus
+            # one view from every camera of the world file (the scene starts after startup_clouds of them)
+            cameras = len(load_world(world_path).cameras)
+            deadline = time.monotonic() + 30.0
             st = rospy.wait_for_message("/planning_scene/octomap_status", OctomapStatus, timeout=30)
+            while st.clouds < cameras:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the scene integrated {st.clouds} of {cameras} camera views in 30 s")
+                st = rospy.wait_for_message("/planning_scene/octomap_status", OctomapStatus, timeout=30)
             map_info = {"clouds": st.clouds, "occupied_leaves": st.occupied_leaves, "resolution": st.resolution}
         scene_joints = rospy.get_param("/planning_scene/joint_names", None)
         if scene_joints is not None and list(scene_joints) != list(sim.joint_names):

@@ -323,13 +323,25 @@ class PlanningSceneNode {
     while (joint_history_.size() > kJointHistory) joint_history_.pop_front();
   }
 
-  /// The robot configuration when the cloud was taken: the last joint state stamped at or before it.
-  const std::vector<double>* jointStateAt(const ros::Time& stamp) const {
-    if (joint_history_.empty()) return nullptr;
-    for (auto it = joint_history_.rbegin(); it != joint_history_.rend(); ++it) {
-      if (it->first <= stamp) return &it->second;
+  /// The robot configurations the cloud may have been taken in: the last joint state stamped before it, every state
+  /// stamped exactly at it (lockstep: a reset changes the configuration without advancing time, so several states
+  /// can share the render's stamp) and the first one after it (the robot moved between two joint states). The self
+  /// filter removes the points near any of them, so the robot never leaves itself behind as an obstacle.
+  void jointStatesAround(const ros::Time& stamp, std::vector<const std::vector<double>*>* out) const {
+    out->clear();
+    const std::vector<double>* before = nullptr;
+    const std::vector<double>* after = nullptr;
+    for (const auto& js : joint_history_) {
+      if (js.first < stamp) {
+        before = &js.second;
+      } else if (js.first == stamp) {
+        out->push_back(&js.second);
+      } else if (after == nullptr) {
+        after = &js.second;
+      }
     }
-    return &joint_history_.front().second;  // older than every state we kept: the oldest is the best guess
+    if (before != nullptr) out->push_back(before);
+    if (after != nullptr) out->push_back(after);
   }
 
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
@@ -345,8 +357,8 @@ class PlanningSceneNode {
       ROS_WARN_THROTTLE(5.0, "planning_scene: cloud from '%s' dropped: %s", msg->header.frame_id.c_str(), e.what());
       return;
     }
-    const std::vector<double>* q = jointStateAt(msg->header.stamp);
-    if (q == nullptr) {
+    jointStatesAround(msg->header.stamp, &configurations_);
+    if (configurations_.empty()) {
       ++dropped_;
       ROS_WARN_THROTTLE(5.0, "planning_scene: cloud dropped: no joint state yet (cannot filter the robot's points)");
       return;
@@ -365,7 +377,13 @@ class PlanningSceneNode {
       ROS_WARN_THROTTLE(5.0, "planning_scene: cloud without float32 x, y, z fields dropped: %s", e.what());
       return;
     }
-    scene_->checker().robotPointMask(q->data(), points_, self_filter_padding_, &mask_);
+    for (std::size_t c = 0; c < configurations_.size(); ++c) {
+      scene_->checker().robotPointMask(configurations_[c]->data(), points_, self_filter_padding_,
+                                       c == 0 ? &mask_ : &mask_more_);
+      if (c > 0) {
+        for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
+      }
+    }
     map_->computeUpdate(points_, mask_, pose.translation(), &update_);
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -585,7 +603,8 @@ class PlanningSceneNode {
   std::map<std::string, std::size_t> joint_index_;
   std::deque<std::pair<ros::Time, std::vector<double>>> joint_history_;
   std::vector<Eigen::Vector3d> points_;
-  std::vector<std::uint8_t> mask_;
+  std::vector<std::uint8_t> mask_, mask_more_;
+  std::vector<const std::vector<double>*> configurations_;
   mps::MapUpdate update_;
   double self_filter_padding_ = 0.03, transform_timeout_ = 0.1, last_integration_ = 0.0;
   std::atomic<uint32_t> clouds_{0}, dropped_{0};

@@ -32,6 +32,9 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-n", "--n-timesteps", type=int, default=None, help="default: from the hyper-parameter file")
     p.add_argument("--shield", default="on", choices=("on", "off"))
+    p.add_argument("--obstacles", default="objects", choices=("objects", "octomap", "both"),
+                   help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
+                        "from the world's depth cameras, or both")
     p.add_argument("--log-folder", default="runs")
     p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: config/hyperparams)")
     p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"),
@@ -60,12 +63,13 @@ def main(argv=None) -> int:
     run = Path(args.log_folder) / f"{args.algo}_{args.env.split('/')[-1]}_{args.shield}_s{args.seed}"
     run.mkdir(parents=True, exist_ok=True)
 
-    env = Monitor(gym.make(args.env, shield=shield, graph=args.graph))
+    launch_args = {} if args.obstacles == "objects" else {"obstacles": args.obstacles}
+    env = Monitor(gym.make(args.env, shield=shield, graph=args.graph, launch_args=launch_args))
     try:
         env.reset(seed=args.seed)
         env.action_space.seed(args.seed)
         config = {"env": args.env, "algo": args.algo, "seed": args.seed, "n_timesteps": n_timesteps,
-                  "shield": shield, "policy": policy, "hyperparams": hp,
+                  "shield": shield, "obstacles": args.obstacles, "policy": policy, "hyperparams": hp,
                   "task": vars(env.unwrapped.config), "world": env.unwrapped.world_name}
         (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         algo_cls = {"ppo": PPO, "sac": SAC, "td3": TD3}[args.algo]

@@ -26,6 +26,8 @@
 #include <shape_msgs/SolidPrimitive.h>
 
 #include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <cstdlib>
 #include <deque>
 #include <exception>
@@ -245,6 +247,7 @@ class PlanningSceneNode {
     pnh_.param("octomap/occupancy_threshold", mo.occupancy_threshold, mo.occupancy_threshold);
     pnh_.param("octomap/self_filter_padding", self_filter_padding_, 0.03);
     pnh_.param("octomap/transform_timeout", transform_timeout_, 0.1);
+    pnh_.param("octomap/joint_state_wait", joint_state_wait_, 0.5);
     std::string cloud_topic, joint_topic;
     int queue = 4;
     pnh_.param<std::string>("octomap/cloud_topic", cloud_topic, "/sim/points");
@@ -279,7 +282,8 @@ class PlanningSceneNode {
     marker_pub_ = pnh_.advertise<visualization_msgs::Marker>("octomap_markers", 1, /*latch=*/true);
     services_.push_back(pnh_.advertiseService("clear_octomap", &PlanningSceneNode::clearOctomap, this));
     ros::SubscribeOptions js = ros::SubscribeOptions::create<sensor_msgs::JointState>(
-        joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(), &sensor_queue_);
+        joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(),
+        &joint_queue_);
     ros::SubscribeOptions pc = ros::SubscribeOptions::create<sensor_msgs::PointCloud2>(
         cloud_topic, static_cast<uint32_t>(std::max(1, queue)), [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); },
         ros::VoidPtr(), &sensor_queue_);
@@ -287,6 +291,8 @@ class PlanningSceneNode {
     cloud_sub_ = nh_.subscribe(pc);
     sensor_spinner_.reset(new ros::AsyncSpinner(1, &sensor_queue_));
     sensor_spinner_->start();
+    joint_spinner_.reset(new ros::AsyncSpinner(1, &joint_queue_));
+    joint_spinner_->start();
     publishStatus(ros::Time(0), "");
     ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
              "mapped within +-%.2f m of the base)", cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range,
@@ -319,29 +325,42 @@ class PlanningSceneNode {
       ++found;
     }
     if (found != q.size()) return;  // another robot's or a partial message
-    joint_history_.emplace_back(msg->header.stamp, std::move(q));
-    while (joint_history_.size() > kJointHistory) joint_history_.pop_front();
+    {
+      std::lock_guard<std::mutex> lock(joint_mutex_);
+      joint_history_.emplace_back(msg->header.stamp, std::move(q));
+      while (joint_history_.size() > kJointHistory) joint_history_.pop_front();
+    }
+    joint_cv_.notify_all();
   }
 
   /// The robot configurations the cloud may have been taken in: the last joint state stamped before it, every state
   /// stamped exactly at it (lockstep: a reset changes the configuration without advancing time, so several states
   /// can share the render's stamp) and the first one after it (the robot moved between two joint states). The self
   /// filter removes the points near any of them, so the robot never leaves itself behind as an obstacle.
-  void jointStatesAround(const ros::Time& stamp, std::vector<const std::vector<double>*>* out) const {
+  /// Waits (up to joint_state_wait) until a joint state stamped at or after the cloud has arrived: the driver may
+  /// publish the state a render saw after the cloud. False when none came (the cloud is then dropped: filtering
+  /// with an older configuration would leave the robot behind as an obstacle).
+  bool jointStatesAround(const ros::Time& stamp, std::vector<std::vector<double>>* out) {
     out->clear();
+    std::unique_lock<std::mutex> lock(joint_mutex_);
+    const bool arrived = joint_cv_.wait_for(lock, std::chrono::duration<double>(joint_state_wait_), [&] {
+      return !joint_history_.empty() && joint_history_.back().first >= stamp;
+    });
+    if (!arrived) return false;
     const std::vector<double>* before = nullptr;
     const std::vector<double>* after = nullptr;
     for (const auto& js : joint_history_) {
       if (js.first < stamp) {
         before = &js.second;
       } else if (js.first == stamp) {
-        out->push_back(&js.second);
+        out->push_back(js.second);
       } else if (after == nullptr) {
         after = &js.second;
       }
     }
-    if (before != nullptr) out->push_back(before);
-    if (after != nullptr) out->push_back(after);
+    if (before != nullptr) out->push_back(*before);
+    if (after != nullptr) out->push_back(*after);
+    return true;
   }
 
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
@@ -357,10 +376,10 @@ class PlanningSceneNode {
       ROS_WARN_THROTTLE(5.0, "planning_scene: cloud from '%s' dropped: %s", msg->header.frame_id.c_str(), e.what());
       return;
     }
-    jointStatesAround(msg->header.stamp, &configurations_);
-    if (configurations_.empty()) {
+    if (!jointStatesAround(msg->header.stamp, &configurations_)) {
       ++dropped_;
-      ROS_WARN_THROTTLE(5.0, "planning_scene: cloud dropped: no joint state yet (cannot filter the robot's points)");
+      ROS_WARN_THROTTLE(5.0, "planning_scene: cloud dropped: no joint state stamped at or after it within %.2f s "
+                        "(cannot filter the robot's points)", joint_state_wait_);
       return;
     }
     const auto& t = tf.transform;
@@ -378,7 +397,7 @@ class PlanningSceneNode {
       return;
     }
     for (std::size_t c = 0; c < configurations_.size(); ++c) {
-      scene_->checker().robotPointMask(configurations_[c]->data(), points_, self_filter_padding_,
+      scene_->checker().robotPointMask(configurations_[c].data(), points_, self_filter_padding_,
                                        c == 0 ? &mask_ : &mask_more_);
       if (c > 0) {
         for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
@@ -604,7 +623,12 @@ class PlanningSceneNode {
   std::deque<std::pair<ros::Time, std::vector<double>>> joint_history_;
   std::vector<Eigen::Vector3d> points_;
   std::vector<std::uint8_t> mask_, mask_more_;
-  std::vector<const std::vector<double>*> configurations_;
+  std::vector<std::vector<double>> configurations_;
+  ros::CallbackQueue joint_queue_;
+  std::unique_ptr<ros::AsyncSpinner> joint_spinner_;
+  std::mutex joint_mutex_;  // joint_history_
+  std::condition_variable joint_cv_;
+  double joint_state_wait_ = 0.5;
   mps::MapUpdate update_;
   double self_filter_padding_ = 0.03, transform_timeout_ = 0.1, last_integration_ = 0.0;
   std::atomic<uint32_t> clouds_{0}, dropped_{0};

@@ -52,6 +52,12 @@ constexpr int kMaxSimplifyRounds = 10;       // bounds the number of simplificat
 constexpr int kSimplifyStepsPerCall = 5;     // motion checks per reduceVertices/shortcutPath call
 constexpr int kMaxIdleSimplifyCalls = 4;     // stop after this many calls without improvement
 constexpr double kMinSimplifyBudget = 1e-3;  // s; below this, the raw solution is returned
+// The final re-validation of the path (the guaranteed path check on every segment) must also end by the time limit:
+// the planner and the simplifier stop early enough to leave it time. Its cost is estimated from the number of states
+// it checks times the measured cost of one state check (running average, initial guess below), with a margin.
+constexpr double kInitialStateCheckCost = 60e-6;  // s per state check before any measurement
+constexpr double kValidationMargin = 1.5;        // estimated validation time x this is reserved
+constexpr double kSolveReserve = 0.1;            // the planner stops at 90 % of the limit (the rest: validation)
 
 template <typename P>
 PlannerFactory make() {
@@ -163,6 +169,7 @@ struct MotionPlanner::Impl {
   PathCheckResult path_result;
   CollisionResult state_result;
   Deadline deadline;
+  double state_check_cost = kInitialStateCheckCost;  // running average (s per state) of the re-validations
   Impl(const RobotModel& m, CollisionChecker* c) : model(m), checker(c) {}
 };
 
@@ -257,9 +264,15 @@ void MotionPlanner::plan(const std::vector<double>& start, const std::vector<dou
     g[i] = goal[i];
   }
   ss.setStartAndGoalStates(s, g);
-  // The planner and the simplifier share one deadline: t0 + time_limit.
-  im.deadline.time = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time_limit));
-  const ob::PlannerStatus status = ss.solve(ob::timedPlannerTerminationCondition(std::max(0.0, time_limit - elapsed())));
+  // Hard deadlines: the call returns by t0 + time_limit. The planner stops at t0 + (1 - kSolveReserve) time_limit
+  // (its validity checks fail after it, so even planners that rarely poll stop quickly); the simplifier stops early
+  // enough for the estimated re-validation; the re-validation itself gives up (no solution) at t0 + time_limit.
+  const auto at = [&](double s) {
+    return t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
+  };
+  const double solve_limit = (1.0 - kSolveReserve) * time_limit;
+  im.deadline.time = at(solve_limit);
+  const ob::PlannerStatus status = ss.solve(ob::timedPlannerTerminationCondition(std::max(0.0, solve_limit - elapsed())));
   if (status != ob::PlannerStatus::EXACT_SOLUTION) {
     im.deadline.time = Clock::time_point::max();
     std::ostringstream m;
@@ -268,7 +281,17 @@ void MotionPlanner::plan(const std::vector<double>& start, const std::vector<dou
   }
   og::PathGeometric raw = ss.getSolutionPath();
   og::PathGeometric path = raw;
-  const double budget = time_limit - elapsed();
+  // States the re-validation of a path checks (interior states + the end of every segment).
+  auto validation_states = [&](const og::PathGeometric& p) {
+    double n = 0.0;
+    for (std::size_t k = 0; k + 1 < p.getStateCount(); ++k) {
+      n += 1.0 + static_cast<double>(im.checker->interiorStateCount(values(p.getState(k)), values(p.getState(k + 1))));
+    }
+    return n;
+  };
+  const double reserve = kValidationMargin * im.state_check_cost * validation_states(raw);
+  const double budget = time_limit - reserve - elapsed();
+  im.deadline.time = at(time_limit - reserve);
   if (options_.simplify && budget > kMinSimplifyBudget) {
     const ob::PlannerTerminationCondition ptc = ob::timedPlannerTerminationCondition(budget);
     og::PathSimplifier simplifier(si);
@@ -283,19 +306,41 @@ void MotionPlanner::plan(const std::vector<double>& start, const std::vector<dou
     if (!ptc) simplifier.collapseCloseVertices(path);
   }
   im.deadline.time = Clock::time_point::max();
-  // Re-validate the final path segment by segment with the guaranteed path check.
+  // Re-validate the final path segment by segment with the guaranteed path check, within the time limit.
+  const Deadline hard{at(time_limit)};
+  bool late = false;
   auto valid = [&](const og::PathGeometric& p) {
     im.validate_request.check_goal = true;
+    const auto v0 = Clock::now();
+    std::size_t states = 0;
+    bool ok = true;
     for (std::size_t k = 0; k + 1 < p.getStateCount(); ++k) {
+      if (hard.passed()) {
+        late = true;
+        ok = false;
+        break;
+      }
       im.checker->checkPath(values(p.getState(k)), values(p.getState(k + 1)), im.validate_request, &im.path_result);
-      if (im.path_result.status != CollisionStatus::kFree) return false;
+      states += im.path_result.checked_states;
+      if (im.path_result.status != CollisionStatus::kFree) {
+        ok = false;
+        break;
+      }
     }
-    return true;
+    if (states > 0) {  // running average of the cost of one state check (for the next call's reserve)
+      const double per_state = std::chrono::duration<double>(Clock::now() - v0).count() / static_cast<double>(states);
+      im.state_check_cost = 0.8 * im.state_check_cost + 0.2 * per_state;
+    }
+    return ok;
   };
   const og::PathGeometric* chosen = &path;
   if (!valid(path)) {
     chosen = &raw;
-    if (!valid(raw)) return finish(PlanStatus::kNoSolution, name + " solution failed re-validation");
+    if (late || !valid(raw)) {
+      return finish(PlanStatus::kNoSolution, late ? name + " solution could not be re-validated within " +
+                                                        std::to_string(time_limit) + " s"
+                                                  : name + " solution failed re-validation");
+    }
   }
   const std::size_t dof = start.size();
   result->waypoints.resize(chosen->getStateCount());

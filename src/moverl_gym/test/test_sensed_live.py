@@ -10,9 +10,11 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
   (c) after the box has moved away, new camera views clear its old cells: the same target becomes free and the
       shield executes the move, without contact (the box is still far: the map only knows where things were
       when last seen, so the sensed mode is for static or slow obstacles);
-  (d) the map filtered the robot's own points: after random moves and resets near home (renders race with the
-      joint states), every configuration the robot was in is still free in the map (the robot never leaves
-      itself behind as an obstacle).
+  (d) the map filtered the robot's own points: 300 random env steps in 10-step episodes (30 resets, renders
+      racing with the joint states) go through, each reset sampling a collision-free start near home from the
+      scene, and afterwards home and every episode start are still free in the map (a robot left behind as an
+      obstacle would block them). Not asserted for every configuration visited: a visited pose can touch cells
+      that were unknown (hidden by the robot itself) at the time and were seen later, a legitimate verdict.
 """
 
 import time
@@ -118,23 +120,25 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
         # The env's random episodes (short ones: many resets, each sampling a collision-free start through the
         # scene, which fails if the robot left itself behind in the map).
         env = gym.make("MoveRL/PandaReachTable-v0", graph="attach", world="sensed_box",
-                       task={"max_episode_steps": 10})
-        visited = []
+                       task={"max_episode_steps": 10}, max_episode_steps=10)
+        starts = []
         try:
             env.action_space.seed(4)
             env.reset(seed=4)
+            starts.append(env.unwrapped.q[:7].tolist())
             for _ in range(ENV_STEPS):
                 _, _, term, trunc, info = env.step(env.action_space.sample())
-                visited.append(env.unwrapped.q[:7].tolist())
                 if term or trunc:
                     env.reset()
+                    starts.append(env.unwrapped.q[:7].tolist())
+            self.current = env.unwrapped.q[:7].tolist()
         finally:
             env.close()
-        self.current = visited[-1]
+        self.assertGreaterEqual(len(starts), ENV_STEPS // 10)
         self.wait_for_clouds(4)
-        phantom = [(q, [(p.a, p.b) for p in r.pairs]) for q in visited
+        blocked = [(q, [(p.a, p.b) for p in r.pairs]) for q in [HOME] + starts
                    for r in [self.check_state(positions=q)] if r.outcome != VALID]
-        self.assertEqual(phantom, [], "configurations the robot was in are now in collision with the map")
+        self.assertEqual(blocked, [], "home or episode starts are now in collision with the map")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,32 @@
-"""Assertions and a rollout shared by the live (rostest) tests of the shield and the env."""
+"""Assertions, connections and a rollout shared by the live (rostest) tests of the shield and the env."""
 
 
 class LiveAssertions:
     """Mixin for unittest.TestCase classes that step the live shield or env."""
+
+    @classmethod
+    def connect_shield_pair(cls, node_name, *services):
+        """Make this process a node and connect to /shield and to the unchecked /shield_off of the same graph
+        (cls.step, cls.reset, cls.step_off, cls.reset_off, persistent) and to the scene's check_state, after waiting
+        for them and for the extra services named."""
+        import rospy
+        from moverl_msgs.srv import CheckState, ResetRobot, ShieldStep
+
+        rospy.init_node(node_name, anonymous=True, disable_signals=True)
+        for name in ("/shield/step", "/shield/reset", "/shield_off/step", "/shield_off/reset",
+                     "/planning_scene/check_state") + services:
+            rospy.wait_for_service(name, timeout=60)
+        cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
+        cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)
+        cls.step_off = rospy.ServiceProxy("/shield_off/step", ShieldStep, persistent=True)
+        cls.reset_off = rospy.ServiceProxy("/shield_off/reset", ResetRobot, persistent=True)
+        cls.check_state = rospy.ServiceProxy("/planning_scene/check_state", CheckState)
+
+    def place(self, q, reset=None):
+        """Reset the robot to q through the shield (or the given reset proxy); returns the response."""
+        res = (reset or self.reset)(positions=q)
+        self.assertTrue(res.success, res.message)
+        return res
 
     def assert_no_contacts(self, res, substeps=True):
         """The simulator measured contacts for the step and found none."""

@@ -22,7 +22,7 @@ import rospy
 import rostest
 from live_helpers import LiveAssertions
 from moverl_msgs.msg import ObstacleMotion
-from moverl_msgs.srv import CheckState, GetWorld, ResetRobot, ShieldStep, ValidateMotion
+from moverl_msgs.srv import GetWorld, ValidateMotion
 
 import moverl_gym  # noqa: F401
 
@@ -41,22 +41,9 @@ DT = 0.05
 class MovingObstacleLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("moving_obstacle_test", anonymous=True, disable_signals=True)
-        for name in ("/shield/step", "/shield/reset", "/shield_off/step", "/shield_off/reset",
-                     "/planning_scene/check_state", "/planning_scene/validate_motion", "/sim/get_world"):
-            rospy.wait_for_service(name, timeout=60)
-        cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
-        cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)
-        cls.step_off = rospy.ServiceProxy("/shield_off/step", ShieldStep, persistent=True)
-        cls.reset_off = rospy.ServiceProxy("/shield_off/reset", ResetRobot, persistent=True)
-        cls.check_state = rospy.ServiceProxy("/planning_scene/check_state", CheckState)
+        cls.connect_shield_pair("moving_obstacle_test", "/planning_scene/validate_motion", "/sim/get_world")
         cls.validate = rospy.ServiceProxy("/planning_scene/validate_motion", ValidateMotion)
         cls.world = rospy.ServiceProxy("/sim/get_world", GetWorld)().world
-
-    def place(self, q, reset=None):
-        res = (reset or self.reset)(positions=q)
-        self.assertTrue(res.success, res.message)
-        return res
 
     def assert_no_contacts(self, res):
         super().assert_no_contacts(res, substeps=False)

@@ -26,7 +26,6 @@ import rospy
 import rostest
 from live_helpers import LiveAssertions
 from moverl_msgs.msg import OctomapStatus
-from moverl_msgs.srv import CheckState, ResetRobot, ShieldStep
 
 import moverl_gym  # noqa: F401
 
@@ -43,26 +42,13 @@ ENV_STEPS = 300
 class SensedObstacleLive(LiveAssertions, unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("sensed_obstacle_test", anonymous=True, disable_signals=True)
-        for name in ("/shield/step", "/shield/reset", "/shield_off/step", "/shield_off/reset",
-                     "/planning_scene/check_state"):
-            rospy.wait_for_service(name, timeout=60)
-        cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
-        cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)
-        cls.step_off = rospy.ServiceProxy("/shield_off/step", ShieldStep, persistent=True)
-        cls.reset_off = rospy.ServiceProxy("/shield_off/reset", ResetRobot, persistent=True)
-        cls.check_state = rospy.ServiceProxy("/planning_scene/check_state", CheckState)
+        cls.connect_shield_pair("sensed_obstacle_test")
         cls.status = None
         cls.status_sub = rospy.Subscriber("/planning_scene/octomap_status", OctomapStatus, cls._on_status)
 
     @classmethod
     def _on_status(cls, msg):
         cls.status = msg
-
-    def place(self, q, reset=None):
-        res = (reset or self.reset)(positions=q)
-        self.assertTrue(res.success, res.message)
-        return res
 
     def wait_for_clouds(self, n):
         """One hold of a camera period (lockstep sim time moves on, so the cameras render again), then wait until

@@ -6,14 +6,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <random>
-#include <sstream>
 
+#include "../test/panda_support.h"
 #include "moverl_planning_scene/planning_scene.h"
 
 namespace mps = moverl_planning_scene;
 using Clock = std::chrono::steady_clock;
+using mps::panda::box;
 
 namespace {
 
@@ -30,15 +30,6 @@ void report(const char* what, std::vector<double> t) {
               pct(0.99) * 1e6, t.back() * 1e6);
 }
 
-mps::WorldObject box(const std::string& id, double sx, double sy, double sz, double x, double y, double z) {
-  mps::WorldObject o;
-  o.id = id;
-  o.type = mps::ShapeType::kBox;
-  o.dimensions = {sx, sy, sz};
-  o.pose.translation() = Eigen::Vector3d(x, y, z);
-  return o;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -47,22 +38,13 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: scene_benchmark panda.urdf [acm_samples] (pybullet_data not found at build time)\n");
     return 1;
   }
-  std::ifstream in(urdf_file);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  mps::PlanningSceneOptions o;
-  o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
-                         "panda_joint5", "panda_joint6", "panda_joint7"};
-  o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
-  o.robot.base_link = "panda_link0";
-  o.robot.ee_link = "panda_link8";
-  o.robot.mesh_base_dir = urdf_file.substr(0, urdf_file.rfind('/'));
+  mps::PlanningSceneOptions o = mps::panda::options(urdf_file);
   o.checker.acm_samples = argc > 2 ? std::atoi(argv[2]) : 20000;
   if (argc > 3) o.planner.planner = argv[3];
   if (argc > 4) o.planner.planning_time = std::atof(argv[4]);
   std::string error;
   const auto t0 = Clock::now();
-  auto scene = mps::PlanningScene::create(ss.str(), o, &error);
+  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf_file), o, &error);
   if (!scene) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;

@@ -8,11 +8,10 @@
 #include <octomap/OcTree.h>
 
 #include <chrono>
-#include <fstream>
-#include <sstream>
 
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
+#include "panda_support.h"
 
 namespace mps = moverl_planning_scene;
 
@@ -50,12 +49,6 @@ void integrate(mps::OccupancyMap* map, const std::vector<Eigen::Vector3d>& pts, 
   map->apply(u);
 }
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 }  // namespace
 
@@ -125,16 +118,10 @@ class PandaOctomap : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     if (kPandaUrdf.empty()) return;
-    mps::PlanningSceneOptions o;
-    o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
-                           "panda_joint5", "panda_joint6", "panda_joint7"};
-    o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
-    o.robot.base_link = "panda_link0";
-    o.robot.ee_link = "panda_link8";
-    o.robot.mesh_base_dir = kPandaUrdf.substr(0, kPandaUrdf.rfind('/'));
+    mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
     o.planner.planner = "RRTConnect";
     std::string error;
-    scene_ = mps::PlanningScene::create(readFile(kPandaUrdf), o, &error).release();
+    scene_ = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), o, &error).release();
     ASSERT_NE(scene_, nullptr) << error;
   }
   static void TearDownTestSuite() {

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "moverl_planning_scene/planning_scene.h"
+#include "panda_support.h"
 
 namespace mps = moverl_planning_scene;
 
@@ -29,32 +30,13 @@ constexpr double kPlanTime = 1.0;     // s, around the wall
 constexpr double kTimeSlack = 0.15;   // s, allowed overrun of a planning time limit
 constexpr double kFkTolerance = 1e-9;
 
-std::string readFile(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
+using mps::panda::box;
+using mps::panda::readFile;
 
 mps::PlanningSceneOptions pandaOptions() {
-  mps::PlanningSceneOptions o;
-  o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
-                         "panda_joint5", "panda_joint6", "panda_joint7"};
-  o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
-  o.robot.base_link = "panda_link0";
-  o.robot.ee_link = "panda_link8";
-  o.robot.mesh_base_dir = kPandaUrdf.substr(0, kPandaUrdf.rfind('/'));
+  mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
   o.planner.planner = "RRTConnect";
   o.planner.planning_time = kPlanTime;
-  return o;
-}
-
-mps::WorldObject box(const std::string& id, double sx, double sy, double sz, double x, double y, double z) {
-  mps::WorldObject o;
-  o.id = id;
-  o.type = mps::ShapeType::kBox;
-  o.dimensions = {sx, sy, sz};
-  o.pose.translation() = Eigen::Vector3d(x, y, z);
   return o;
 }
 

@@ -1,6 +1,7 @@
 /**
  * \file scene_benchmark.cpp
- * \brief Timing of the hot-path queries on the Panda (pybullet_data URDF, table + thin wall worlds).
+ * \brief Timing of the hot-path queries on the Panda (pybullet_data URDF, table + thin wall worlds), with the repo's
+ *        config/robots/panda.yaml and config/planning_scene.yaml.
  *        Usage: scene_benchmark [panda.urdf|""] [acm_samples] [planner] [planning_time]
  */
 #include <algorithm>
@@ -8,12 +9,14 @@
 #include <cstdio>
 #include <random>
 
-#include "../test/panda_support.h"
+#include <fstream>
+#include <sstream>
+
 #include "moverl_planning_scene/planning_scene.h"
+#include "moverl_planning_scene/tunables.h"
 
 namespace mps = moverl_planning_scene;
 using Clock = std::chrono::steady_clock;
-using mps::panda::box;
 
 namespace {
 
@@ -21,6 +24,16 @@ constexpr int kStateSamples = 5000;
 constexpr int kPathSamples = 2000;
 constexpr int kPlanSamples = 30;
 constexpr double kStepRad = 0.1;
+
+/// An axis-aligned box obstacle centred at (x, y, z).
+mps::WorldObject box(const std::string& id, double sx, double sy, double sz, double x, double y, double z) {
+  mps::WorldObject o;
+  o.id = id;
+  o.type = mps::ShapeType::kBox;
+  o.dimensions = {sx, sy, sz};
+  o.pose.translation() = Eigen::Vector3d(x, y, z);
+  return o;
+}
 
 void report(const char* what, std::vector<double> t) {
   if (t.empty()) return;
@@ -38,13 +51,23 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "usage: scene_benchmark panda.urdf [acm_samples] (pybullet_data not found at build time)\n");
     return 1;
   }
-  mps::PlanningSceneOptions o = mps::panda::options(urdf_file);
-  o.checker.acm_samples = argc > 2 ? std::atoi(argv[2]) : 20000;
+  mps::PlanningSceneOptions o;
+  std::string error, uri;
+  const auto tunables = mps::YamlTunables::fromFile(MOVERL_CONFIG_DIR "/planning_scene.yaml", &error);
+  if (!tunables || !mps::loadRobotConfig(MOVERL_CONFIG_DIR "/robots/panda.yaml", &o.robot, &uri, &error)) {
+    std::fprintf(stderr, "error: %s\n", error.c_str());
+    return 1;
+  }
+  mps::readSceneTunables(*tunables, &o);
+  o.robot.mesh_base_dir = urdf_file.substr(0, urdf_file.rfind('/'));
+  if (argc > 2) o.checker.acm_samples = std::atoi(argv[2]);
   if (argc > 3) o.planner.planner = argv[3];
   if (argc > 4) o.planner.planning_time = std::atof(argv[4]);
-  std::string error;
+  std::ifstream urdf_in(urdf_file);
+  std::stringstream urdf;
+  urdf << urdf_in.rdbuf();
   const auto t0 = Clock::now();
-  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf_file), o, &error);
+  auto scene = mps::PlanningScene::create(urdf.str(), o, &error);
   if (!scene) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;

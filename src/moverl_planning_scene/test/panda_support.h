@@ -1,15 +1,21 @@
 /**
  * \file panda_support.h
- * \brief Shared by the gtests and scene_benchmark: the Panda's scene options (pybullet_data's URDF) and a few
- *        helpers. Header-only, ROS-free.
+ * \brief Shared by the gtests: the Panda's scene options as the repo ships them (config/robots/panda.yaml,
+ *        config/planning_scene.yaml; pybullet_data's URDF) and a few helpers. Header-only, ROS-free.
  */
 #pragma once
 
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 
 #include "moverl_planning_scene/planning_scene.h"
+#include "moverl_planning_scene/tunables.h"
+
+#ifndef MOVERL_CONFIG_DIR
+#error "MOVERL_CONFIG_DIR (the repo's config/ folder) must be defined by the build"
+#endif
 
 namespace moverl_planning_scene {
 namespace panda {
@@ -21,15 +27,34 @@ inline std::string readFile(const std::string& path) {
   return ss.str();
 }
 
-/// Scene options of the Panda in config/robots/panda.yaml (fingers held open), meshes next to urdf_path.
+/// The scene's tunables as config/planning_scene.yaml ships them (throws when it cannot be read).
+inline const Tunables& shippedTunables() {
+  static const std::unique_ptr<YamlTunables> t = [] {
+    std::string error;
+    auto loaded = YamlTunables::fromFile(MOVERL_CONFIG_DIR "/planning_scene.yaml", &error);
+    if (!loaded) throw std::runtime_error(error);
+    return loaded;
+  }();
+  return *t;
+}
+
+/// Scene options of the Panda as config/robots/panda.yaml and config/planning_scene.yaml give them, meshes next to
+/// urdf_path.
 inline PlanningSceneOptions options(const std::string& urdf_path) {
   PlanningSceneOptions o;
-  o.robot.joint_names = {"panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4",
-                         "panda_joint5", "panda_joint6", "panda_joint7"};
-  o.robot.fixed_joint_positions = {{"panda_finger_joint1", 0.04}, {"panda_finger_joint2", 0.04}};
-  o.robot.base_link = "panda_link0";
-  o.robot.ee_link = "panda_link8";
+  std::string error, uri;
+  if (!loadRobotConfig(MOVERL_CONFIG_DIR "/robots/panda.yaml", &o.robot, &uri, &error)) {
+    throw std::runtime_error(error);
+  }
+  readSceneTunables(shippedTunables(), &o);
   o.robot.mesh_base_dir = urdf_path.substr(0, urdf_path.rfind('/'));
+  return o;
+}
+
+/// The occupancy map's options as config/planning_scene.yaml ships them.
+inline OccupancyMapOptions mapOptions() {
+  OccupancyMapOptions o;
+  readOccupancyMapTunables(shippedTunables(), &o);
   return o;
 }
 

@@ -24,7 +24,7 @@ const std::vector<double> kIntoTable = {0.0, 1.0, 0.0, -1.5, 0.0, 1.571, 0.785};
 const Eigen::Vector3d kCamera(0.35, 0.0, 1.5);
 
 std::unique_ptr<mps::OccupancyMap> makeMap(double resolution = 0.02, double max_range = 3.0) {
-  mps::OccupancyMapOptions o;
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.resolution = resolution;
   o.max_range = max_range;
   std::string error;
@@ -54,15 +54,15 @@ void integrate(mps::OccupancyMap* map, const std::vector<Eigen::Vector3d>& pts, 
 
 TEST(OccupancyMap, RejectsBadOptions) {
   std::string error;
-  mps::OccupancyMapOptions o;
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.resolution = 0.0;
   EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
   EXPECT_NE(error.find("resolution"), std::string::npos) << error;
-  o = mps::OccupancyMapOptions();
+  o = mps::panda::mapOptions();
   o.prob_hit = 0.4;
   EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
   EXPECT_NE(error.find("prob_hit"), std::string::npos) << error;
-  o = mps::OccupancyMapOptions();
+  o = mps::panda::mapOptions();
   o.max_range = -1.0;
   EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
   EXPECT_NE(error.find("max_range"), std::string::npos) << error;
@@ -119,7 +119,6 @@ class PandaOctomap : public ::testing::Test {
   static void SetUpTestSuite() {
     if (kPandaUrdf.empty()) return;
     mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
-    o.planner.planner = "RRTConnect";
     std::string error;
     scene_ = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), o, &error).release();
     ASSERT_NE(scene_, nullptr) << error;
@@ -129,7 +128,7 @@ class PandaOctomap : public ::testing::Test {
     scene_ = nullptr;
   }
   void SetUp() override {
-    if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
+    ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
     std::string error;
     ASSERT_TRUE(scene_->setWorld({}, &error)) << error;
     scene_->checker().setOctree(nullptr);
@@ -164,7 +163,7 @@ TEST_F(PandaOctomap, RobotPointMask) {
 }
 
 TEST(OccupancyMap, BeamsAreClippedToTheBounds) {
-  mps::OccupancyMapOptions o;
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(1, 1, 1));
   std::string error;
   auto map = mps::OccupancyMap::create(o, &error);

@@ -27,7 +27,9 @@ const std::vector<double> kSelfCollision = {0.0, 0.2, 0.0, -3.0, 0.0, 1.0, 0.785
 // Leaning forward and down: the hand goes below the table top (z = 0).
 const std::vector<double> kIntoTable = {0.0, 1.0, 0.0, -1.5, 0.0, 1.571, 0.785};
 constexpr double kPlanTime = 1.0;     // s, around the wall
-constexpr double kTimeSlack = 0.15;   // s, allowed overrun of a planning time limit
+// s, allowed overrun of a planning time limit in wall time: what is tested is that planning is bounded (an unbounded
+// planner would run for seconds), not how fast this machine is while other jobs share its 2 cores.
+constexpr double kTimeSlack = 0.5;
 constexpr double kFkTolerance = 1e-9;
 
 using mps::panda::box;
@@ -35,7 +37,6 @@ using mps::panda::readFile;
 
 mps::PlanningSceneOptions pandaOptions() {
   mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
-  o.planner.planner = "RRTConnect";
   o.planner.planning_time = kPlanTime;
   return o;
 }
@@ -69,7 +70,7 @@ class PandaScene : public ::testing::Test {
     scene_ = nullptr;
   }
   void SetUp() override {
-    if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
+    ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
     ASSERT_NE(scene_, nullptr);
     std::string error;
     ASSERT_TRUE(scene_->setWorld({}, &error)) << error;
@@ -429,7 +430,7 @@ TEST_F(PandaScene, AcmDisablesAdjacentPairs) {
 }
 
 TEST(PandaModel, ErrorsNameTheProblem) {
-  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data not found at configure time";
   std::string error;
   auto o = pandaOptions();
   EXPECT_EQ(mps::PlanningScene::create("<robot name='x'><link", o, &error), nullptr);
@@ -448,7 +449,7 @@ TEST(PandaModel, ErrorsNameTheProblem) {
 }
 
 TEST(PandaModel, TriangleMeshModeAndAcmCache) {
-  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data not found at configure time";
   auto o = pandaOptions();
   o.checker.mesh_mode = mps::MeshMode::kTriangles;
   o.checker.acm_samples = 2000;
@@ -485,7 +486,7 @@ int main(int argc, char** argv) {
 // Self padding inflates links for self checks: every configuration that self-collides unpadded still does, and
 // near misses (links closer than the padding) are now flagged too.
 TEST(SelfPadding, FlagsASupersetIncludingNearMisses) {
-  if (kPandaUrdf.empty()) GTEST_SKIP() << "pybullet_data not found at configure time";
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data not found at configure time";
   std::string error;
   mps::PlanningSceneOptions plain = pandaOptions();
   plain.checker.self_padding = 0.0;
@@ -709,4 +710,27 @@ TEST_F(PandaScene, GoalMustBeFreeOfTheWholeEnvelope) {
   setWorld({table(), ball});
   scene_->checkState(kHome, &sc);
   EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+}
+
+// The C++ twin of the obstacle-motion formula gives the shared cases the Python one is checked on (one formula per
+// language, moverl_sim/test/fixtures/obstacle_motion_cases.txt).
+TEST(ObstacleMotion, DisplacementMatchesTheSharedCases) {
+  std::ifstream in(MOVERL_MOTION_CASES);
+  ASSERT_TRUE(in.good()) << "cannot read " << MOVERL_MOTION_CASES;
+  std::string line;
+  int cases = 0;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream row(line);
+    double amplitude, period, phase, t, expected;
+    ASSERT_TRUE(row >> amplitude >> period >> phase >> t >> expected) << line;
+    mps::ObstacleMotion m;
+    m.type = mps::ObstacleMotion::Type::kOscillate;
+    m.amplitude = amplitude;
+    m.period = period;
+    m.phase = phase;
+    EXPECT_NEAR(m.displacement(t), expected, 1e-12) << line;
+    ++cases;
+  }
+  EXPECT_EQ(cases, 40);
 }

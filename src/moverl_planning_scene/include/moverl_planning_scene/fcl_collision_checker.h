@@ -12,6 +12,7 @@
 
 #include "moverl_planning_scene/collision_checker.h"
 #include "moverl_planning_scene/robot_model.h"
+#include "moverl_planning_scene/unset.h"
 
 namespace fcl {
 template <typename S>
@@ -31,18 +32,30 @@ enum class MeshMode { kConvexHull, kTriangles };
 /// \brief Why a pair of links is not checked (kEnabled: it is checked).
 enum class AcmReason : std::uint8_t { kEnabled = 0, kAdjacent, kRigid, kAlways, kNever, kStatic, kNoGeometry };
 
-/// \brief Tunables of the FCL checker (defaults = config/planning_scene.yaml).
+/// \brief Tunables of the FCL checker. Their values live in config/planning_scene.yaml (tunables.h reads them); unset
+///        ones (NaN, -1) are rejected by create().
 struct FclCheckerOptions {
-  double padding = 0.01;          ///< world obstacles inflated by this (m)
+  double padding = kUnset;  ///< world obstacles inflated by this (m)
   /// Each robot link is inflated by at least this (m) in self-collision checks (a pair: 2x); covers the physics engine's
   /// collision margins (PyBullet: 1 mm per convex hull) and motion between path samples (path_resolution / 2).
-  double self_padding = 0.0;
-  double path_resolution = 0.01;  ///< max motion of any robot point between checked states (m)
+  double self_padding = kUnset;
+  double path_resolution = kUnset;  ///< max motion of any robot point between checked states (m)
   MeshMode mesh_mode = MeshMode::kConvexHull;
-  int acm_samples = 20000;        ///< random configurations for the always/never-in-collision test (0: skip)
-  unsigned acm_seed = 1;
+  int acm_samples = -1;  ///< random configurations for the always/never-in-collision test (0: skip)
+  unsigned acm_seed = 0;
   /// Folder where computed ACMs are cached (file name = hash of the inputs). Empty: no cache.
   std::string acm_cache_dir;
+};
+
+/// \brief One collision geometry of a link as the checker holds it (diagnostics, tests, the parity tool).
+struct LinkGeometry {
+  ShapeType type = ShapeType::kBox;
+  std::string piece;  ///< mesh piece (OBJ object/group name), "" otherwise
+  Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  ///< shape frame in the link frame
+  Eigen::Vector3d dims = Eigen::Vector3d::Zero();            ///< primitives, as CollisionShapeSpec::dims
+  /// Meshes: the points (shape frame) whose convex hull is the shape in convex_hull mode (the mesh's vertices in
+  /// triangles mode).
+  std::vector<Eigen::Vector3d> vertices;
 };
 
 /// \brief Statistics of the ACM computation (for logs and tests).
@@ -78,6 +91,15 @@ class FclCollisionChecker : public CollisionChecker {
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
                       std::vector<std::uint8_t>* mask) const;
+  /// \brief As robotPointMask, for the collision shapes of one link only (link index; -1: every link).
+  void linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
+                     std::vector<std::uint8_t>* mask) const;
+  /// \brief The collision geometries of a link (index in RobotModel::linkNames()): one per primitive, one per mesh
+  ///        piece (mesh_loader.h).
+  std::vector<LinkGeometry> linkGeometry(int link) const;
+  /// \brief Mesh pieces whose convex hull came out degenerate (flat, tiny, or unverifiable): they are checked as the
+  ///        hull of all their points, padded by icosahedra around every point (correct, slower).
+  std::size_t degenerateHulls() const { return degenerate_hulls_; }
   /// \brief Bound (m) on the distance of any robot collision point from the base origin over all configurations.
   double reachRadius() const { return reach_radius_; }
   /// Name reported for the octree in colliding pairs.
@@ -129,6 +151,7 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<double> q_scratch_;
   CollisionResult state_scratch_;
   AcmStats acm_stats_;
+  std::size_t degenerate_hulls_ = 0;
 };
 
 }  // namespace moverl_planning_scene

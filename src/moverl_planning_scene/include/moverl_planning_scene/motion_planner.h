@@ -10,16 +10,18 @@
 
 #include "moverl_planning_scene/collision_checker.h"
 #include "moverl_planning_scene/robot_model.h"
+#include "moverl_planning_scene/unset.h"
 
 namespace moverl_planning_scene {
 
-/// \brief Tunables of the planner (defaults = config/planning_scene.yaml).
+/// \brief Tunables of the planner. Their values live in config/planning_scene.yaml (tunables.h reads them); unset ones
+///        ("", NaN) are rejected by PlanningScene::create().
 struct PlannerOptions {
-  std::string planner = "RRT";  ///< default planner name
-  double planning_time = 0.1;   ///< default time limit per call (s)
-  double range = 0.0;           ///< max extension of tree planners (rad); 0: OMPL default
-  bool simplify = true;         ///< shortcut the solution within the remaining time
-  unsigned seed = 1;            ///< OMPL global RNG seed (0: not seeded). Applied once per process.
+  std::string planner;             ///< default planner name
+  double planning_time = kUnset;   ///< default time limit per call (s)
+  double range = kUnset;           ///< max extension of tree planners (rad); 0: OMPL default
+  bool simplify = true;            ///< shortcut the solution within the remaining time
+  unsigned seed = 0;               ///< OMPL global RNG seed (0: not seeded). Applied once per process.
 };
 
 /// \brief Outcome of a planning call (values match moverl_msgs/PlanPath).

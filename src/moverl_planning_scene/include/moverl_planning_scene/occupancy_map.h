@@ -19,21 +19,24 @@
 #include <string>
 #include <vector>
 
+#include "moverl_planning_scene/unset.h"
+
 namespace octomap {
 class OcTree;
 }
 
 namespace moverl_planning_scene {
 
-/// \brief Tunables of the occupancy map (defaults = config/planning_scene.yaml, octomap: section).
+/// \brief Tunables of the occupancy map. Their values live in config/planning_scene.yaml's octomap: section (tunables.h
+///        reads them); unset ones (NaN) are rejected by create().
 struct OccupancyMapOptions {
-  double resolution = 0.02;           ///< leaf size (m)
-  double max_range = 3.0;             ///< beams are integrated up to this range (m); longer ones clear space only
-  double prob_hit = 0.7;              ///< occupancy probability of a hit
-  double prob_miss = 0.4;             ///< occupancy probability of a miss
-  double clamp_min = 0.12;            ///< clamping of cell probabilities (lets cells change state quickly)
-  double clamp_max = 0.85;
-  double occupancy_threshold = 0.5;   ///< a cell above this probability is an obstacle
+  double resolution = kUnset;           ///< leaf size (m)
+  double max_range = kUnset;            ///< beams are integrated up to this range (m); longer ones clear space only
+  double prob_hit = kUnset;             ///< occupancy probability of a hit
+  double prob_miss = kUnset;            ///< occupancy probability of a miss
+  double clamp_min = kUnset;            ///< clamping of cell probabilities (lets cells change state quickly)
+  double clamp_max = kUnset;
+  double occupancy_threshold = kUnset;  ///< a cell above this probability is an obstacle
   /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Empty: unbounded.
   /// The node sets it to the robot's reach (nothing outside can ever touch the robot).
   Eigen::AlignedBox3d bounds;

@@ -1,0 +1,22 @@
+/**
+ * \file fcl_convex.h
+ * \brief Convex hulls as FCL shapes, with the fastest exact support function FCL offers (ROS-free).
+ */
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <fcl/geometry/shape/convex.h>
+
+namespace moverl_planning_scene {
+
+/// The convex hull of `points` as an fcl::Convex. With the hull's faces, FCL's support function walks the hull's edge
+/// graph (hill climbing, exact on a convex polytope: a vertex no neighbour beats is the maximum of a linear function)
+/// instead of scanning every point: GJK's support calls were most of the shield's collision-checking time. When the
+/// hull is not exact (degenerate, or points that round-off left outside its faces), no faces: FCL then scans every
+/// point, which is exactly the support function of their convex hull too.
+std::shared_ptr<fcl::Convexd> makeFclConvex(const std::vector<Eigen::Vector3d>& points);
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,79 @@
+/**
+ * \file octomap_monitor.h
+ * \brief Sensed obstacles, the ROS side: depth-camera point clouds (sensor_msgs/PointCloud2, any frame known to TF)
+ *        are self-filtered with the configurations the robot may have been in (JointStateHistory) and integrated into
+ *        the scene's OccupancyMap; ~octomap_status, ~octomap_markers and ~clear_octomap.
+ *
+ * Clouds and joint states are received on queues and threads of their own: a cloud takes tens of ms to integrate, and
+ * the scene's services keep answering meanwhile (they only wait for the short tree update, under the scene's mutex).
+ */
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <moverl_msgs/OctomapStatus.h>
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <std_srvs/Empty.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include "moverl_planning_scene/joint_state_history.h"
+#include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/planning_scene.h"
+
+namespace moverl_planning_scene {
+
+/// \brief Why a cloud cannot be read as float32 x, y, z points ("" when it can): the fields exist as single float32
+///        values inside each point, and the data holds every point the header claims.
+std::string cloudLayoutError(const sensor_msgs::PointCloud2& cloud);
+
+class OctomapMonitor {
+ public:
+  /// \param scene the scene whose checker gets the map; scene_mutex the mutex every reader of the scene holds
+  OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex);
+  ~OctomapMonitor();
+
+  /// \brief Read the octomap/ parameters, create the map, subscribe, and wait until the cameras' first views are in
+  ///        the map (fail closed: an empty map calls everything free). False with *error.
+  bool init(std::string* error);
+
+ private:
+  void onJointState(const sensor_msgs::JointState::ConstPtr& msg);
+  void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg);
+  bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
+  void drop(const std::string& why);
+  void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
+  void publishMarkers();
+
+  ros::NodeHandle nh_, pnh_;
+  PlanningScene* scene_;
+  std::mutex* scene_mutex_;
+  std::unique_ptr<OccupancyMap> map_;
+  std::mutex sensor_mutex_;  // serializes cloud integration with ~clear_octomap (never held by the queries)
+  ros::CallbackQueue sensor_queue_, joint_queue_;
+  std::unique_ptr<ros::AsyncSpinner> sensor_spinner_, joint_spinner_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  ros::Subscriber joint_sub_, cloud_sub_;
+  ros::Publisher status_pub_, marker_pub_;
+  ros::ServiceServer clear_srv_;
+  std::vector<std::string> joints_;
+  JointStateHistory history_{400};
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<std::uint8_t> mask_, mask_more_;
+  std::vector<std::vector<double>> configurations_;
+  MapUpdate update_;
+  double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;
+  std::atomic<uint32_t> clouds_{0}, dropped_{0};
+  ros::Time last_cloud_stamp_;  // the last integrated cloud's stamp and frame (reported with drops too)
+  std::string last_cloud_frame_;
+};
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,226 @@
+/**
+ * \file acm.cpp
+ * \brief FclCollisionChecker: the allowed-collision matrix (link pairs that are adjacent, rigidly attached, always or
+ *        never in collision over random configurations are not checked, as MoveIt's setup assistant decides) and its
+ *        cache file.
+ */
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <unistd.h>
+
+#include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/shape/box.h>
+#include <fcl/geometry/shape/capsule.h>
+#include <fcl/geometry/shape/cone.h>
+#include <fcl/geometry/shape/convex.h>
+#include <fcl/geometry/shape/cylinder.h>
+#include <fcl/geometry/shape/sphere.h>
+#include <fcl/math/bv/OBBRSS.h>
+#include <fcl/geometry/octree/octree.h>
+#include <fcl/narrowphase/collision.h>
+
+#include "fcl_checker_internal.h"
+
+namespace moverl_planning_scene {
+namespace {
+
+constexpr std::uint64_t kFnvOffset = 1469598103934665603ULL;
+constexpr std::uint64_t kFnvPrime = 1099511628211ULL;
+constexpr int kAcmFileVersion = 2;  // 2: complete hulls, one geometry per mesh piece
+
+void fnv(std::uint64_t* h, const void* data, std::size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    *h ^= p[i];
+    *h *= kFnvPrime;
+  }
+}
+void fnvString(std::uint64_t* h, const std::string& s) {
+  fnv(h, s.data(), s.size());
+  const char sep = '\0';
+  fnv(h, &sep, 1);
+}
+template <typename T>
+void fnvValue(std::uint64_t* h, T v) {
+  fnv(h, &v, sizeof(v));
+}
+
+}  // namespace
+
+std::uint64_t FclCollisionChecker::acmKey() const {
+  std::uint64_t h = kFnvOffset;
+  fnvValue(&h, kAcmFileVersion);
+  fnvString(&h, model_.urdfText());
+  for (const auto& j : model_.jointNames()) fnvString(&h, j);
+  fnvString(&h, "|fixed|");
+  for (const auto& kv : model_.fixedPositions()) {
+    fnvString(&h, kv.first);
+    fnvValue(&h, kv.second);
+  }
+  fnvValue(&h, options_.acm_samples);
+  fnvValue(&h, options_.acm_seed);
+  fnvValue(&h, options_.self_padding);
+  fnvValue(&h, static_cast<int>(options_.mesh_mode));
+  // Geometry content (mesh files may change while the URDF text does not).
+  for (const Geom& g : geoms_) {
+    fnvValue(&h, g.radius);
+    fnvValue(&h, g.center_local.x());
+    fnvValue(&h, g.center_local.y());
+    fnvValue(&h, g.center_local.z());
+  }
+  return h;
+}
+
+bool FclCollisionChecker::loadAcm(const std::string& file) {
+  std::ifstream in(file);
+  if (!in) return false;
+  const std::size_t n = model_.linkNames().size();
+  std::vector<AcmReason> acm(n * n, AcmReason::kNoGeometry);
+  std::string a, b;
+  int reason = 0;
+  std::size_t count = 0;
+  while (in >> a >> b >> reason) {
+    const int ia = model_.linkIndex(a), ib = model_.linkIndex(b);
+    if (ia < 0 || ib < 0 || reason < 0 || reason > static_cast<int>(AcmReason::kNoGeometry)) return false;
+    acm[ia * n + ib] = acm[ib * n + ia] = static_cast<AcmReason>(reason);
+    ++count;
+  }
+  if (count == 0) return false;
+  acm_ = acm;
+  return true;
+}
+
+void FclCollisionChecker::saveAcm(const std::string& file) const {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(file).parent_path(), ec);
+  const std::string tmp = file + ".tmp" + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp);
+    if (!out) return;
+    const auto& names = model_.linkNames();
+    const std::size_t n = names.size();
+    for (std::size_t a = 0; a < n; ++a) {
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (acm_[a * n + b] == AcmReason::kNoGeometry) continue;
+        out << names[a] << ' ' << names[b] << ' ' << static_cast<int>(acm_[a * n + b]) << '\n';
+      }
+    }
+  }
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) std::filesystem::remove(tmp, ec);
+}
+
+void FclCollisionChecker::computeAcm() {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::size_t n = model_.linkNames().size();
+  acm_stats_ = AcmStats();
+  if (!options_.acm_cache_dir.empty()) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "acm_%016llx.txt", static_cast<unsigned long long>(acmKey()));
+    acm_stats_.cache_file = (std::filesystem::path(options_.acm_cache_dir) / name).string();
+    if (loadAcm(acm_stats_.cache_file)) acm_stats_.from_cache = true;
+  }
+  if (!acm_stats_.from_cache) {
+    acm_.assign(n * n, AcmReason::kNoGeometry);
+    // Nearest ancestor with collision geometry ("looking through" geometry-less links and fixed joints).
+    auto geometry_parent = [&](int l) {
+      int p = model_.parentLink(l);
+      while (p >= 0 && link_geoms_[p].empty()) p = model_.parentLink(p);
+      return p;
+    };
+    std::vector<std::pair<int, int>> candidates;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (link_geoms_[a].empty()) continue;
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (link_geoms_[b].empty()) continue;
+        const int ia = static_cast<int>(a), ib = static_cast<int>(b);
+        AcmReason r = AcmReason::kEnabled;
+        if (model_.isStatic(ia) && model_.isStatic(ib)) {
+          r = AcmReason::kStatic;
+        } else if (geometry_parent(ib) == ia || geometry_parent(ia) == ib) {
+          r = AcmReason::kAdjacent;
+        } else if (model_.drivingJoint(ia) == model_.drivingJoint(ib)) {
+          r = AcmReason::kRigid;  // no controlled joint between them
+        } else {
+          candidates.emplace_back(ia, ib);
+        }
+        acm_[a * n + b] = acm_[b * n + a] = r;
+      }
+    }
+    if (options_.acm_samples > 0 && !candidates.empty()) {
+      // "always": the real shapes touch in every sample; "never": even the padded shapes never touch.
+      std::vector<int> hits(candidates.size(), 0), padded_hits(candidates.size(), 0);
+      std::mt19937_64 rng(options_.acm_seed);
+      const std::size_t dof = model_.dof();
+      std::vector<double> q(dof);
+      for (int s = 0; s < options_.acm_samples; ++s) {
+        for (std::size_t i = 0; i < dof; ++i) {
+          std::uniform_real_distribution<double> d(model_.lowerLimits()[i], model_.upperLimits()[i]);
+          q[i] = d(rng);
+        }
+        updateTransforms(q.data());
+        for (std::size_t c = 0; c < candidates.size(); ++c) {
+          if (linkPairCollides(candidates[c].first, candidates[c].second, true)) {
+            ++padded_hits[c];
+            if (linkPairCollides(candidates[c].first, candidates[c].second, false)) ++hits[c];
+          }
+        }
+      }
+      for (std::size_t c = 0; c < candidates.size(); ++c) {
+        AcmReason r = AcmReason::kEnabled;
+        if (padded_hits[c] == 0) r = AcmReason::kNever;
+        if (hits[c] == options_.acm_samples) r = AcmReason::kAlways;
+        const int a = candidates[c].first, b = candidates[c].second;
+        acm_[a * n + b] = acm_[b * n + a] = r;
+      }
+    }
+    if (!acm_stats_.cache_file.empty()) saveAcm(acm_stats_.cache_file);
+  }
+  rebuildPairLists();
+  acm_stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void FclCollisionChecker::rebuildPairLists() {
+  const std::size_t n = model_.linkNames().size();
+  self_pairs_.clear();
+  for (std::size_t a = 0; a < n; ++a) {
+    for (std::size_t b = a + 1; b < n; ++b) {
+      switch (acm_[a * n + b]) {
+        case AcmReason::kEnabled:
+          ++acm_stats_.enabled;
+          self_pairs_.emplace_back(static_cast<int>(a), static_cast<int>(b));
+          break;
+        case AcmReason::kAdjacent:
+          ++acm_stats_.adjacent;
+          break;
+        case AcmReason::kRigid:
+          ++acm_stats_.rigid;
+          break;
+        case AcmReason::kAlways:
+          ++acm_stats_.always;
+          break;
+        case AcmReason::kNever:
+          ++acm_stats_.never;
+          break;
+        default:
+          break;
+      }
+    }
+  }
+  world_geoms_.clear();
+  for (std::size_t g = 0; g < geoms_.size(); ++g) {
+    if (!model_.isStatic(geoms_[g].link)) world_geoms_.push_back(static_cast<int>(g));
+  }
+}
+
+AcmReason FclCollisionChecker::acmReason(const std::string& link_a, const std::string& link_b) const {
+  const int a = model_.linkIndex(link_a), b = model_.linkIndex(link_b);
+  if (a < 0 || b < 0 || a == b) return AcmReason::kNoGeometry;
+  return acm_[a * model_.linkNames().size() + b];
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,289 @@
+/**
+ * \file octomap_monitor.cpp
+ * \brief OctomapMonitor: point clouds -> self filter (JointStateHistory) -> OccupancyMap (see the header).
+ */
+#include "moverl_planning_scene/octomap_monitor.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <visualization_msgs/Marker.h>
+
+#include "moverl_planning_scene/ros_param.h"
+
+namespace moverl_planning_scene {
+
+namespace {
+const char* const kYaml = "load config/planning_scene.yaml";
+}  // namespace
+
+// PointCloud2ConstIterator checks none of this.
+std::string cloudLayoutError(const sensor_msgs::PointCloud2& c) {
+  if (c.is_bigendian) return "big-endian data";
+  if (c.point_step == 0) return "point_step 0";
+  for (const char* name : {"x", "y", "z"}) {
+    const sensor_msgs::PointField* field = nullptr;
+    for (const auto& f : c.fields) {
+      if (f.name == name) field = &f;
+    }
+    if (field == nullptr) return std::string("no field ") + name;
+    if (field->datatype != sensor_msgs::PointField::FLOAT32 || field->count != 1) {
+      return std::string("field ") + name + " is not one float32";
+    }
+    if (static_cast<std::uint64_t>(field->offset) + 4 > c.point_step) {
+      return std::string("field ") + name + " lies beyond point_step";
+    }
+  }
+  const std::uint64_t row = static_cast<std::uint64_t>(c.width) * c.point_step;
+  if (c.row_step < row) return "row_step shorter than width * point_step";
+  if (static_cast<std::uint64_t>(c.row_step) * c.height > c.data.size()) {
+    return "data holds " + std::to_string(c.data.size()) + " bytes, the header claims " +
+           std::to_string(static_cast<std::uint64_t>(c.row_step) * c.height);
+  }
+  return "";
+}
+
+
+OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex)
+    : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex) {}
+
+OctomapMonitor::~OctomapMonitor() {
+  // Stop the threads before the members they use go.
+  if (sensor_spinner_) sensor_spinner_->stop();
+  if (joint_spinner_) joint_spinner_->stop();
+}
+
+bool OctomapMonitor::init(std::string* error) {
+  OccupancyMapOptions mo;
+  std::string cloud_topic, joint_topic;
+  int queue = 0, startup_clouds = 0;
+  double startup_timeout = 0.0;
+  try {
+    readOccupancyMapTunables(RosTunables(pnh_, kYaml), &mo);
+    self_filter_padding_ = requiredParam<double>(pnh_, "octomap/self_filter_padding", kYaml);
+    transform_timeout_ = requiredParam<double>(pnh_, "octomap/transform_timeout", kYaml);
+    joint_state_wait_ = requiredParam<double>(pnh_, "octomap/joint_state_wait", kYaml);
+    cloud_topic = requiredParam<std::string>(pnh_, "octomap/cloud_topic", kYaml);
+    joint_topic = requiredParam<std::string>(pnh_, "octomap/joint_states_topic", kYaml);
+    queue = requiredParam<int>(pnh_, "octomap/queue_size", kYaml);
+    startup_clouds = requiredParam<int>(pnh_, "octomap/startup_clouds", kYaml);
+    startup_timeout = requiredParam<double>(pnh_, "octomap/startup_timeout", kYaml);
+  } catch (const std::exception& e) {
+    *error = e.what();
+    return false;
+  }
+  if (!(self_filter_padding_ >= 0.0) || !std::isfinite(self_filter_padding_)) {
+    *error = "octomap/self_filter_padding must be >= 0";
+    return false;
+  }
+  // Map only what the robot can reach (padded): beams are clipped there, which keeps integration fast.
+  const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + 2 * mo.resolution;
+  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  map_ = OccupancyMap::create(mo, error);
+  if (!map_) return false;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    scene_->checker().setOctree(map_->tree());
+  }
+  joints_ = scene_->model().jointNames();
+  tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
+  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh_);
+  status_pub_ = pnh_.advertise<moverl_msgs::OctomapStatus>("octomap_status", 1, /*latch=*/true);
+  marker_pub_ = pnh_.advertise<visualization_msgs::Marker>("octomap_markers", 1, /*latch=*/true);
+  clear_srv_ = pnh_.advertiseService("clear_octomap", &OctomapMonitor::clear, this);
+  ros::SubscribeOptions js = ros::SubscribeOptions::create<sensor_msgs::JointState>(
+      joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(),
+      &joint_queue_);
+  ros::SubscribeOptions pc = ros::SubscribeOptions::create<sensor_msgs::PointCloud2>(
+      cloud_topic, static_cast<uint32_t>(std::max(1, queue)),
+      [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); }, ros::VoidPtr(), &sensor_queue_);
+  joint_sub_ = nh_.subscribe(js);
+  cloud_sub_ = nh_.subscribe(pc);
+  sensor_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &sensor_queue_);
+  sensor_spinner_->start();
+  joint_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &joint_queue_);
+  joint_spinner_->start();
+  publishStatus(ros::Time(0), "");
+  ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
+           "mapped within +-%.2f m of the base)",
+           cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach);
+  // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
+  while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {
+    if (!ros::ok()) {
+      *error = "shut down while waiting for the first point clouds";
+      return false;
+    }
+    if (ros::WallTime::now() > deadline) {
+      *error = "only " + std::to_string(clouds_.load()) + " of " + std::to_string(startup_clouds) +
+               " point clouds integrated from " + cloud_sub_.getTopic() + " after " + std::to_string(startup_timeout) +
+               " s (dropped " + std::to_string(dropped_.load()) +
+               "): is a depth camera publishing there, with TF for its frame and joint states on " +
+               joint_sub_.getTopic() + "?";
+      return false;
+    }
+    ros::WallDuration(0.01).sleep();
+  }
+  ROS_INFO("planning_scene: %u clouds integrated at start-up, %zu occupied cells", clouds_.load(),
+           map_->occupiedLeafCount());
+  return true;
+}
+
+void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) {
+  std::vector<double> q(joints_.size(), std::numeric_limits<double>::quiet_NaN());
+  std::size_t found = 0;
+  for (std::size_t k = 0; k < msg->name.size() && k < msg->position.size(); ++k) {
+    const auto it = std::find(joints_.begin(), joints_.end(), msg->name[k]);
+    if (it == joints_.end()) continue;  // not ours
+    double& slot = q[static_cast<std::size_t>(it - joints_.begin())];
+    if (!std::isnan(slot)) continue;  // listed twice
+    slot = msg->position[k];
+    ++found;
+  }
+  if (found != q.size()) return;  // another robot's or a partial message
+  for (double v : q) {
+    if (!std::isfinite(v)) return;  // a broken driver's message: never a configuration to filter with
+  }
+  history_.add(static_cast<std::int64_t>(msg->header.stamp.toNSec()), std::move(q));
+}
+
+void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+  std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+  const ros::WallTime t0 = ros::WallTime::now();
+  geometry_msgs::TransformStamped tf;
+  const std::string& base = scene_->model().baseLink();
+  try {
+    tf = tf_buffer_->lookupTransform(base, msg->header.frame_id, msg->header.stamp, ros::Duration(transform_timeout_));
+  } catch (const tf2::TransformException& e) {
+    drop("cloud from '" + msg->header.frame_id + "' dropped: " + e.what());
+    return;
+  }
+  const std::string bad = cloudLayoutError(*msg);  // before waiting for a joint state: a malformed cloud goes at once
+  if (!bad.empty()) {
+    drop("malformed cloud from '" + msg->header.frame_id + "' dropped: " + bad);
+    return;
+  }
+  if (!history_.around(static_cast<std::int64_t>(msg->header.stamp.toNSec()), joint_state_wait_, &configurations_)) {
+    drop("cloud dropped: no joint state stamped at or after it within " + std::to_string(joint_state_wait_) +
+         " s (cannot filter the robot's points)");
+    return;
+  }
+  const auto& t = tf.transform;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).toRotationMatrix();
+  pose.translation() = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+  points_.clear();
+  points_.reserve(static_cast<std::size_t>(msg->width) * msg->height);
+  sensor_msgs::PointCloud2ConstIterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z");
+  for (; x != x.end(); ++x, ++y, ++z) {
+    if (std::isfinite(*x) && std::isfinite(*y) && std::isfinite(*z)) {  // NaN marks no return in some drivers
+      points_.push_back(pose * Eigen::Vector3d(*x, *y, *z));
+    }
+  }
+  for (std::size_t c = 0; c < configurations_.size(); ++c) {
+    scene_->checker().robotPointMask(configurations_[c].data(), points_, self_filter_padding_,
+                                     c == 0 ? &mask_ : &mask_more_);
+    if (c > 0) {
+      for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
+    }
+  }
+  map_->computeUpdate(points_, mask_, pose.translation(), &update_);
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    map_->apply(update_);
+  }
+  ++clouds_;
+  last_integration_ = (ros::WallTime::now() - t0).toSec();
+  last_cloud_stamp_ = msg->header.stamp;
+  last_cloud_frame_ = msg->header.frame_id;
+  publishStatus(msg->header.stamp, msg->header.frame_id);
+  publishMarkers();
+}
+
+bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
+  std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    map_->clear();
+  }
+  clouds_ = 0;
+  update_.stats = MapUpdateStats();
+  publishStatus(ros::Time(0), "");
+  publishMarkers();
+  return true;
+}
+
+/// A cloud that cannot be integrated: counted, logged (throttled) and reported in ~octomap_status.
+void OctomapMonitor::drop(const std::string& why) {
+  ++dropped_;
+  ROS_WARN_THROTTLE(5.0, "planning_scene: %s", why.c_str());
+  publishStatus(last_cloud_stamp_, last_cloud_frame_);
+}
+
+void OctomapMonitor::publishStatus(const ros::Time& stamp, const std::string& sensor_frame) {
+  moverl_msgs::OctomapStatus s;
+  s.header.stamp = stamp;
+  s.header.frame_id = scene_->model().baseLink();
+  s.resolution = map_->options().resolution;
+  s.clouds = clouds_;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    s.occupied_leaves = static_cast<uint32_t>(map_->occupiedLeafCount());
+  }
+  s.sensor_frame = sensor_frame;
+  const MapUpdateStats& u = update_.stats;
+  s.points = static_cast<uint32_t>(u.points);
+  s.robot_points = static_cast<uint32_t>(u.robot);
+  s.beyond_range = static_cast<uint32_t>(u.beyond_range);
+  s.hit_cells = static_cast<uint32_t>(u.hit_cells);
+  s.free_cells = static_cast<uint32_t>(u.free_cells);
+  s.integration_time = last_integration_;
+  s.dropped = dropped_;
+  status_pub_.publish(s);
+}
+
+/// Occupied cells as one CUBE_LIST (only when someone listens, e.g. rviz).
+void OctomapMonitor::publishMarkers() {
+  if (marker_pub_.getNumSubscribers() == 0) return;
+  visualization_msgs::Marker m;
+  m.header.frame_id = scene_->model().baseLink();
+  m.header.stamp = ros::Time(0);
+  m.ns = "octomap";
+  m.type = visualization_msgs::Marker::CUBE_LIST;
+  m.action = visualization_msgs::Marker::ADD;
+  m.pose.orientation.w = 1.0;
+  m.scale.x = m.scale.y = m.scale.z = map_->options().resolution;
+  m.color.r = 0.2f;
+  m.color.g = 0.6f;
+  m.color.b = 1.0f;
+  m.color.a = 0.8f;
+  std::vector<Eigen::Vector3d> centers;
+  std::vector<double> sizes;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    map_->occupiedLeaves(&centers, &sizes);
+  }
+  const double r = map_->options().resolution;
+  for (std::size_t k = 0; k < centers.size(); ++k) {
+    // Pruned (larger) leaves: one cube per resolution cell inside them.
+    const int n = std::max(1, static_cast<int>(std::lround(sizes[k] / r)));
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) {
+        for (int l = 0; l < n; ++l) {
+          geometry_msgs::Point p;
+          p.x = centers[k].x() + (i - 0.5 * (n - 1)) * r;
+          p.y = centers[k].y() + (j - 0.5 * (n - 1)) * r;
+          p.z = centers[k].z() + (l - 0.5 * (n - 1)) * r;
+          m.points.push_back(p);
+        }
+      }
+    }
+  }
+  if (m.points.empty()) m.action = visualization_msgs::Marker::DELETE;
+  marker_pub_.publish(m);
+}
+
+}  // namespace moverl_planning_scene

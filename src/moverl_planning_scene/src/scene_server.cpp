@@ -1,0 +1,366 @@
+/**
+ * \file scene_server.cpp
+ * \brief SceneServer: the planning scene's parameters, world, services and sensed-obstacle monitor (see the header).
+ */
+#include "moverl_planning_scene/scene_server.h"
+
+#include <cstdlib>
+#include <exception>
+
+#include <ros/package.h>
+#include <shape_msgs/SolidPrimitive.h>
+#include <std_msgs/Bool.h>
+
+#include "moverl_planning_scene/octomap_monitor.h"
+#include "moverl_planning_scene/ros_param.h"
+
+namespace moverl_planning_scene {
+namespace {
+
+const char* const kYaml = "load config/planning_scene.yaml";
+
+// The core's outcome codes are the services' codes: checked here, where both are visible, at compile time.
+template <class E>
+constexpr std::uint8_t code(E e) {
+  return static_cast<std::uint8_t>(e);
+}
+using CheckRes = moverl_msgs::CheckState::Response;
+using PathRes = moverl_msgs::CheckPath::Response;
+using PlanRes = moverl_msgs::PlanPath::Response;
+using MotionRes = moverl_msgs::ValidateMotion::Response;
+static_assert(code(CheckOutcome::kValid) == CheckRes::VALID &&
+                  code(CheckOutcome::kSelfCollision) == CheckRes::SELF_COLLISION &&
+                  code(CheckOutcome::kWorldCollision) == CheckRes::WORLD_COLLISION &&
+                  code(CheckOutcome::kInvalidRequest) == CheckRes::INVALID_REQUEST,
+              "CheckOutcome differs from moverl_msgs/CheckState");
+static_assert(code(CheckOutcome::kValid) == PathRes::VALID &&
+                  code(CheckOutcome::kSelfCollision) == PathRes::SELF_COLLISION &&
+                  code(CheckOutcome::kWorldCollision) == PathRes::WORLD_COLLISION &&
+                  code(CheckOutcome::kInvalidRequest) == PathRes::INVALID_REQUEST,
+              "CheckOutcome differs from moverl_msgs/CheckPath");
+static_assert(code(PlanStatus::kSuccess) == PlanRes::SUCCESS &&
+                  code(PlanStatus::kStartInvalid) == PlanRes::START_INVALID &&
+                  code(PlanStatus::kGoalInvalid) == PlanRes::GOAL_INVALID &&
+                  code(PlanStatus::kNoSolution) == PlanRes::NO_SOLUTION &&
+                  code(PlanStatus::kInvalidRequest) == PlanRes::INVALID_REQUEST,
+              "PlanStatus differs from moverl_msgs/PlanPath");
+static_assert(code(MotionOutcome::kValid) == MotionRes::VALID &&
+                  code(MotionOutcome::kSelfCollision) == MotionRes::SELF_COLLISION &&
+                  code(MotionOutcome::kPoseCollision) == MotionRes::POSE_COLLISION &&
+                  code(MotionOutcome::kPathCollision) == MotionRes::PATH_COLLISION &&
+                  code(MotionOutcome::kStartInCollision) == MotionRes::START_IN_COLLISION &&
+                  code(MotionOutcome::kInvalidRequest) == MotionRes::INVALID_REQUEST,
+              "MotionOutcome differs from moverl_msgs/ValidateMotion");
+
+constexpr double kQuaternionEpsilon = 1e-9;
+
+/// ROS world message -> core world objects. False with *error on unsupported shapes.
+bool toWorld(const moverl_msgs::World& msg, std::vector<WorldObject>* out, std::string* error) {
+  out->clear();
+  for (const auto& o : msg.objects) {
+    WorldObject w;
+    w.id = o.id;
+    switch (o.shape.type) {
+      case shape_msgs::SolidPrimitive::BOX:
+        w.type = ShapeType::kBox;
+        break;
+      case shape_msgs::SolidPrimitive::SPHERE:
+        w.type = ShapeType::kSphere;
+        break;
+      case shape_msgs::SolidPrimitive::CYLINDER:
+        w.type = ShapeType::kCylinder;
+        break;
+      case shape_msgs::SolidPrimitive::CONE:
+        w.type = ShapeType::kCone;
+        break;
+      default:
+        *error = "world object '" + o.id + "': unsupported shape type " + std::to_string(o.shape.type);
+        return false;
+    }
+    w.dimensions.assign(o.shape.dimensions.begin(), o.shape.dimensions.end());
+    const auto& q = o.pose.orientation;
+    Eigen::Quaterniond rot(q.w, q.x, q.y, q.z);
+    // An all-zero quaternion (unset field) means identity.
+    rot = rot.norm() < kQuaternionEpsilon ? Eigen::Quaterniond::Identity() : rot.normalized();
+    w.pose = Eigen::Isometry3d::Identity();
+    w.pose.linear() = rot.toRotationMatrix();
+    w.pose.translation() = Eigen::Vector3d(o.pose.position.x, o.pose.position.y, o.pose.position.z);
+    if (o.motion.type == moverl_msgs::ObstacleMotion::OSCILLATE) {
+      w.motion.type = ObstacleMotion::Type::kOscillate;
+      w.motion.axis = Eigen::Vector3d(o.motion.axis[0], o.motion.axis[1], o.motion.axis[2]);
+      w.motion.amplitude = o.motion.amplitude;
+      w.motion.period = o.motion.period;
+      w.motion.phase = o.motion.phase;
+    } else if (o.motion.type != moverl_msgs::ObstacleMotion::NONE) {
+      *error = "world object '" + o.id + "': unknown motion type " + std::to_string(o.motion.type);
+      return false;
+    }
+    out->push_back(std::move(w));
+  }
+  return true;
+}
+
+void toPairs(const std::vector<ContactPair>& in, std::vector<moverl_msgs::CollisionPair>* out) {
+  out->resize(in.size());
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    (*out)[i].a = in[i].a;
+    (*out)[i].b = in[i].b;
+    (*out)[i].depth = in[i].depth;
+  }
+}
+
+void toTrajectory(const std::vector<std::vector<double>>& waypoints, const std::vector<std::string>& joints,
+                  trajectory_msgs::JointTrajectory* out) {
+  out->joint_names = joints;
+  out->points.resize(waypoints.size());
+  for (std::size_t k = 0; k < waypoints.size(); ++k) out->points[k].positions = waypoints[k];
+}
+
+std::string cacheDir() {
+  const char* ros_home = std::getenv("ROS_HOME");
+  if (ros_home != nullptr && ros_home[0] != '\0') return std::string(ros_home) + "/moverl_cache";
+  const char* home = std::getenv("HOME");
+  return std::string(home != nullptr ? home : "/tmp") + "/.ros/moverl_cache";
+}
+
+/// package://pkg/rest -> <path of ROS package pkg>/rest, "" when unknown.
+std::string resolvePackage(const std::string& url) {
+  const std::string rest = url.substr(std::string("package://").size());
+  const std::size_t slash = rest.find('/');
+  if (slash == std::string::npos) return "";
+  const std::string pkg_path = ros::package::getPath(rest.substr(0, slash));
+  return pkg_path.empty() ? "" : pkg_path + rest.substr(slash);
+}
+
+}  // namespace
+
+RobotModelOptions robotOptions(const ros::NodeHandle& nh, std::string* urdf) {
+  const std::string robot_yaml = "load config/robots/<robot>.yaml (launch/robot.launch)";
+  *urdf = requiredParam<std::string>(nh, "robot_description", robot_yaml);
+  RobotModelOptions o;
+  o.joint_names = requiredParam<std::vector<std::string>>(nh, "robot/joints", robot_yaml);
+  o.base_link = requiredParam<std::string>(nh, "robot/base_link", robot_yaml);
+  o.ee_link = requiredParam<std::string>(nh, "robot/ee_link", robot_yaml);
+  if (nh.hasParam("robot/fixed_joint_positions") &&  // optional: robots without uncontrolled joints leave it out
+      !nh.getParam("robot/fixed_joint_positions", o.fixed_joint_positions)) {
+    throw std::runtime_error("parameter " + nh.resolveName("robot/fixed_joint_positions") +
+                             " must be a dict {joint: position}");
+  }
+  o.package_resolver = resolvePackage;
+  return o;
+}
+
+SceneServer::SceneServer(ros::NodeHandle nh, ros::NodeHandle pnh) : nh_(nh), pnh_(pnh) {}
+
+SceneServer::~SceneServer() = default;
+
+bool SceneServer::init(std::string* error) {
+  PlanningSceneOptions o;
+  std::string urdf, world_service, world_topic;
+  double world_timeout = 0.0;
+  try {
+    o.robot = robotOptions(nh_, &urdf);
+    o.robot.mesh_base_dir = requiredParam<std::string>(pnh_, "urdf_dir", kYaml);
+    readSceneTunables(RosTunables(pnh_, kYaml), &o);
+    if (requiredParam<bool>(pnh_, "acm_cache", kYaml)) o.checker.acm_cache_dir = cacheDir();
+    world_timeout = requiredParam<double>(pnh_, "world_timeout", kYaml);
+    const std::string launch = "set by launch/planning_scene.launch";
+    obstacles_ = requiredParam<std::string>(pnh_, "obstacles", launch);
+    world_service = requiredParam<std::string>(pnh_, "world_service", launch);
+    world_topic = requiredParam<std::string>(pnh_, "world_topic", launch);
+  } catch (const std::exception& e) {
+    *error = e.what();
+    return false;
+  }
+  if (obstacles_ != "objects" && obstacles_ != "octomap" && obstacles_ != "both") {
+    *error = pnh_.resolveName("obstacles") + " must be objects, octomap or both, not '" + obstacles_ + "'";
+    return false;
+  }
+  planning_time_ = o.planner.planning_time;
+
+  const ros::WallTime t0 = ros::WallTime::now();
+  scene_ = PlanningScene::create(urdf, o, error);
+  if (!scene_) {
+    *error = "cannot build the scene: " + *error;
+    return false;
+  }
+  const AcmStats& acm = scene_->checker().acmStats();
+  ROS_INFO("planning_scene: %zu joints, ACM %s in %.2f s (adjacent %d, rigid %d, always %d, never %d, checked %d)%s%s",
+           scene_->model().dof(), acm.from_cache ? "loaded" : "computed", acm.seconds, acm.adjacent, acm.rigid,
+           acm.always, acm.never, acm.enabled, acm.cache_file.empty() ? "" : ", cache ", acm.cache_file.c_str());
+  ROS_INFO("planning_scene: scene built in %.2f s", (ros::WallTime::now() - t0).toSec());
+
+  // World: synchronous fetch, then mirror the latched topic.
+  if (!ros::service::waitForService(world_service, ros::Duration(world_timeout))) {
+    *error = "world service " + world_service + " not available after " + std::to_string(world_timeout) +
+             " s (is the simulator or the world server running?)";
+    return false;
+  }
+  moverl_msgs::GetWorld get_world;
+  if (!ros::service::call(world_service, get_world)) {
+    *error = "call to " + world_service + " failed";
+    return false;
+  }
+  if (!applyWorld(get_world.response.world, error)) {
+    *error = "invalid world from " + world_service + ": " + *error;
+    return false;
+  }
+  if (obstacles_ != "objects") {
+    monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_);
+    if (!monitor_->init(error)) return false;
+  }
+  world_sub_ = nh_.subscribe(world_topic, 1, &SceneServer::onWorld, this);
+
+  services_.push_back(pnh_.advertiseService("check_state", &SceneServer::checkState, this));
+  services_.push_back(pnh_.advertiseService("check_path", &SceneServer::checkPath, this));
+  services_.push_back(pnh_.advertiseService("plan", &SceneServer::plan, this));
+  services_.push_back(pnh_.advertiseService("fk", &SceneServer::fk, this));
+  services_.push_back(pnh_.advertiseService("validate_motion", &SceneServer::validateMotion, this));
+  services_.push_back(pnh_.advertiseService("get_world", &SceneServer::getWorld, this));
+  // Facts for other processes (a shield that reaches the scene through its services, tools).
+  pnh_.setParam("joint_names", scene_->model().jointNames());
+  pnh_.setParam("joint_radius_bounds", jointRadiusBounds());
+  ready_pub_ = pnh_.advertise<std_msgs::Bool>("ready", 1, /*latch=*/true);
+  std_msgs::Bool ready;
+  ready.data = true;
+  ready_pub_.publish(ready);
+  ROS_INFO("planning_scene: ready in %s (obstacles: %s, %zu world objects)", pnh_.getNamespace().c_str(),
+           obstacles_.c_str(), scene_->checker().worldSize());
+  return true;
+}
+
+std::vector<double> SceneServer::jointRadiusBounds() const {
+  std::vector<double> radius(scene_->model().dof());
+  for (std::size_t i = 0; i < radius.size(); ++i) radius[i] = scene_->checker().jointRadiusBound(i);
+  return radius;
+}
+
+moverl_msgs::World SceneServer::world() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return world_msg_;
+}
+
+bool SceneServer::applyWorld(const moverl_msgs::World& msg, std::string* error) {
+  std::vector<WorldObject> objects;
+  if (!toWorld(msg, &objects, error)) return false;
+  if (obstacles_ == "octomap") objects.clear();  // sensed only: the scene must not know the objects
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!scene_->setWorld(objects, error)) return false;
+  world_msg_ = msg;
+  return true;
+}
+
+/// The world as the world source describes it (its objects too in octomap mode, where the scene ignores them), with its
+/// motion epoch: what the env observes and the shield times moving obstacles with.
+bool SceneServer::getWorld(moverl_msgs::GetWorld::Request&, moverl_msgs::GetWorld::Response& res) {
+  res.world = world();
+  return true;
+}
+
+void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
+  std::string error;
+  if (!applyWorld(*msg, &error)) {
+    ROS_ERROR("planning_scene: world update '%s' rejected, previous world kept: %s", msg->name.c_str(), error.c_str());
+  } else {
+    ROS_DEBUG("planning_scene: world '%s' with %zu objects", msg->name.c_str(), msg->objects.size());
+  }
+}
+
+bool SceneServer::checkState(moverl_msgs::CheckState::Request& req, moverl_msgs::CheckState::Response& res) {
+  try {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene_->checkState(req.positions, &state_);  // depth 0: FCL MPR depths on vertex-only hulls are unreliable
+    res.outcome = static_cast<uint8_t>(state_.outcome);
+    toPairs(state_.pairs, &res.pairs);
+    res.message = state_.message;
+    res.check_time = state_.check_time;
+  } catch (const std::exception& e) {
+    res.outcome = moverl_msgs::CheckState::Response::INVALID_REQUEST;
+    res.message = std::string("internal error: ") + e.what();
+  }
+  return true;
+}
+
+bool SceneServer::checkPath(moverl_msgs::CheckPath::Request& req, moverl_msgs::CheckPath::Response& res) {
+  try {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene_->checkPath(req.start, req.goal, &path_);
+    res.outcome = static_cast<uint8_t>(path_.outcome);
+    toPairs(path_.pairs, &res.pairs);
+    res.collision_fraction = path_.collision_fraction;
+    res.checked_states = static_cast<uint32_t>(path_.checked_states);
+    res.message = path_.message;
+    res.check_time = path_.check_time;
+  } catch (const std::exception& e) {
+    res.outcome = moverl_msgs::CheckPath::Response::INVALID_REQUEST;
+    res.message = std::string("internal error: ") + e.what();
+  }
+  return true;
+}
+
+bool SceneServer::plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res) {
+  try {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene_->plan(req.start, req.goal, req.planner, req.time_limit, &plan_);
+    res.outcome = static_cast<uint8_t>(plan_.status);
+    toTrajectory(plan_.waypoints, scene_->model().jointNames(), &res.path);
+    res.planning_time = plan_.planning_time;
+    res.path_length = plan_.path_length;
+    res.message = plan_.message;
+  } catch (const std::exception& e) {
+    res.outcome = moverl_msgs::PlanPath::Response::INVALID_REQUEST;
+    res.message = std::string("internal error: ") + e.what();
+  }
+  return true;
+}
+
+bool SceneServer::fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Response& res) {
+  try {
+    std::lock_guard<std::mutex> lock(mutex_);
+    std::vector<Eigen::Isometry3d> poses;
+    res.success = scene_->fk(req.positions, req.links, &poses, &res.message);
+    res.poses.resize(poses.size());
+    for (std::size_t i = 0; i < poses.size(); ++i) {
+      const Eigen::Quaterniond q(poses[i].linear());
+      res.poses[i].position.x = poses[i].translation().x();
+      res.poses[i].position.y = poses[i].translation().y();
+      res.poses[i].position.z = poses[i].translation().z();
+      res.poses[i].orientation.x = q.x();
+      res.poses[i].orientation.y = q.y();
+      res.poses[i].orientation.z = q.z();
+      res.poses[i].orientation.w = q.w();
+    }
+  } catch (const std::exception& e) {
+    res.success = false;
+    res.message = std::string("internal error: ") + e.what();
+  }
+  return true;
+}
+
+bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
+                                 moverl_msgs::ValidateMotion::Response& res) {
+  try {
+    std::lock_guard<std::mutex> lock(mutex_);
+    scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free,
+                           req.start_time, req.duration);
+    res.moving_obstacles = motion_.moving_obstacles;
+    res.outcome = static_cast<uint8_t>(motion_.outcome);
+    res.replanned = motion_.replanned;
+    if (motion_.replanned) toTrajectory(motion_.path, scene_->model().jointNames(), &res.path);
+    toPairs(motion_.pairs, &res.pairs);
+    res.message = motion_.message;
+    res.state_check_time = motion_.state_check_time;
+    res.path_check_time = motion_.path_check_time;
+    res.planning_time = motion_.planning_time;
+    res.last_free_fraction = motion_.last_free_fraction;
+    res.last_free_state = motion_.last_free_state;
+  } catch (const std::exception& e) {
+    res.outcome = moverl_msgs::ValidateMotion::Response::INVALID_REQUEST;
+    res.message = std::string("internal error: ") + e.what();
+    res.last_free_fraction = -1.0;
+    res.last_free_state.clear();
+  }
+  return true;
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,116 @@
+#include "moverl_planning_scene/tunables.h"
+
+#include <map>
+#include <sstream>
+#include <vector>
+#include <stdexcept>
+
+#include <yaml-cpp/yaml.h>
+
+namespace moverl_planning_scene {
+
+struct YamlTunables::Impl {
+  std::string path;
+  YAML::Node root;
+
+  /// The node at "a/b/c", or an invalid node.
+  YAML::Node find(const std::string& key) const {
+    YAML::Node node = YAML::Clone(root);
+    std::stringstream parts(key);
+    std::string part;
+    while (std::getline(parts, part, '/')) {
+      if (!node.IsMap() || !node[part]) return YAML::Node(YAML::NodeType::Undefined);
+      node = node[part];
+    }
+    return node.IsScalar() ? node : YAML::Node(YAML::NodeType::Undefined);
+  }
+
+  template <class T>
+  bool as(const std::string& key, T* value) const {
+    const YAML::Node node = find(key);
+    if (!node.IsDefined()) return false;
+    try {
+      *value = node.as<T>();
+      return true;
+    } catch (const YAML::Exception&) {
+      return false;
+    }
+  }
+};
+
+YamlTunables::YamlTunables(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+YamlTunables::~YamlTunables() = default;
+
+std::unique_ptr<YamlTunables> YamlTunables::fromFile(const std::string& path, std::string* error) {
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  try {
+    impl->root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    if (error != nullptr) *error = path + ": " + e.what();
+    return nullptr;
+  }
+  if (!impl->root.IsMap()) {
+    if (error != nullptr) *error = path + ": not a map of tunables";
+    return nullptr;
+  }
+  return std::unique_ptr<YamlTunables>(new YamlTunables(std::move(impl)));
+}
+
+bool YamlTunables::get(const std::string& key, double* value) const { return impl_->as(key, value); }
+bool YamlTunables::get(const std::string& key, int* value) const { return impl_->as(key, value); }
+bool YamlTunables::get(const std::string& key, bool* value) const { return impl_->as(key, value); }
+bool YamlTunables::get(const std::string& key, std::string* value) const { return impl_->as(key, value); }
+std::string YamlTunables::describe(const std::string& key) const { return impl_->path + ": key " + key; }
+
+void readSceneTunables(const Tunables& t, PlanningSceneOptions* o) {
+  o->checker.padding = t.require<double>("padding");
+  o->checker.self_padding = t.require<double>("self_padding");
+  o->checker.path_resolution = t.require<double>("path_resolution");
+  o->checker.acm_samples = t.require<int>("acm_samples");
+  o->checker.acm_seed = static_cast<unsigned>(t.require<int>("acm_seed"));
+  const std::string mesh_mode = t.require<std::string>("mesh_mode");
+  if (mesh_mode == "convex_hull") {
+    o->checker.mesh_mode = MeshMode::kConvexHull;
+  } else if (mesh_mode == "triangles") {
+    o->checker.mesh_mode = MeshMode::kTriangles;
+  } else {
+    throw std::runtime_error(t.describe("mesh_mode") + " must be convex_hull or triangles, not '" + mesh_mode + "'");
+  }
+  o->planner.planner = t.require<std::string>("planner");
+  o->planner.planning_time = t.require<double>("planning_time");
+  o->planner.range = t.require<double>("planner_range");
+  o->planner.simplify = t.require<bool>("simplify");
+  o->planner.seed = static_cast<unsigned>(t.require<int>("planner_seed"));
+}
+
+bool loadRobotConfig(const std::string& path, RobotModelOptions* o, std::string* urdf_uri, std::string* error) {
+  try {
+    const YAML::Node robot = YAML::LoadFile(path)["robot"];
+    if (!robot || !robot.IsMap()) throw std::runtime_error("no robot: map");
+    o->joint_names = robot["joints"].as<std::vector<std::string>>();
+    o->base_link = robot["base_link"].as<std::string>();
+    o->ee_link = robot["ee_link"].as<std::string>();
+    o->fixed_joint_positions.clear();
+    if (robot["fixed_joint_positions"]) {
+      o->fixed_joint_positions = robot["fixed_joint_positions"].as<std::map<std::string, double>>();
+    }
+    *urdf_uri = robot["urdf"].as<std::string>();
+  } catch (const std::exception& e) {
+    if (error != nullptr) *error = path + ": " + e.what();
+    return false;
+  }
+  return true;
+}
+
+void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
+  o->resolution = t.require<double>("octomap/resolution");
+  o->max_range = t.require<double>("octomap/max_range");
+  o->prob_hit = t.require<double>("octomap/prob_hit");
+  o->prob_miss = t.require<double>("octomap/prob_miss");
+  o->clamp_min = t.require<double>("octomap/clamp_min");
+  o->clamp_max = t.require<double>("octomap/clamp_max");
+  o->occupancy_threshold = t.require<double>("octomap/occupancy_threshold");
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,178 @@
+/**
+ * \file world_objects.cpp
+ * \brief FclCollisionChecker: world obstacles, padded, and the volumes moving ones sweep in a motion-time window.
+ */
+#include <cmath>
+#include <limits>
+#include <set>
+
+#include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/shape/box.h>
+#include <fcl/geometry/shape/capsule.h>
+#include <fcl/geometry/shape/cone.h>
+#include <fcl/geometry/shape/convex.h>
+#include <fcl/geometry/shape/cylinder.h>
+#include <fcl/geometry/shape/sphere.h>
+#include <fcl/math/bv/OBBRSS.h>
+#include <fcl/geometry/octree/octree.h>
+#include <fcl/narrowphase/collision.h>
+
+#include "fcl_checker_internal.h"
+
+namespace moverl_planning_scene {
+namespace {
+
+/// Geometry of object o padded by p and translated along its motion axis by every s in [lo, hi] from its pose at
+/// t = 0: a superset of the swept volume (exact for spheres -> capsules, boxes translating along a box axis and
+/// cylinders translating along their own axis; otherwise the shape's local bounding box stretched along the motion).
+/// With lo = hi = 0 it is the padded object itself. Returns false for a bad shape (message in *why).
+bool sweptGeometry(const WorldObject& o, double p, double lo, double hi,
+                   std::shared_ptr<fcl::CollisionGeometry<double>>* geom, Eigen::Isometry3d* pose, double* radius,
+                   std::string* why) {
+  const std::vector<double>& d = o.dimensions;
+  const double h = 0.5 * (hi - lo);                  // half the travel
+  const Eigen::Vector3d a = o.motion.axis;           // unit
+  *pose = o.pose;
+  pose->translation() += a * (0.5 * (lo + hi));      // centre of the travel
+  const Eigen::Matrix3d R = o.pose.linear();
+  const Eigen::Vector3d u = R.transpose() * a;       // motion axis in the object's frame
+  constexpr double kAligned = 1.0 - 1e-9;
+  auto box = [&](double x, double y, double z) {
+    // A box of these (padded) dims in the frame *pose, swept along u by +/- h: |x_i + s u_i| <= d_i/2 + h |u_i|.
+    const Eigen::Vector3d dims(x + 2 * h * std::fabs(u[0]), y + 2 * h * std::fabs(u[1]), z + 2 * h * std::fabs(u[2]));
+    *geom = std::make_shared<fcl::Boxd>(dims[0], dims[1], dims[2]);
+    *radius = 0.5 * dims.norm();
+  };
+  switch (o.type) {
+    case ShapeType::kBox:
+      if (d.size() != 3) return (*why = "BOX needs 3 dimensions [x, y, z]", false);
+      box(d[0] + 2 * p, d[1] + 2 * p, d[2] + 2 * p);
+      return true;
+    case ShapeType::kSphere:
+      if (d.size() != 1) return (*why = "SPHERE needs 1 dimension [radius]", false);
+      if (h <= 0.0) {
+        *geom = std::make_shared<fcl::Sphered>(d[0] + p);
+      } else {  // a capsule along the motion axis (fcl capsules lie along local z)
+        *geom = std::make_shared<fcl::Capsuled>(d[0] + p, 2 * h);
+        pose->linear() = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), a).toRotationMatrix();
+      }
+      *radius = d[0] + p + h;
+      return true;
+    case ShapeType::kCylinder:
+    case ShapeType::kCone: {
+      if (d.size() != 2) return (*why = "CYLINDER/CONE needs 2 dimensions [height, radius]", false);
+      const double r = d[1] + p, len = d[0] + 2 * p;
+      if (h <= 0.0 || std::fabs(u[2]) >= kAligned) {  // static, or moving along its own axis: longer cylinder
+        if (o.type == ShapeType::kCylinder) {
+          *geom = std::make_shared<fcl::Cylinderd>(r, len + 2 * h);
+        } else if (h <= 0.0) {
+          *geom = std::make_shared<fcl::Coned>(r, len);
+        } else {
+          *geom = std::make_shared<fcl::Cylinderd>(r, len + 2 * h);  // cone within its cylinder
+        }
+        *radius = std::hypot(r, 0.5 * len + h);
+        return true;
+      }
+      // Rotate the (symmetric) local frame about z so that the in-plane part of u lies along x; bound the
+      // cylinder by its box (2r, 2r, len) and sweep that.
+      const double angle = std::atan2(u[1], u[0]);
+      pose->linear() = R * Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+      const Eigen::Vector3d u2(std::hypot(u[0], u[1]), 0.0, u[2]);
+      const Eigen::Vector3d dims(2 * r + 2 * h * u2[0], 2 * r, len + 2 * h * std::fabs(u2[2]));
+      *geom = std::make_shared<fcl::Boxd>(dims[0], dims[1], dims[2]);
+      *radius = 0.5 * dims.norm();
+      return true;
+    }
+    default:
+      return (*why = "unsupported shape type", false);
+  }
+}
+
+}  // namespace
+
+std::size_t FclCollisionChecker::worldSize() const { return world_.size(); }
+
+bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std::string* error) {
+  std::string dummy;
+  if (error == nullptr) error = &dummy;
+  std::vector<Obstacle> world;
+  world.reserve(objects.size());
+  std::vector<std::size_t> moving;
+  const double p = options_.padding;
+  // Nothing of a robot's world is kilometres away or wide: such numbers are corrupt input, not geometry.
+  constexpr double kMaxExtent = 1e4;  // m
+  std::set<std::string> ids;
+  for (const WorldObject& o : objects) {
+    const std::vector<double>& d = o.dimensions;
+    auto bad = [&](const std::string& why) {
+      *error = "world object '" + o.id + "': " + why;
+      return false;
+    };
+    if (!ids.insert(o.id).second) return bad("id used twice");
+    for (double v : d) {
+      if (!std::isfinite(v) || v <= 0.0 || v > kMaxExtent) return bad("dimensions must be finite, > 0 and <= 1e4 m");
+    }
+    if (!o.pose.matrix().allFinite()) return bad("pose is not finite");
+    if (o.pose.translation().norm() > kMaxExtent) return bad("pose is more than 1e4 m away");
+    const ObstacleMotion& m = o.motion;
+    if (m.type != ObstacleMotion::Type::kNone) {
+      if (m.type != ObstacleMotion::Type::kOscillate) return bad("unknown motion type");
+      if (!m.axis.allFinite() || std::fabs(m.axis.norm() - 1.0) > 1e-6) return bad("motion axis must be a unit vector");
+      if (!std::isfinite(m.amplitude) || m.amplitude < 0.0 || m.amplitude > kMaxExtent) {
+        return bad("motion amplitude must be finite, >= 0 and <= 1e4 m");
+      }
+      if (!std::isfinite(m.period) || m.period <= 0.0) return bad("motion period must be finite and > 0");
+      if (!std::isfinite(m.phase)) return bad("motion phase must be finite");
+    }
+    Obstacle ob;
+    ob.id = o.id;
+    std::string why;
+    double lo = 0.0, hi = 0.0;
+    if (m.moving()) m.range(0.0, std::numeric_limits<double>::infinity(), &lo, &hi);  // whole envelope
+    if (!sweptGeometry(o, p, lo, hi, &ob.geom, &ob.pose, &ob.radius, &why)) return bad(why);
+    ob.geom->computeLocalAABB();
+    if (m.moving()) {
+      moving.push_back(world.size());
+      ob.source = o;
+    }
+    world.push_back(std::move(ob));
+  }
+  moving_.swap(moving);
+  window_t0_ = 0.0;
+  window_t1_ = std::numeric_limits<double>::infinity();
+  world_.swap(world);
+  return true;
+}
+
+void FclCollisionChecker::setMotionWindow(double t0, double t1) {
+  if (moving_.empty()) return;
+  const bool envelope = !(t1 < std::numeric_limits<double>::infinity());
+  const bool current_envelope = !(window_t1_ < std::numeric_limits<double>::infinity());
+  if (envelope ? current_envelope : (t0 == window_t0_ && t1 == window_t1_)) return;  // unchanged
+  window_t0_ = t0;
+  window_t1_ = envelope ? std::numeric_limits<double>::infinity() : t1;
+  for (std::size_t i : moving_) {
+    Obstacle& ob = world_[i];
+    double lo, hi;
+    ob.source.motion.range(t0, window_t1_, &lo, &hi);
+    std::string why;
+    sweptGeometry(ob.source, options_.padding, lo, hi, &ob.geom, &ob.pose, &ob.radius, &why);  // validated before
+    ob.geom->computeLocalAABB();
+  }
+}
+
+double FclCollisionChecker::obstacleRadius(std::size_t i) const { return world_.at(i).radius; }
+Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { return world_.at(i).pose.translation(); }
+
+bool FclCollisionChecker::obstacleContains(std::size_t i, const Eigen::Vector3d& point) const {
+  const Obstacle& ob = world_.at(i);
+  auto probe = std::make_shared<fcl::Sphered>(1e-6);
+  Eigen::Isometry3d tf = Eigen::Isometry3d::Identity();
+  tf.translation() = point;
+  fcl::CollisionRequestd req(1, false);
+  fcl::CollisionResultd res;
+  fcl::collide(probe.get(), tf, ob.geom.get(), ob.pose, req, res);
+  return res.isCollision();
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,373 @@
+/**
+ * \file test_geometry.cpp
+ * \brief Convex hulls, their inflation, mesh reading (OBJ pieces, COLLADA units/up axis) and the regression of issue
+ *        #15: every vertex of the KUKA iiwa's binary STL collision meshes lies inside the scene's link shapes. No
+ *        roscore. The iiwa test is skipped when pybullet_data was not found at configure time.
+ */
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <set>
+#include <sstream>
+#include <unistd.h>
+
+#include "moverl_planning_scene/convex_hull.h"
+#include "moverl_planning_scene/fcl_collision_checker.h"
+#include "moverl_planning_scene/fcl_convex.h"
+#include "moverl_planning_scene/mesh_loader.h"
+#include "moverl_planning_scene/robot_model.h"
+#include "panda_support.h"
+
+namespace mps = moverl_planning_scene;
+using Eigen::Vector3d;
+
+namespace {
+
+const std::string kPandaUrdf = MOVERL_PANDA_URDF;
+
+/// pybullet_data's folder, from the Panda URDF found at configure time ("" when not found).
+std::string pybulletData() {
+  if (kPandaUrdf.empty()) return "";
+  const std::string dir = kPandaUrdf.substr(0, kPandaUrdf.rfind('/'));  // .../franka_panda
+  return dir.substr(0, dir.rfind('/'));
+}
+
+double support(const std::vector<Vector3d>& pts, const Vector3d& u) {
+  double best = -1e300;
+  for (const auto& p : pts) best = std::max(best, u.dot(p));
+  return best;
+}
+
+Vector3d randomUnit(std::mt19937* rng) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Vector3d u(n(*rng), n(*rng), n(*rng));
+  return u.normalized();
+}
+
+/// Checks the hull's invariants against its input; returns the largest distance above a face of an input point
+/// that is not one of the hull's points (loose points are kept in `vertices`, so their hull contains them).
+double checkHull(const mps::ConvexHull& h, const std::vector<Vector3d>& input) {
+  EXPECT_FALSE(h.degenerate);
+  EXPECT_EQ(h.faces.size(), h.normals.size());
+  // Every hull point is an input point.
+  for (const auto& v : h.vertices) {
+    bool found = false;
+    for (const auto& p : input) found |= (p - v).norm() == 0.0;
+    EXPECT_TRUE(found);
+  }
+  // Closed triangulated sphere: every directed edge once, its reverse once; Euler V - E + F = 2.
+  std::set<std::pair<int, int>> edges;
+  for (const auto& f : h.faces) {
+    for (int e = 0; e < 3; ++e) EXPECT_TRUE(edges.insert({f[e], f[(e + 1) % 3]}).second);
+  }
+  for (const auto& e : edges) EXPECT_TRUE(edges.count({e.second, e.first}));
+  const long nv = static_cast<long>(h.face_vertices), ne = static_cast<long>(edges.size() / 2);
+  EXPECT_EQ(nv - ne + static_cast<long>(h.faces.size()), 2);
+  // Convex, and every other input point inside every face plane.
+  std::set<std::array<double, 3>> kept;
+  for (const auto& v : h.vertices) kept.insert({v.x(), v.y(), v.z()});
+  double worst = -1e300;
+  for (std::size_t f = 0; f < h.faces.size(); ++f) {
+    const Vector3d& a = h.vertices[h.faces[f][0]];
+    for (std::size_t k = 0; k < h.face_vertices; ++k) EXPECT_LE(h.normals[f].dot(h.vertices[k] - a), 1e-9);
+    for (const auto& p : input) {
+      if (!kept.count({p.x(), p.y(), p.z()})) worst = std::max(worst, h.normals[f].dot(p - a));
+    }
+  }
+  return worst;
+}
+
+void writeFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+}
+
+std::string tempPath(const std::string& name) {
+  const char* tmp = std::getenv("TMPDIR");
+  return std::string(tmp ? tmp : "/tmp") + "/moverl_test_geometry_" + std::to_string(::getpid()) + "_" + name;
+}
+
+}  // namespace
+
+TEST(ConvexHull, RandomCloudIsExact) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-0.2, 0.2);
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<Vector3d> pts;
+    for (int i = 0; i < 500; ++i) pts.emplace_back(u(rng), u(rng), u(rng) * 0.3);
+    const mps::ConvexHull h = mps::computeConvexHull(pts);
+    EXPECT_LE(checkHull(h, pts), 1e-12);
+    // Same support function as the whole cloud in every direction: no extreme point was lost.
+    for (int k = 0; k < 200; ++k) {
+      const Vector3d d = randomUnit(&rng);
+      EXPECT_NEAR(support(h.vertices, d), support(pts, d), 1e-15);
+    }
+  }
+}
+
+TEST(ConvexHull, TessellatedCylinderWithFloatNoise) {
+  // The kind of mesh that broke the old vertex selection (issue #15): a finely tessellated round link whose many
+  // cap vertices are coplanar and whose coordinates went through float.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(-1e-7, 1e-7);
+  std::vector<Vector3d> pts;
+  for (int i = 0; i < 256; ++i) {
+    const double a = 2 * M_PI * i / 256;
+    for (double z : {-0.1, -0.05, 0.0, 0.05, 0.1}) {
+      const Vector3d p(0.068 * std::cos(a) + jitter(rng), 0.068 * std::sin(a), z);
+      pts.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
+    }
+    for (double r : {0.02, 0.04}) {
+      pts.emplace_back(static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)), 0.1f);
+    }
+  }
+  const mps::ConvexHull h = mps::computeConvexHull(pts);
+  EXPECT_LE(checkHull(h, pts), 1e-12);
+  EXPECT_LE(h.vertices.size() - h.face_vertices, h.face_vertices / 20) << "too many loose points";
+  for (int k = 0; k < 2000; ++k) {
+    const Vector3d d = randomUnit(&rng);
+    EXPECT_GE(support(h.vertices, d), support(pts, d) - 1e-15);
+  }
+}
+
+TEST(ConvexHull, DegenerateInputsKeepEveryPoint) {
+  std::vector<Vector3d> flat;  // a square grid in the plane z = 0.1
+  for (int i = 0; i < 5; ++i) {
+    for (int j = 0; j < 5; ++j) flat.emplace_back(0.01 * i, 0.01 * j, 0.1);
+  }
+  mps::ConvexHull h = mps::computeConvexHull(flat);
+  EXPECT_TRUE(h.degenerate);
+  EXPECT_EQ(h.vertices.size(), 25u);
+  h = mps::computeConvexHull({Vector3d(0, 0, 0), Vector3d(1, 1, 1), Vector3d(2, 2, 2), Vector3d(3, 3, 3)});
+  EXPECT_TRUE(h.degenerate);  // collinear
+  h = mps::computeConvexHull({Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0)});
+  EXPECT_TRUE(h.degenerate);
+  EXPECT_EQ(h.vertices.size(), 3u);  // duplicates merged
+  // A box given with duplicated corners and interior points: 8 vertices.
+  std::vector<Vector3d> box;
+  for (int k = 0; k < 3; ++k) {
+    for (double x : {-1.0, 1.0}) {
+      for (double y : {-2.0, 2.0}) {
+        for (double z : {-0.5, 0.5}) box.emplace_back(x, y, z);
+      }
+    }
+    box.emplace_back(0.1 * k, 0.0, 0.0);
+    box.emplace_back(1.0, 0.0, 0.0);  // on a face
+  }
+  h = mps::computeConvexHull(box);
+  EXPECT_LE(checkHull(h, box), 1e-12);
+  EXPECT_EQ(h.vertices.size(), 8u);
+}
+
+TEST(ConvexHull, InflationOfABoxIsTight) {
+  // Box corners have a normal cone of an octant: one point would overshoot by sqrt(3); the sub-cones keep it <= 25 %.
+  std::vector<Vector3d> box;
+  for (double x : {-0.1, 0.1}) {
+    for (double y : {-0.05, 0.05}) {
+      for (double z : {-0.02, 0.02}) box.emplace_back(x, y, z);
+    }
+  }
+  const mps::ConvexHull h = mps::computeConvexHull(box);
+  ASSERT_FALSE(h.degenerate);
+  const double r = 0.01;
+  const std::vector<Vector3d> inflated = mps::inflateHull(h, r);
+  std::mt19937 rng(2);
+  double worst = 0.0;
+  for (int k = 0; k < 20000; ++k) {
+    const Vector3d d = randomUnit(&rng);
+    const double grow = support(inflated, d) - support(h.vertices, d);
+    EXPECT_GE(grow, r * (1 - 1e-12));
+    worst = std::max(worst, grow / r);
+  }
+  EXPECT_LE(worst, 1.25 + 1e-9);
+  EXPECT_LE(inflated.size(), 8u * 20u);
+}
+
+TEST(ConvexHull, InflationContainsTheMinkowskiSum) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-0.1, 0.1);
+  std::vector<Vector3d> pts;
+  for (int i = 0; i < 300; ++i) pts.emplace_back(u(rng), 0.2 * u(rng), 3 * u(rng));  // a long, thin, sharp cloud
+  const mps::ConvexHull h = mps::computeConvexHull(pts);
+  const double r = 0.004;
+  const std::vector<Vector3d> inflated = mps::inflateHull(h, r);
+  for (int k = 0; k < 5000; ++k) {
+    const Vector3d d = randomUnit(&rng);
+    const double grow = support(inflated, d) - support(h.vertices, d);
+    EXPECT_GE(grow, r * (1 - 1e-12)) << "direction " << d.transpose();
+    EXPECT_LE(grow, 1.2585 * r);  // at most the icosahedron's 26 % more than needed
+  }
+  // Degenerate hulls (a flat square): icosahedra around every point, still a superset.
+  std::vector<Vector3d> flat = {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0), Vector3d(1, 1, 0)};
+  const mps::ConvexHull fh = mps::computeConvexHull(flat);
+  ASSERT_TRUE(fh.degenerate);
+  const std::vector<Vector3d> finf = mps::inflateHull(fh, r);
+  EXPECT_EQ(finf.size(), 48u);
+  for (int k = 0; k < 2000; ++k) {
+    const Vector3d d = randomUnit(&rng);
+    EXPECT_GE(support(finf, d) - support(flat, d), r * (1 - 1e-12));
+    EXPECT_LE(support(finf, d) - support(flat, d), 1.2585 * r);
+  }
+}
+
+TEST(MeshLoader, ObjPiecesFollowObjectsAndGroups) {
+  const std::string obj =
+      "# two objects, the second split by a group; a bare 'g' (no space) starts nothing, as in PyBullet\n"
+      "mtllib x.mtl\n"
+      "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"
+      "v 5 0 0\nv 6 0 0\nv 5 1 0\nv 5 0 1\n"
+      "v 9 9 9\n"  // used by no face: not part of any piece
+      "o first\nusemtl a\nf 1 2 3\nusemtl b\nf 1/1 2/2 4/4\n"
+      "o second\ng\nf 5//1 6//1 7//1\ng part\nf -5 -4 -3 -2\nl 1 2\n";
+  std::vector<mps::MeshPiece> pieces;
+  std::string error;
+  ASSERT_TRUE(mps::parseObj(obj, Vector3d(2, 1, 1), &pieces, &error)) << error;
+  ASSERT_EQ(pieces.size(), 3u);
+  EXPECT_EQ(pieces[0].name, "first");
+  EXPECT_EQ(pieces[0].vertices.size(), 4u);
+  EXPECT_EQ(pieces[0].triangles.size(), 2u);  // usemtl does not split
+  EXPECT_EQ(pieces[1].name, "second");
+  EXPECT_EQ(pieces[1].vertices.size(), 3u);
+  EXPECT_EQ(pieces[2].name, "part");
+  EXPECT_EQ(pieces[2].vertices.size(), 4u);     // the quad, relative indices
+  EXPECT_EQ(pieces[2].triangles.size(), 2u);    // fanned
+  EXPECT_EQ(pieces[1].vertices[1], Vector3d(12, 0, 0));  // scaled
+  for (const auto& p : pieces) {
+    for (const auto& v : p.vertices) EXPECT_NE(v, Vector3d(18, 9, 9));
+  }
+  pieces.clear();
+  EXPECT_FALSE(mps::parseObj("v 0 0 0\nf 1 2 3\n", Vector3d::Ones(), &pieces, &error));
+  EXPECT_NE(error.find(":2:"), std::string::npos) << error;
+  EXPECT_FALSE(mps::parseObj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", Vector3d::Ones(), &pieces, &error));
+  EXPECT_FALSE(mps::parseObj("v 0 0\n", Vector3d::Ones(), &pieces, &error));
+  EXPECT_FALSE(mps::parseObj("v 0 0 0\n", Vector3d::Ones(), &pieces, &error));  // no faces
+}
+
+TEST(MeshLoader, ColladaUnitAndNodeTransformApplyUpAxisDoesNot) {
+  // A unit triangle-pair in millimetres, Z_UP, under a node translated by (10, 20, 30) mm.
+  const std::string dae = R"(<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit name="millimeter" meter="0.001"/><up_axis>Z_UP</up_axis></asset>
+  <library_geometries>
+    <geometry id="g" name="g"><mesh>
+      <source id="g-pos"><float_array id="g-pos-array" count="12">0 0 0 100 0 0 0 100 0 0 0 100</float_array>
+        <technique_common><accessor source="#g-pos-array" count="4" stride="3">
+          <param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/>
+        </accessor></technique_common></source>
+      <vertices id="g-vtx"><input semantic="POSITION" source="#g-pos"/></vertices>
+      <triangles count="2"><input semantic="VERTEX" source="#g-vtx" offset="0"/><p>0 1 2 0 1 3</p></triangles>
+    </mesh></geometry>
+  </library_geometries>
+  <library_visual_scenes><visual_scene id="s" name="s">
+    <node id="n" name="n"><matrix>1 0 0 10 0 1 0 20 0 0 1 30 0 0 0 1</matrix>
+      <instance_geometry url="#g"/></node>
+  </visual_scene></library_visual_scenes>
+  <scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>
+)";
+  const std::string path = tempPath("mesh.dae");
+  writeFile(path, dae);
+  std::vector<mps::MeshPiece> pieces;
+  std::string error;
+  ASSERT_TRUE(mps::loadMeshPieces(path, Vector3d::Ones(), true, &pieces, &error)) << error;
+  std::remove(path.c_str());
+  ASSERT_EQ(pieces.size(), 1u);
+  std::vector<Vector3d> expected = {Vector3d(0.01, 0.02, 0.03), Vector3d(0.11, 0.02, 0.03), Vector3d(0.01, 0.12, 0.03),
+                                    Vector3d(0.01, 0.02, 0.13)};
+  ASSERT_EQ(pieces[0].vertices.size(), 4u);
+  for (const auto& e : expected) {
+    double best = 1e9;
+    for (const auto& v : pieces[0].vertices) best = std::min(best, (v - e).norm());
+    EXPECT_LT(best, 1e-6) << "missing vertex " << e.transpose();
+  }
+}
+
+// Issue #15: the scene must contain PyBullet's shape of every iiwa link. PyBullet's shape of a binary STL is the
+// convex hull of all its triangle vertices (read here independently of the scene).
+TEST(IiwaMeshes, EveryStlVertexIsInsideTheSceneShape) {
+  const std::string data = pybulletData();
+  ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
+  const std::string urdf = data + "/kuka_iiwa/model.urdf";
+  mps::RobotModelOptions o;
+  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
+  o.mesh_base_dir = data + "/kuka_iiwa";
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(urdf), o, &error);
+  ASSERT_NE(model, nullptr) << error;
+  mps::FclCheckerOptions co = mps::panda::options(kPandaUrdf).checker;
+  co.acm_samples = 0;
+  auto checker = mps::FclCollisionChecker::create(*model, co, &error);
+  ASSERT_NE(checker, nullptr) << error;
+  EXPECT_EQ(checker->degenerateHulls(), 0u);
+  std::mt19937 rng(1);
+  std::vector<double> q(7);
+  for (int i = 0; i < 7; ++i) {
+    std::uniform_real_distribution<double> d(model->lowerLimits()[i], model->upperLimits()[i]);
+    q[i] = d(rng);
+  }
+  std::vector<Eigen::Isometry3d> poses;
+  model->computeLinkTransforms(q.data(), &poses);
+  for (int k = 0; k <= 7; ++k) {
+    const std::string link = "lbr_iiwa_link_" + std::to_string(k);
+    std::ifstream in(data + "/kuka_iiwa/meshes/link_" + std::to_string(k) + ".stl", std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GT(bytes.size(), 84u);
+    std::uint32_t n = 0;
+    std::memcpy(&n, bytes.data() + 80, 4);
+    ASSERT_EQ(bytes.size(), 84u + 50u * n) << link << ": not a binary STL";
+    const int l = model->linkIndex(link);
+    ASSERT_GE(l, 0);
+    const auto& shapes = model->collisionShapes(l);
+    ASSERT_EQ(shapes.size(), 1u);
+    std::vector<Vector3d> points;
+    for (std::uint32_t t = 0; t < n; ++t) {
+      for (int v = 0; v < 3; ++v) {
+        float xyz[3];
+        std::memcpy(xyz, bytes.data() + 84 + 50 * t + 12 + 12 * v, 12);
+        points.push_back(poses[l] * shapes[0].origin * Vector3d(xyz[0], xyz[1], xyz[2]));
+      }
+    }
+    std::vector<std::uint8_t> mask;
+    checker->linkPointMask(q.data(), l, points, 1e-7, &mask);
+    std::size_t outside = 0;
+    for (auto m : mask) outside += m == 0;
+    EXPECT_EQ(outside, 0u) << link << ": " << outside << " of " << points.size() << " STL vertices outside";
+  }
+}
+
+// The FCL shapes of hulls walk the hull's edges for their support function: it must give exactly the support of the
+// point set, for every Panda collision mesh, its hull and both inflations the checker uses, in every direction.
+TEST(FclConvex, SupportEqualsThePointSetsOnEveryPandaMesh) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data (franka_panda/panda.urdf) not found at configure time";
+  const std::string meshes = kPandaUrdf.substr(0, kPandaUrdf.rfind('/')) + "/meshes/collision/";
+  std::mt19937 rng(7);
+  int walked = 0;
+  for (const char* name : {"link0", "link1", "link2", "link3", "link4", "link5", "link6", "link7", "hand", "finger"}) {
+    std::vector<mps::MeshPiece> pieces;
+    std::string error;
+    ASSERT_TRUE(mps::loadMeshPieces(meshes + name + ".obj", Vector3d::Ones(), true, &pieces, &error)) << error;
+    for (const auto& piece : pieces) {
+      const mps::ConvexHull hull = mps::computeConvexHull(piece.vertices);
+      for (const std::vector<Vector3d>& pts : {piece.vertices, hull.vertices, mps::inflateHull(hull, 0.004),
+                                               mps::inflateHull(hull, 0.01)}) {
+        const auto convex = mps::makeFclConvex(pts);
+        walked += pts.size() > 32 && convex->getFaceCount() > 0;  // FCL walks edges above 32 vertices
+        for (int k = 0; k < 2000; ++k) {
+          const Vector3d u = randomUnit(&rng);
+          EXPECT_NEAR(u.dot(convex->findExtremeVertex(u)), support(pts, u), 1e-12) << name;
+        }
+      }
+    }
+  }
+  EXPECT_GT(walked, 20) << "the hull shapes should use FCL's edge walk";
+}
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

@@ -30,6 +30,12 @@ std::string verdictName(Verdict verdict) {
       return "scene_unavailable";
     case Verdict::kExecutionFailed:
       return "execution_failed";
+    case Verdict::kAborted:
+      return "aborted";
+    case Verdict::kDriverUnavailable:
+      return "driver_unavailable";
+    case Verdict::kStateUnavailable:
+      return "state_unavailable";
   }
   return "unknown";
 }

@@ -1,212 +1,298 @@
 // The MoveRL shield node: a thin ROS shell around moverl_shield's core.
 //
-// Per env step (service ~step): read the current state, make ONE ValidateMotion call to the planning scene,
-// then execute the direct move, the replacement plan or the truncated straight move through the driver's
-// ExecuteTrajectory service, or hold still. ~strategy says what happens to an unsafe action (plan, discard,
-// last_safe; see config/shield.yaml). With moving obstacles the scene checks the straight move against where they
-// will be during its execution (motion time = state stamp - stamp of the last reset), and a held-still step
-// executes a zero-motion trajectory of the step's duration so the world keeps moving. Connections are persistent; nothing waits for a service on the hot path. If the scene cannot
-// be reached the shield fails closed: nothing moves and the verdict says SCENE_UNAVAILABLE.
+// Per env step (service ~step): read the robot's current state from the driver, ask the planning scene ONE
+// ValidateMotion question (a function call: by default the shield hosts the scene, see scene_access.h), then execute
+// the direct move, the replacement plan or the truncated straight move through the driver, or hold still. ~strategy says what happens to an unsafe action (plan, discard, last_safe; see
+// config/shield.yaml). ~reset brings the robot to an episode's start: the simulator's teleport when the driver has one,
+// else a shield-checked move (straight, or an OMPL plan).
 //
-// The shield talks to the robot only through what a driver offers: joint states in (the `joint_states`
-// topic and the state returned by each execution) and joint trajectories out. ~reset forwards to a
-// simulator's reset service, when the driver has one.
-#include <chrono>
+// Drivers (drivers.h): the standard control_msgs/FollowJointTrajectory action with the robot's joint states (real
+// robots, the simulator in real time), or the simulator's lockstep services (training). The env sees no difference.
+//
+// Threads: ~step and ~reset are served one at a time on the global callback queue; the driver's joint states and
+// action callbacks run on their own queue and thread, so they arrive while a step waits; a watchdog thread enforces
+// every deadline (deadline.h). Every hop has one, from configuration: a scene in its own process gets its planning time
+// limit plus a margin (in process its calls are bounded by that planning time), the driver the move's duration plus
+// goal_time plus a margin. When one passes the shield fails closed (cancels the goal, holds) and its verdict names the
+// component.
+//
+// Moving obstacles: the scene checks the straight move against where they will be while it executes. In lockstep the
+// window is [motion time of the current state, + the move's duration]; in real time it also covers the time the check
+// may take (check_budget) and the start lead, and the move is stamped to start within it (driver_core.h).
+#include <atomic>
+#include <cmath>
 #include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include <moverl_msgs/ExecuteTrajectory.h>
+#include <control_msgs/FollowJointTrajectoryResult.h>
+#include <moverl_msgs/GetWorld.h>
+#include <moverl_msgs/PlanPath.h>
 #include <moverl_msgs/ResetRobot.h>
 #include <moverl_msgs/ShieldEvent.h>
-#include <trajectory_msgs/JointTrajectory.h>
 #include <moverl_msgs/ShieldStep.h>
 #include <moverl_msgs/ValidateMotion.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
-#include <sensor_msgs/JointState.h>
+#include <trajectory_msgs/JointTrajectory.h>
 
-#include "moverl_shield/kinematics.h"
+#include "deadline.h"
+#include "drivers.h"
+#include "scene_access.h"
+#include "moverl_shield/driver_core.h"
 #include "moverl_shield/shield_core.h"
+#include "moverl_shield/trajectory.h"
 
 namespace moverl_shield {
 namespace {
 
-double secondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+// The core's codes are the messages' codes: checked here, where both are visible, at compile time.
+using StepRes = moverl_msgs::ShieldStep::Response;
+using SceneRes = moverl_msgs::ValidateMotion::Response;
+using FjtResult = control_msgs::FollowJointTrajectoryResult;
+constexpr std::uint8_t code(Verdict v) { return static_cast<std::uint8_t>(v); }
+static_assert(code(Verdict::kSafe) == StepRes::SAFE && code(Verdict::kReplanned) == StepRes::REPLANNED &&
+                  code(Verdict::kDiscardedSelf) == StepRes::DISCARDED_SELF &&
+                  code(Verdict::kDiscardedPose) == StepRes::DISCARDED_POSE &&
+                  code(Verdict::kDiscardedPath) == StepRes::DISCARDED_PATH &&
+                  code(Verdict::kDiscardedStart) == StepRes::DISCARDED_START &&
+                  code(Verdict::kUnchecked) == StepRes::UNCHECKED && code(Verdict::kTruncated) == StepRes::TRUNCATED &&
+                  code(Verdict::kAborted) == StepRes::ABORTED &&
+                  code(Verdict::kInvalidRequest) == StepRes::INVALID_REQUEST &&
+                  code(Verdict::kSceneUnavailable) == StepRes::SCENE_UNAVAILABLE &&
+                  code(Verdict::kExecutionFailed) == StepRes::EXECUTION_FAILED &&
+                  code(Verdict::kDriverUnavailable) == StepRes::DRIVER_UNAVAILABLE &&
+                  code(Verdict::kStateUnavailable) == StepRes::STATE_UNAVAILABLE,
+              "moverl_shield::Verdict differs from moverl_msgs/ShieldStep");
+constexpr std::uint8_t code(SceneOutcome o) { return static_cast<std::uint8_t>(o); }
+static_assert(code(SceneOutcome::kValid) == SceneRes::VALID &&
+                  code(SceneOutcome::kSelfCollision) == SceneRes::SELF_COLLISION &&
+                  code(SceneOutcome::kPoseCollision) == SceneRes::POSE_COLLISION &&
+                  code(SceneOutcome::kPathCollision) == SceneRes::PATH_COLLISION &&
+                  code(SceneOutcome::kStartInCollision) == SceneRes::START_IN_COLLISION &&
+                  code(SceneOutcome::kInvalidRequest) == SceneRes::INVALID_REQUEST,
+              "moverl_shield::SceneOutcome differs from moverl_msgs/ValidateMotion");
+constexpr std::int32_t code(TrajectoryError e) { return static_cast<std::int32_t>(e); }
+static_assert(code(TrajectoryError::kSuccessful) == FjtResult::SUCCESSFUL &&
+                  code(TrajectoryError::kInvalidGoal) == FjtResult::INVALID_GOAL &&
+                  code(TrajectoryError::kInvalidJoints) == FjtResult::INVALID_JOINTS &&
+                  code(TrajectoryError::kOldHeaderTimestamp) == FjtResult::OLD_HEADER_TIMESTAMP &&
+                  code(TrajectoryError::kPathToleranceViolated) == FjtResult::PATH_TOLERANCE_VIOLATED &&
+                  code(TrajectoryError::kGoalToleranceViolated) == FjtResult::GOAL_TOLERANCE_VIOLATED,
+              "moverl_shield::TrajectoryError differs from control_msgs/FollowJointTrajectoryResult");
+
+/// The longest duration a step may ask for (s): an env step lasts dt (0.05 s); anything near this is corrupt input.
+constexpr double kMaxStepDuration = 3600.0;
+
+/// A private parameter that config/shield.yaml must set (the YAML is where every tunable lives, with its comment).
+template <class T>
+T required(const ros::NodeHandle& pnh, const std::string& name) {
+  T value;
+  if (!pnh.getParam(name, value)) {
+    throw std::runtime_error("parameter " + pnh.resolveName(name) + " is not set (load config/shield.yaml)");
+  }
+  return value;
 }
 
-/// A persistent service client that reconnects (without waiting) after its server went away.
-template <class Srv>
-class PersistentClient {
- public:
-  PersistentClient(ros::NodeHandle& nh, std::string name) : nh_(nh), name_(std::move(name)) {}
+std::string describe(CallEnd end, const std::string& service, double timeout) {
+  return end == CallEnd::kTimedOut
+             ? "service " + service + " did not answer within its deadline of " + std::to_string(timeout) + " s"
+             : "service " + service + " is unreachable";
+}
 
-  /// \brief Call the service; on a broken connection reconnect once if the server exists again.
-  bool call(Srv& srv) {
-    for (int attempt = 0; attempt < 2; ++attempt) {
-      if (!client_.isValid()) {
-        if (!ros::service::exists(name_, false)) return false;
-        client_ = nh_.serviceClient<Srv>(name_, /*persistent=*/true);
-      }
-      if (client_.call(srv)) return true;
-      client_.shutdown();
-    }
-    return false;
-  }
-  const std::string& name() const { return name_; }
-
- private:
-  ros::NodeHandle& nh_;
-  std::string name_;
-  ros::ServiceClient client_;
-};
+}  // namespace
 
 class ShieldNode {
  public:
   ShieldNode(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : nh_(nh),
-        scene_(nh_, pnh.param<std::string>("scene_service", "/planning_scene/validate_motion")),
-        execute_(nh_, pnh.param<std::string>("execute_service", "/sim/execute")),
-        reset_(nh_, pnh.param<std::string>("reset_service", "/sim/reset_robot")) {
-    // false: pass targets straight to the driver without checks (the "shield off" baseline).
-    enabled_ = pnh.param("enabled", true);
-    // What happens to an unsafe action: plan (default, the paper's), discard, last_safe.
-    const std::string strategy = pnh.param<std::string>("strategy", "plan");
+      : nh_(nh) {
+    enabled_ = required<bool>(pnh, "enabled");
+    const std::string strategy = required<std::string>(pnh, "strategy");
     if (!parseStrategy(strategy, &strategy_)) {
       throw std::runtime_error("unknown ~strategy '" + strategy + "' (expected one of: " + strategyNames() + ")");
     }
-    if (pnh.hasParam("plan_on_path_collision")) {
-      ROS_WARN("shield: ~plan_on_path_collision is obsolete and ignored; use ~strategy (plan, discard, last_safe)");
+    const std::string profile = required<std::string>(pnh, "profile");
+    if (!parseProfile(profile, &profile_)) {
+      throw std::runtime_error("unknown ~profile '" + profile + "' (expected linear or min_jerk)");
     }
-    // Fraction of the URDF velocity limits used to time plans and direct moves.
-    velocity_scale_ = pnh.param("velocity_scale", 1.0);
+    limits_.velocity_scale = required<double>(pnh, "velocity_scale");
+    reset_velocity_scale_ = required<double>(pnh, "reset_velocity_scale");
+    sample_period_ = required<double>(pnh, "sample_period");
+    scene_margin_ = required<double>(pnh, "scene_margin");
+    check_budget_ = required<double>(pnh, "check_budget");
+    reset_planning_time_ = required<double>(pnh, "reset_planning_time");
+    tracking_budget_ = required<double>(pnh, "tracking_budget");
+    DriverOptions driver;
+    driver.result_margin = required<double>(pnh, "result_margin");
+    driver.max_state_age = required<double>(pnh, "max_state_age");
+    driver.limit_tolerance = required<double>(pnh, "limit_tolerance");
+    driver.start_lead = required<double>(pnh, "start_lead");
+    driver.goal_time = required<double>(pnh, "goal_time");
+    driver.stopped_velocity_tolerance = required<double>(pnh, "stopped_velocity_tolerance");
+    start_lead_ = driver.start_lead;
+    goal_time_ = driver.goal_time;
 
-    std::string urdf, base_link, ee_link;
-    if (!nh.getParam("robot_description", urdf)) throw std::runtime_error("parameter /robot_description is not set");
-    if (!nh.getParam("robot/joints", joints_) || joints_.empty()) {
-      throw std::runtime_error("parameter /robot/joints is not set (load config/robots/<robot>.yaml)");
+    // The planning scene, in this process or behind its services; its robot model is the shield's too.
+    scene_ = SceneAccess::create(required<std::string>(pnh, "scene"), nh, required<std::string>(pnh, "scene_namespace"),
+                                 &watchdog_);
+    const moverl_planning_scene::RobotModel& model = scene_->model();
+    joints_ = model.jointNames();
+    ee_link_ = model.linkIndex(model.eeLink());
+    limits_.velocity = model.velocityLimits();
+    // Optional: the robot's joint acceleration limits (URDFs have none); min_jerk moves respect them.
+    if (nh.getParam("robot/acceleration_limits", limits_.acceleration) &&
+        limits_.acceleration.size() != joints_.size()) {
+      throw std::runtime_error("/robot/acceleration_limits must have one value per controlled joint");
     }
-    if (!nh.getParam("robot/base_link", base_link) || !nh.getParam("robot/ee_link", ee_link)) {
-      throw std::runtime_error("parameters /robot/base_link and /robot/ee_link must be set");
-    }
-    std::map<std::string, double> fixed;
-    nh.getParam("robot/fixed_joint_positions", fixed);
-    kinematics_ = std::make_unique<ChainKinematics>(urdf, base_link, ee_link, joints_, fixed);
-    for (size_t i = 0; i < joints_.size(); ++i) index_[joints_[i]] = i;
+    // Path tolerances: derived from the tracking budget and the scene's joint radius bounds on first use (the scene
+    // publishes them when it is up).
 
-    state_sub_ = nh.subscribe("joint_states", 10, &ShieldNode::onJointState, this);
+    const std::string name = required<std::string>(pnh, "driver");
+    // The driver's callbacks (joint states, action results) run on their own queue and thread.
+    ros::NodeHandle driver_nh(nh);
+    driver_nh.setCallbackQueue(&driver_queue_);
+    if (name == "follow_joint_trajectory") {
+      auto fjt = std::make_unique<FollowJointTrajectoryDriver>(
+          driver_nh, joints_, model.lowerLimits(), model.upperLimits(),
+          required<std::string>(pnh, "action"), required<std::string>(pnh, "joint_states"), driver);
+      driver_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &driver_queue_);
+      driver_spinner_->start();
+      std::string error;
+      if (!fjt->waitUntilReady(required<double>(pnh, "startup_timeout"), &error)) {
+        throw std::runtime_error("the robot's driver is not ready: " + error);
+      }
+      driver_ = std::move(fjt);
+    } else if (name == "sim_service") {
+      driver_ = std::make_unique<SimServiceDriver>(driver_nh, joints_, model.lowerLimits(), model.upperLimits(),
+                                                   required<std::string>(pnh, "execute_service"),
+                                                   required<std::string>(pnh, "reset_service"), driver, &watchdog_);
+      driver_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &driver_queue_);
+      driver_spinner_->start();
+    } else {
+      throw std::runtime_error("unknown ~driver '" + name + "' (expected follow_joint_trajectory or sim_service)");
+    }
+
     step_srv_ = pnh.advertiseService("step", &ShieldNode::step, this);
     reset_srv_ = pnh.advertiseService("reset", &ShieldNode::reset, this);
     events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
-    ROS_INFO("shield ready (%s, strategy %s), %zu joints, scene %s, driver %s", enabled_ ? "enabled" : "DISABLED",
-             strategyName(strategy_).c_str(), joints_.size(), scene_.name().c_str(), execute_.name().c_str());
+    ROS_INFO("shield ready (%s, strategy %s, %s profile), %zu joints, scene %s, driver %s",
+             enabled_ ? "enabled" : "DISABLED", strategyName(strategy_).c_str(), profileName(profile_).c_str(),
+             joints_.size(), scene_->name().c_str(), driver_->name().c_str());
+  }
+
+  ~ShieldNode() {
+    if (driver_spinner_) driver_spinner_->stop();
   }
 
  private:
-  /// Adopt a measured state if it is newer than what we know (stamps from the driver's clock).
-  void onJointState(const sensor_msgs::JointStateConstPtr& msg) {
-    if (have_state_ && msg->header.stamp <= state_stamp_) return;
-    adoptState(*msg);
-  }
-
-  /// Copy a JointState into q_ (controlled joints only). Returns false if a joint is missing.
-  bool adoptState(const sensor_msgs::JointState& msg) {
-    std::vector<double> q(joints_.size(), 0.0);
-    size_t found = 0;
-    for (size_t k = 0; k < msg.name.size() && k < msg.position.size(); ++k) {
-      auto it = index_.find(msg.name[k]);
-      if (it == index_.end()) continue;
-      q[it->second] = msg.position[k];
-      ++found;
+  // ---------------------------------------------------------------------------------------------------- set-up
+  /// Facts that come from the planning scene, fetched once on first use: the obstacles' motion epoch (from its world)
+  /// and the path tolerances (its joint radius bounds and the tracking budget). False with *error if unavailable.
+  bool ensureSceneFacts(std::string* error) {
+    if (scene_facts_) return true;
+    moverl_msgs::GetWorld gw;
+    const double timeout = scene_margin_;
+    const CallEnd end = scene_->world(gw, timeout);
+    if (end != CallEnd::kAnswered) {
+      *error = describe(end, scene_->name(), timeout);
+      return false;
     }
-    if (found != joints_.size()) return false;
-    q_ = std::move(q);
-    state_stamp_ = msg.header.stamp;
-    have_state_ = true;
+    motion_epoch_ = gw.response.world.motion_epoch;
+    SceneFacts facts;
+    if (!scene_->facts(&facts, error)) return false;
+    if (facts.joint_radius_bounds.size() != joints_.size()) {
+      *error = "the planning scene's joint_radius_bounds has " + std::to_string(facts.joint_radius_bounds.size()) +
+               " values for " + std::to_string(joints_.size()) + " joints";
+      return false;
+    }
+    const double padding = facts.padding, resolution = facts.path_resolution;
+    // The padding leaves padding - path_resolution / 2 between the robot and any obstacle along a checked path
+    // (checked states are `padding` clear; between two of them no point moves more than path_resolution). Tracking
+    // errors must stay within that.
+    const double slack = padding - resolution / 2.0;
+    if (tracking_budget_ > slack + 1e-12) {
+      *error = "~tracking_budget " + std::to_string(tracking_budget_) + " m exceeds what the padding leaves along a path (" +
+               std::to_string(slack) + " m = padding - path_resolution / 2)";
+      return false;
+    }
+    driver_->setPathTolerance(pathTolerances(tracking_budget_, facts.joint_radius_bounds));
+    planning_time_ = facts.planning_time;
+    scene_facts_ = true;
     return true;
   }
 
-  void fillState(sensor_msgs::JointState& state, geometry_msgs::Pose& ee) const {
-    state.header.stamp = state_stamp_;
-    state.name = joints_;
-    state.position = q_;
-    const Pose pose = kinematics_->endEffectorPose(q_);
-    ee.position.x = pose.position[0];
-    ee.position.y = pose.position[1];
-    ee.position.z = pose.position[2];
-    ee.orientation.x = pose.orientation[0];
-    ee.orientation.y = pose.orientation[1];
-    ee.orientation.z = pose.orientation[2];
-    ee.orientation.w = pose.orientation[3];
-  }
+  double sceneTimeout() const { return planning_time_ + scene_margin_; }
 
+  // ----------------------------------------------------------------------------------------------------- step
   bool step(moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
     res.strategy = enabled_ ? strategyName(strategy_) : "";
     res.unsafe_cause = 0;
     res.truncated_fraction = -1.0;
+    res.driver_error_code = 0;
+    res.contacts.available = driver_->sensesContacts();
     const bool publish = events_pub_.getNumSubscribers() > 0;  // visualisation only: nothing extra otherwise
-    std::vector<double> start;
-    if (publish) start = q_;
-    const ros::Time start_stamp = state_stamp_;
     executed_.points.clear();
-    res.verdict = static_cast<uint8_t>(run(req, res));
-    if (publish) publishEvent(req, res, start, start_stamp);
-    if (have_state_) fillState(res.state, res.ee_pose);
-    if (!res.contacts.header.stamp.isZero()) return true;
-    // No motion this step: no contacts, as far as the driver's last report goes.
-    res.contacts.header.stamp = state_stamp_;
-    res.contacts.available = contacts_available_;
-    res.contacts.total_contact_substeps = total_contact_substeps_;
+    RobotState start;
+    res.verdict = code(run(req, res, &start));
+    if (publish) publishEvent(req, res, start);
+    if (have_state_) fillState(last_, res.state, res.ee_pose);
+    if (res.contacts.header.stamp.isZero()) {
+      // No motion this step: no contacts, as far as the driver's last report goes.
+      res.contacts.header.stamp = last_.stamp;
+      res.contacts.total_contact_substeps = total_contact_substeps_;
+    }
     return true;
   }
 
-  /// Tell visualisers and loggers what this step did (only called while ~events has subscribers).
-  void publishEvent(const moverl_msgs::ShieldStep::Request& req, const moverl_msgs::ShieldStep::Response& res,
-                    const std::vector<double>& start, const ros::Time& stamp) {
-    moverl_msgs::ShieldEvent ev;
-    ev.header.stamp = stamp;
-    ev.verdict = res.verdict;
-    ev.verdict_name = verdictName(static_cast<Verdict>(res.verdict));
-    ev.joint_names = joints_;
-    ev.start = start;
-    ev.target = req.target;
-    ev.executed = executed_;
-    ev.pairs = res.pairs;
-    events_pub_.publish(ev);
-  }
-
-  Verdict run(const moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
-    const std::string bad = validateTarget(req.target, joints_.size());
+  Verdict run(const moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res, RobotState* s) {
+    if (abandoned(req.not_after)) {
+      res.message = "request served after its caller gave up on it (the shield was stalled): nothing moves";
+      ROS_WARN("shield: %s", res.message.c_str());
+      return Verdict::kInvalidRequest;
+    }
+    std::string bad = validateTarget(req.target, joints_.size());
+    if (bad.empty() && !(std::isfinite(req.duration) && req.duration >= 0.0 && req.duration <= kMaxStepDuration)) {
+      bad = "duration must be finite, >= 0 and <= " + std::to_string(kMaxStepDuration) + " s, got " +
+            std::to_string(req.duration);
+    }
     if (!bad.empty()) {
       res.message = bad;
       return Verdict::kInvalidRequest;
     }
-    if (!have_state_) {
-      res.message = "no joint state received yet from the driver (topic joint_states or ~reset)";
-      return Verdict::kExecutionFailed;
+    std::string error;
+    if (!driver_->currentState(s, &error)) {
+      res.message = "joint states: " + error;
+      return Verdict::kStateUnavailable;
+    }
+    adopt(*s);
+    const bool real_time = driver_->realTime();
+    if (!ensureSceneFacts(&error)) {
+      res.message = "planning scene: " + error + ": failing closed, robot held";
+      return Verdict::kSceneUnavailable;
     }
     Decision decision;
     if (!enabled_) {
-      decision = passThrough(q_, req.target);
+      decision = passThrough(s->q, req.target);
     } else {
       moverl_msgs::ValidateMotion vm;
-      vm.request.start = q_;
+      vm.request.start = s->q;
       vm.request.goal = req.target;
       vm.request.plan_on_path_collision = wantsPlan(strategy_);
       vm.request.find_last_free = wantsLastFree(strategy_);
-      // Moving obstacles: the straight move is checked against where they will be while it executes, i.e. over
-      // [motion time of the current state, + the move's executed duration] (timed exactly as execute() will).
-      vm.request.start_time = (state_stamp_ - motion_epoch_).toSec();
+      double straight;
       try {
-        vm.request.duration =
-            timeWaypoints({q_, req.target}, kinematics_->velocityLimits(), req.duration, velocity_scale_).back();
+        straight = timeTrajectory(profile_, {s->q, req.target}, limits_, req.duration, sample_period_).duration();
       } catch (const std::exception& e) {
         res.message = std::string("cannot time the move: ") + e.what();
         return Verdict::kExecutionFailed;
       }
-      if (!scene_.call(vm)) {
-        res.message = "planning scene service " + scene_.name() + " is unreachable: failing closed, robot held";
+      const ros::Time check_begin = real_time ? ros::Time::now() : ros::Time();
+      setWindow(*s, check_begin, straight, &vm.request);
+      const double timeout = sceneTimeout();
+      const CallEnd end = scene_->validate(vm, timeout);
+      if (end != CallEnd::kAnswered) {
+        res.message = "planning scene: " + describe(end, scene_->name(), timeout) + ": failing closed, robot held";
         ROS_WARN_THROTTLE(5.0, "%s", res.message.c_str());
         return Verdict::kSceneUnavailable;
       }
@@ -222,14 +308,22 @@ class ShieldNode {
       for (const auto& p : vm.response.path.points) answer.plan.push_back(p.positions);
       answer.last_free_fraction = vm.response.last_free_fraction;
       answer.last_free_state = vm.response.last_free_state;
-      decision = decide(strategy_, answer, q_, req.target);
+      decision = decide(strategy_, answer, s->q, req.target);
       res.unsafe_cause = decision.unsafe_cause;
       res.truncated_fraction = decision.truncated_fraction;
-      if (decision.waypoints.empty() && vm.response.moving_obstacles && req.duration > 0.0 &&
-          decision.verdict != Verdict::kSceneUnavailable) {
-        // Hold still for the step's duration through the driver, so that the obstacles keep moving in lockstep
-        // time. Safe: the robot rests at a state checked free of every obstacle's whole motion envelope.
-        decision.waypoints = {q_, q_};
+      const bool windowed = decision.verdict == Verdict::kSafe || decision.verdict == Verdict::kTruncated;
+      if (real_time && windowed && (ros::Time::now() - check_begin).toSec() > check_budget_) {
+        // The window checked assumed the move starts within check_budget + start_lead of the check: too late now.
+        res.message = "planning scene answered after " + std::to_string((ros::Time::now() - check_begin).toSec()) +
+                      " s, beyond the real-time check_budget of " + std::to_string(check_budget_) +
+                      " s: the move was not sent (failing closed)";
+        return Verdict::kSceneUnavailable;
+      }
+      if (!real_time && decision.waypoints.empty() && vm.response.moving_obstacles && req.duration > 0.0 &&
+          decision.verdict != Verdict::kSceneUnavailable && decision.verdict != Verdict::kInvalidRequest) {
+        // Lockstep: hold still for the step's duration through the driver, so that the obstacles keep moving.
+        // Safe: the robot rests at a state checked free of every obstacle's whole motion envelope.
+        decision.waypoints = {s->q};
       }
       if (decision.verdict == Verdict::kTruncated) {
         res.message += "; truncated: moved to the last safe state at fraction " +
@@ -237,92 +331,260 @@ class ShieldNode {
       }
     }
     if (decision.waypoints.empty()) return decision.verdict;
-    return execute(decision, req.duration, res);
+    return move(decision.waypoints, decision.verdict, req.duration, limits_, res);
   }
 
-  Verdict execute(const Decision& decision, double duration, moverl_msgs::ShieldStep::Response& res) {
-    std::vector<double> times;
+  /// The ValidateMotion window of the straight move from state s (see driver_core.h realTimeWindow).
+  void setWindow(const RobotState& s, const ros::Time& check_begin, double duration,
+                 moverl_msgs::ValidateMotion::Request* vm) const {
+    if (driver_->realTime()) {
+      const MotionWindow w = realTimeWindow(s.stamp.toSec(), motion_epoch_.toSec(),
+                                            check_begin.toSec() + check_budget_ + start_lead_, duration, goal_time_);
+      vm->start_time = w.start_time;
+      vm->duration = w.duration;
+    } else {
+      vm->start_time = s.stamp.toSec() - motion_epoch_.toSec();  // in doubles: any stamp a driver sends is safe
+      vm->duration = duration;
+    }
+  }
+
+  /// Time and execute waypoints (the first is the current state); the verdict after the driver's result.
+  Verdict move(const Waypoints& waypoints, Verdict decided, double min_duration, const TimingLimits& limits,
+               moverl_msgs::ShieldStep::Response& res) {
+    TimedTrajectory trajectory;
     try {
-      times = timeWaypoints(decision.waypoints, kinematics_->velocityLimits(), duration, velocity_scale_);
+      trajectory = timeTrajectory(profile_, waypoints, limits, min_duration, sample_period_);
     } catch (const std::exception& e) {
       res.message = std::string("cannot time the trajectory: ") + e.what();
       return Verdict::kExecutionFailed;
     }
-    moverl_msgs::ExecuteTrajectory ex;
-    ex.request.trajectory.joint_names = joints_;
-    ex.request.trajectory.points.resize(decision.waypoints.size());
-    for (size_t k = 0; k < decision.waypoints.size(); ++k) {
-      ex.request.trajectory.points[k].positions = decision.waypoints[k];
-      ex.request.trajectory.points[k].time_from_start = ros::Duration(times[k]);
+    if (!(trajectory.duration() > 0.0)) return decided;  // nothing to move (e.g. a reset to where the robot stands)
+    if (events_pub_.getNumSubscribers() > 0) {
+      executed_.joint_names = joints_;
+      executed_.points.resize(trajectory.positions.size());
+      for (std::size_t k = 0; k < trajectory.positions.size(); ++k) {
+        executed_.points[k].positions = trajectory.positions[k];
+        executed_.points[k].time_from_start = ros::Duration(trajectory.times[k]);
+      }
     }
-    if (events_pub_.getNumSubscribers() > 0) executed_ = ex.request.trajectory;  // for ~events only
-    const auto start = std::chrono::steady_clock::now();
-    const bool called = execute_.call(ex);
-    res.execution_time = secondsSince(start);
-    if (!called) {
-      res.message = "driver service " + execute_.name() + " is unreachable";
-      return Verdict::kExecutionFailed;
+    const ros::Time start = driver_->realTime() ? ros::Time::now() + ros::Duration(start_lead_) : ros::Time();
+    MoveResult r = driver_->execute(trajectory, start);
+    setExecution(r, res);
+    const Verdict verdict = verdictForDriverEnd(decided, r.end, r.error_code);
+    if (verdict != decided) {
+      res.message = "driver " + driver_->name() + ": " + r.message + (res.message.empty() ? "" : " (" + res.message + ")");
     }
-    adoptState(ex.response.state);
-    res.contacts = ex.response.contacts;
-    contacts_available_ = ex.response.contacts.available;
-    total_contact_substeps_ = ex.response.contacts.total_contact_substeps;
-    if (ex.response.outcome != moverl_msgs::ExecuteTrajectory::Response::SUCCESS) {
-      res.message = "driver refused the trajectory: " + ex.response.message;
-      return Verdict::kExecutionFailed;
+    RobotState after;
+    std::string error;
+    if (r.end != DriverEnd::kTimedOut && r.end != DriverEnd::kUnreachable) {
+      if (!driver_->currentState(&after, &error)) {
+        res.message = "joint states after the move: " + error;
+        return Verdict::kStateUnavailable;
+      }
+      adopt(after);
     }
-    return decision.verdict;
+    return verdict;
   }
 
+  void setExecution(const MoveResult& r, moverl_msgs::ShieldStep::Response& res) {
+    res.execution_time = r.seconds;
+    res.driver_error_code = r.error_code;
+    if (r.contacts.available) {
+      res.contacts = r.contacts;
+      total_contact_substeps_ = r.contacts.total_contact_substeps;
+    }
+  }
+
+  void adopt(const RobotState& s) {
+    last_ = s;
+    have_state_ = true;
+  }
+
+  void fillState(const RobotState& s, sensor_msgs::JointState& state, geometry_msgs::Pose& ee) const {
+    state.header.stamp = s.stamp;
+    state.name = joints_;
+    state.position = s.q;
+    scene_->model().computeLinkTransforms(s.q.data(), &link_poses_);
+    const Eigen::Isometry3d& pose = link_poses_[static_cast<std::size_t>(ee_link_)];
+    const Eigen::Quaterniond q(pose.linear());
+    ee.position.x = pose.translation().x();
+    ee.position.y = pose.translation().y();
+    ee.position.z = pose.translation().z();
+    ee.orientation.x = q.x();
+    ee.orientation.y = q.y();
+    ee.orientation.z = q.z();
+    ee.orientation.w = q.w();
+  }
+
+  /// Tell visualisers and loggers what this step did (only called while ~events has subscribers).
+  void publishEvent(const moverl_msgs::ShieldStep::Request& req, const moverl_msgs::ShieldStep::Response& res,
+                    const RobotState& start) {
+    moverl_msgs::ShieldEvent ev;
+    ev.header.stamp = start.stamp;
+    ev.verdict = res.verdict;
+    ev.verdict_name = verdictName(static_cast<Verdict>(res.verdict));
+    ev.joint_names = joints_;
+    ev.start = start.q;
+    ev.target = req.target;
+    ev.executed = executed_;
+    ev.pairs = res.pairs;
+    events_pub_.publish(ev);
+  }
+
+  // ---------------------------------------------------------------------------------------------------- reset
   bool reset(moverl_msgs::ResetRobot::Request& req, moverl_msgs::ResetRobot::Response& res) {
+    res.success = false;
+    res.unreachable = false;
+    std::string error;
+    if (abandoned(req.not_after)) {
+      res.message = "reset served after its caller gave up on it (the shield was stalled): nothing moves";
+      ROS_WARN("shield: %s", res.message.c_str());
+      return true;
+    }
+    if (req.positions.empty()) {  // start the episode where the robot is
+      RobotState s;
+      if (!driver_->currentState(&s, &error)) {
+        res.message = "joint states: " + error;
+        return true;
+      }
+      adopt(s);
+      if (!ensureSceneFacts(&error)) {
+        res.message = "planning scene: " + error;
+        return true;
+      }
+      res.success = true;
+      res.motion_epoch = motion_epoch_;
+      geometry_msgs::Pose unused;
+      fillState(last_, res.state, unused);
+      return true;
+    }
     const std::string bad = validateTarget(req.positions, joints_.size());
     if (!bad.empty()) {
-      res.success = false;
       res.message = bad;
       return true;
     }
-    moverl_msgs::ResetRobot fwd;
-    fwd.request = req;
-    if (!reset_.call(fwd)) {
-      res.success = false;
-      res.message = "driver reset service " + reset_.name() + " is unreachable (hardware drivers have none)";
+    if (driver_->canTeleport()) {
+      if (!driver_->teleport(req.positions, &res, &error)) {
+        res.success = false;
+        res.message = error;
+        return true;
+      }
+      motion_epoch_ = res.state.header.stamp;  // the simulator restarted the obstacles' motions at this stamp
+      RobotState s;
+      driver_->currentState(&s, &error);
+      adopt(s);
+    } else if (!ensureSceneFacts(&error)) {
+      res.message = "planning scene: " + error;
       return true;
+    } else {
+      plannedReset(req.positions, res);
     }
-    res = fwd.response;
-    if (res.success && adoptState(res.state)) {
-      motion_epoch_ = res.state.header.stamp;  // the driver restarted the obstacles' motions at this stamp
-      // Report the controlled joints only, in their configured order (as ~step does).
-      res.state.name = joints_;
-      res.state.position = q_;
-      res.state.velocity.clear();
-      res.state.effort.clear();
+    res.motion_epoch = motion_epoch_;
+    if (have_state_) {
+      geometry_msgs::Pose unused;
+      res.state = sensor_msgs::JointState();
+      fillState(last_, res.state, unused);
     }
     return true;
   }
 
+  /// A reset with a driver that cannot teleport: move there, checked as a step is, at reset_velocity_scale.
+  void plannedReset(const std::vector<double>& target, moverl_msgs::ResetRobot::Response& res) {
+    RobotState s;
+    std::string error;
+    if (!driver_->currentState(&s, &error)) {
+      res.message = "joint states: " + error;
+      return;
+    }
+    adopt(s);
+    TimingLimits limits = limits_;
+    limits.velocity_scale = reset_velocity_scale_;
+    Waypoints waypoints{s.q, target};
+    if (enabled_) {
+      moverl_msgs::ValidateMotion vm;
+      vm.request.start = s.q;
+      vm.request.goal = target;
+      vm.request.plan_on_path_collision = false;  // planned below with the reset's own time limit
+      vm.request.find_last_free = false;
+      const double straight = timeTrajectory(profile_, waypoints, limits, 0.0, sample_period_).duration();
+      const ros::Time check_begin = ros::Time::now();
+      setWindow(s, check_begin, straight, &vm.request);
+      const double timeout = sceneTimeout();
+      const CallEnd end = scene_->validate(vm, timeout);
+      if (end != CallEnd::kAnswered) {
+        res.message = "planning scene: " + describe(end, scene_->name(), timeout);
+        return;
+      }
+      switch (vm.response.outcome) {
+        case SceneRes::VALID:
+          if ((ros::Time::now() - check_begin).toSec() > check_budget_) {
+            res.message = "planning scene answered beyond the real-time check_budget: reset move not sent";
+            return;
+          }
+          break;
+        case SceneRes::PATH_COLLISION: {
+          moverl_msgs::PlanPath plan;
+          plan.request.start = s.q;
+          plan.request.goal = target;
+          plan.request.time_limit = reset_planning_time_;
+          const double plan_timeout = reset_planning_time_ + scene_margin_;
+          const CallEnd pend = scene_->plan(plan, plan_timeout);
+          if (pend != CallEnd::kAnswered) {
+            res.message = "planning scene: " + describe(pend, scene_->name(), plan_timeout);
+            return;
+          }
+          if (plan.response.outcome != moverl_msgs::PlanPath::Response::SUCCESS) {
+            res.unreachable = plan.response.outcome == moverl_msgs::PlanPath::Response::NO_SOLUTION;
+            res.message = "no collision-free path to the reset target: " + plan.response.message;
+            return;
+          }
+          waypoints.clear();
+          for (const auto& p : plan.response.path.points) waypoints.push_back(p.positions);
+          waypoints.front() = s.q;
+          break;
+        }
+        case SceneRes::START_IN_COLLISION:
+          res.message = "the robot is not free where it stands (" + vm.response.message +
+                        "): a planned reset cannot start from there; move the robot out by hand (or with its "
+                        "teach pendant) and reset again";
+          return;
+        default:
+          res.message = "reset target refused: " + vm.response.message;
+          return;
+      }
+    }
+    moverl_msgs::ShieldStep::Response step_res;  // the move's report, for its message
+    const Verdict v = move(waypoints, enabled_ ? Verdict::kSafe : Verdict::kUnchecked, 0.0, limits, step_res);
+    res.success = v == Verdict::kSafe || v == Verdict::kUnchecked;
+    res.message = step_res.message;
+  }
+
   ros::NodeHandle& nh_;
-  PersistentClient<moverl_msgs::ValidateMotion> scene_;
-  PersistentClient<moverl_msgs::ExecuteTrajectory> execute_;
-  PersistentClient<moverl_msgs::ResetRobot> reset_;
-  ros::Subscriber state_sub_;
+  Watchdog watchdog_;
+  ros::CallbackQueue driver_queue_;
+  std::unique_ptr<ros::AsyncSpinner> driver_spinner_;
+  std::unique_ptr<SceneAccess> scene_;
+  std::unique_ptr<Driver> driver_;
   ros::Publisher events_pub_;
-  trajectory_msgs::JointTrajectory executed_;  // what this step sent to the driver
+  trajectory_msgs::JointTrajectory executed_;  // what this step sent to the driver (for ~events)
   ros::ServiceServer step_srv_, reset_srv_;
-  std::unique_ptr<ChainKinematics> kinematics_;
   std::vector<std::string> joints_;
-  std::map<std::string, size_t> index_;
+  int ee_link_ = -1;                                  ///< index of the end-effector link in the model's links
+  mutable std::vector<Eigen::Isometry3d> link_poses_;  ///< FK scratch
   bool enabled_ = true;
   Strategy strategy_ = Strategy::kPlan;
-  double velocity_scale_ = 1.0;
-  std::vector<double> q_;
-  ros::Time state_stamp_;
-  ros::Time motion_epoch_;  ///< stamp of the last successful reset: motion time 0 of moving obstacles
+  Profile profile_ = Profile::kLinear;
+  TimingLimits limits_;
+  double reset_velocity_scale_ = 0.0, sample_period_ = 0.0, scene_margin_ = 0.0, check_budget_ = 0.0;
+  double reset_planning_time_ = 0.0, tracking_budget_ = 0.0, start_lead_ = 0.0, goal_time_ = 0.0;
+  double planning_time_ = 0.0;
+  bool scene_facts_ = false;
+  RobotState last_;  ///< the latest state the shield knows (reported in responses)
   bool have_state_ = false;
-  bool contacts_available_ = false;
-  uint64_t total_contact_substeps_ = 0;
+  ros::Time motion_epoch_;  ///< when the obstacles' motion time was 0 (driver clock)
+  std::uint64_t total_contact_substeps_ = 0;
 };
 
-}  // namespace
 }  // namespace moverl_shield
 
 int main(int argc, char** argv) {

@@ -23,9 +23,12 @@ enum class Verdict : uint8_t {
   kDiscardedStart = 5,    ///< the current state is not free: held still
   kUnchecked = 6,         ///< shield disabled: executed straight without checks
   kTruncated = 7,         ///< unsafe target (last_safe): moved straight to the last safe state before the collision
+  kAborted = 8,           ///< the driver stopped the move on the way (path/goal tolerance): the episode should end
   kInvalidRequest = 10,   ///< malformed target: nothing moves
-  kSceneUnavailable = 11, ///< planning scene unreachable or failed: fail closed
-  kExecutionFailed = 12,  ///< the driver refused or failed the trajectory
+  kSceneUnavailable = 11, ///< planning scene unreachable, failed or late: fail closed
+  kExecutionFailed = 12,  ///< the driver refused the trajectory
+  kDriverUnavailable = 13,  ///< the driver is unreachable or gave no result by the deadline: fail closed
+  kStateUnavailable = 14,   ///< no fresh, complete, in-limits joint state: fail closed
 };
 
 /// Outcome codes of moverl_msgs/ValidateMotion.srv, as the scene reports them.

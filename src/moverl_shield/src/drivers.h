@@ -1,0 +1,165 @@
+// The shield's two ways of driving a robot (ROS part of the shield node).
+//
+//  - FollowJointTrajectoryDriver: the standard interface of every ROS 1 arm (ros_control's joint_trajectory_controller,
+//    franka_ros, ur_robot_driver, gazebo_ros_control, moverl_sim in real time): an actionlib client of
+//    control_msgs/FollowJointTrajectory and the robot's sensor_msgs/JointState topic, joints matched by name. Time
+//    passes while the shield thinks: moves are stamped to start a little ahead, the state a move starts from must be
+//    fresh (a watchdog), every goal carries the path and goal tolerances the padding covers.
+//  - SimServiceDriver: the simulator's lockstep services (moverl_msgs/ExecuteTrajectory, ResetRobot), a speed extension
+//    for training: simulated time stands still between calls, the state comes back with every response, and the
+//    simulator reports ground-truth contacts.
+#pragma once
+
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <actionlib/client/simple_action_client.h>
+#include <control_msgs/FollowJointTrajectoryAction.h>
+#include <moverl_msgs/ContactReport.h>
+#include <moverl_msgs/ExecuteTrajectory.h>
+#include <moverl_msgs/ResetRobot.h>
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+#include <sensor_msgs/JointState.h>
+
+#include "deadline.h"
+#include "moverl_shield/driver_core.h"
+#include "moverl_shield/trajectory.h"
+
+namespace moverl_shield {
+
+/// \brief The robot state a decision starts from.
+struct RobotState {
+  std::vector<double> q;  ///< controlled joints, configured order, clamped into the limits
+  ros::Time stamp;        ///< measurement time on the driver's clock
+};
+
+/// \brief How a move ended, as the shield reports it.
+struct MoveResult {
+  DriverEnd end = DriverEnd::kUnreachable;
+  std::int32_t error_code = 0;  ///< control_msgs/FollowJointTrajectoryResult code (0 when none)
+  std::string message;          ///< the driver's error string, or why the shield gave up
+  moverl_msgs::ContactReport contacts;  ///< ground truth (available=false when the driver has none)
+  double seconds = 0.0;         ///< wall time spent waiting for the driver
+};
+
+/// \brief Tunables of both drivers (set from config/shield.yaml, where each is commented).
+struct DriverOptions {
+  double result_margin = 2.0;   ///< s a result may come after the move's planned end before the move counts as lost
+  double max_state_age = 0.5;   ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
+  double limit_tolerance = 0.02;  ///< rad (m): states this far beyond a joint limit are clamped onto it
+  double start_lead = 0.02;     ///< s between sending a goal and its start stamp (transport to the controller)
+  double goal_time = 0.5;       ///< s the controller may take after the trajectory's end to settle (goal_time_tolerance)
+  double stopped_velocity_tolerance = 0.01;  ///< rad/s: goal velocity tolerance (at rest)
+};
+
+/// \brief Interface of a robot driver as the shield uses it.
+class Driver {
+ public:
+  virtual ~Driver() = default;
+  /// \brief "follow_joint_trajectory" or "sim_service".
+  virtual std::string name() const = 0;
+  /// \brief Time passes while the shield thinks (moves are stamped ahead and windows cover the latency).
+  virtual bool realTime() const = 0;
+  /// \brief The simulator can place the robot instantly (ResetRobot) and restarts the obstacles' motions then.
+  virtual bool canTeleport() const = 0;
+  /// \brief Contacts are measured (a simulator) rather than unknown.
+  virtual bool sensesContacts() const = 0;
+  /// \brief The state to decide a move from. False with *error (fail closed: no move) when there is none that is fresh,
+  ///        complete and within the limit tolerance. May wait up to max_state_age for a fresh one (real-time drivers).
+  virtual bool currentState(RobotState* state, std::string* error) = 0;
+  /// \brief Execute a timed trajectory whose first point is the current state, starting at `start` (driver clock;
+  ///        ignored by lockstep drivers). Blocks until it ended, failed or passed its deadline (then it is cancelled).
+  virtual MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) = 0;
+  /// \brief Teleport (canTeleport() only). False with *error when the driver is unreachable or refused.
+  virtual bool teleport(const std::vector<double>& q, moverl_msgs::ResetRobot::Response* res, std::string* error) = 0;
+  /// \brief Path (and goal position) tolerance per controlled joint sent with every move from now on.
+  void setPathTolerance(std::vector<double> tolerance) { path_tolerance_ = std::move(tolerance); }
+
+ protected:
+  std::vector<double> path_tolerance_;
+};
+
+/// \brief The simulator's lockstep services.
+class SimServiceDriver : public Driver {
+ public:
+  SimServiceDriver(ros::NodeHandle nh, const std::vector<std::string>& joints, const std::vector<double>& lower,
+                   const std::vector<double>& upper, const std::string& execute_service,
+                   const std::string& reset_service, const DriverOptions& options, Watchdog* watchdog);
+  std::string name() const override { return "sim_service"; }
+  bool realTime() const override { return false; }
+  bool canTeleport() const override { return true; }
+  bool sensesContacts() const override { return true; }
+  bool currentState(RobotState* state, std::string* error) override;
+  MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) override;
+  bool teleport(const std::vector<double>& q, moverl_msgs::ResetRobot::Response* res, std::string* error) override;
+
+ private:
+  bool adopt(const sensor_msgs::JointState& msg, std::string* error);
+  void onJointState(const sensor_msgs::JointStateConstPtr& msg);
+
+  JointStateMapper mapper_;
+  std::vector<double> lower_, upper_;
+  DriverOptions options_;
+  DeadlineClient<moverl_msgs::ExecuteTrajectory> execute_;
+  DeadlineClient<moverl_msgs::ResetRobot> reset_;
+  ros::Subscriber state_sub_;  ///< the first state only (the others come with the responses)
+  std::mutex mutex_;           ///< guards the state against the subscriber
+  RobotState state_;
+  bool have_state_ = false;
+  std::string state_error_;
+};
+
+/// \brief control_msgs/FollowJointTrajectory + sensor_msgs/JointState.
+class FollowJointTrajectoryDriver : public Driver {
+ public:
+  /// \param nh a handle whose callbacks run on their own queue and thread (the shield serves its step meanwhile)
+  FollowJointTrajectoryDriver(ros::NodeHandle nh, const std::vector<std::string>& joints,
+                              const std::vector<double>& lower, const std::vector<double>& upper,
+                              const std::string& action, const std::string& joint_states, const DriverOptions& options);
+  std::string name() const override { return "follow_joint_trajectory"; }
+  bool realTime() const override { return true; }
+  bool canTeleport() const override { return false; }
+  bool sensesContacts() const override { return false; }
+  bool currentState(RobotState* state, std::string* error) override;
+  MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) override;
+  bool teleport(const std::vector<double>&, moverl_msgs::ResetRobot::Response*, std::string* error) override {
+    *error = "a FollowJointTrajectory driver cannot teleport";
+    return false;
+  }
+  /// \brief Wait (up to `timeout` s of wall time) until the action server is connected and a joint state arrived.
+  bool waitUntilReady(double timeout, std::string* error);
+
+ private:
+  using Client = actionlib::SimpleActionClient<control_msgs::FollowJointTrajectoryAction>;
+  void onJointState(const sensor_msgs::JointStateConstPtr& msg);
+  double goal_time_plus_margin() const { return options_.goal_time + options_.result_margin; }
+  /// Wait for a state received after `after` (steady clock), up to `until`. False on timeout.
+  bool waitForStateAfter(SteadyClock::time_point after, SteadyClock::time_point until);
+
+  JointStateMapper mapper_;
+  std::vector<double> lower_, upper_;
+  std::string action_name_, joint_states_topic_;
+  DriverOptions options_;
+  std::unique_ptr<Client> client_;
+  ros::Subscriber state_sub_;
+  std::mutex mutex_;
+  std::condition_variable state_cv_, result_cv_;
+  // Latest measured state (controlled joints, unclamped), its stamp and arrival; the error of the last message, if any.
+  std::vector<double> q_;
+  ros::Time stamp_;
+  SteadyClock::time_point received_{};
+  std::string state_error_;
+  std::uint64_t states_ = 0;
+  SteadyClock::time_point last_move_end_{};  ///< arrival of the last move's result: states must be newer
+  // The goal in flight: its end and result.
+  std::uint64_t goal_id_ = 0;
+  bool goal_done_ = false;
+  actionlib::SimpleClientGoalState goal_state_{actionlib::SimpleClientGoalState::LOST};
+  control_msgs::FollowJointTrajectoryResult goal_result_;
+};
+
+}  // namespace moverl_shield

@@ -24,10 +24,10 @@ def test_motion_is_parsed_and_the_axis_normalised():
 
 def test_oscillation_model():
     m = ObjectMotion(axis=(0.0, 1.0, 0.0), amplitude=0.5, period=2.0, phase=0.0)
-    assert m.offset(0.0) == pytest.approx((0, 0, 0))
-    assert m.offset(0.5) == pytest.approx((0, 0.5, 0))       # quarter period: +amplitude
-    assert m.offset(1.5) == pytest.approx((0, -0.5, 0))
-    assert m.offset(2.0) == pytest.approx((0, 0, 0), abs=1e-12)
+    assert m.displacement(0.0) == pytest.approx(0.0)
+    assert m.displacement(0.5) == pytest.approx(0.5)        # quarter period: +amplitude
+    assert m.displacement(1.5) == pytest.approx(-0.5)
+    assert m.displacement(2.0) == pytest.approx(0.0, abs=1e-12)
     assert m.max_speed == pytest.approx(math.pi * 0.5)
     o = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0}).objects[0]
     assert o.position_at(0.5) == pytest.approx((0.307, 1.0, 0.59))   # xyz is the centre of the swing
@@ -115,3 +115,24 @@ def test_world_message_carries_the_motion():
     assert o.pose.position.y == pytest.approx(1.0)   # the pose at t = 0: centre + amplitude * sin(phase)
     static = world_to_msg(_world(None)).objects[0]
     assert static.motion.type == ObstacleMotion.NONE and static.pose.position.y == pytest.approx(0.5)
+
+
+def test_displacement_matches_the_shared_cases():
+    """The same cases the C++ twin (the planning scene's ObstacleMotion::displacement) is checked on."""
+    import os
+
+    import numpy as np
+
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", "obstacle_motion_cases.txt")
+    cases = np.loadtxt(path)
+    assert cases.shape == (40, 5)
+    for amplitude, period, phase, t, expected in cases:
+        m = ObjectMotion(axis=(0.0, 0.0, 1.0), amplitude=amplitude, period=period, phase=phase)
+        assert m.displacement(t) == pytest.approx(expected, abs=1e-12), (amplitude, period, phase, t)
+
+
+def test_position_at_starts_where_the_swing_begins():
+    o = _world({"type": "oscillate", "axis": [0, 0, 1], "amplitude": 0.75, "period": 1.0,
+                "phase": math.pi / 2}).objects[0]
+    assert o.start == pytest.approx((o.xyz[0], o.xyz[1], o.xyz[2] + 0.75))   # the top of its swing
+    assert o.position_at(0.5) == pytest.approx((o.xyz[0], o.xyz[1], o.xyz[2] - 0.75))

@@ -15,6 +15,8 @@ import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
 
+from .follow import spline_at
+from .urdf import JointLimits
 from .world import World
 
 __all__ = ["Simulator", "ContactStats", "ExecutionResult", "Motion", "InvalidTrajectory", "LimitViolation"]
@@ -65,20 +67,29 @@ class ExecutionResult(NamedTuple):
 
 class Motion:
     """A validated trajectory, sampled at every physics substep, being executed."""
-    __slots__ = ("targets", "velocities", "n", "k", "stats", "_counts", "final")
+    __slots__ = ("targets", "velocities", "setpoints", "n", "k", "stats", "_counts", "final", "path_tolerance",
+                 "aborted")
 
-    def __init__(self, targets, velocities, final):
-        self.targets = targets          # list (per substep) of [[q1], [q2], ...]
+    def __init__(self, targets, velocities, final, path_tolerance=None, stats=None, setpoints=None):
+        self.targets = targets          # list (per substep) of [[q1], [q2], ...]: where the robot is after substep k
         self.velocities = velocities    # same shape: segment velocities
+        # Dynamic control: the motors' position setpoint of substep k, flat lists. PyBullet's position motor reaches
+        # setpoint + velocity * dt within the substep, so the setpoint is the trajectory at the substep's START (the
+        # end-of-substep position would put the robot one substep ahead: 4 mrad at 240 Hz, measured).
+        # None: the targets' positions (kinematic control never reads them).
+        self.setpoints = setpoints
         self.final = final              # tuple: last setpoint
         self.n = len(targets)
         self.k = 0
-        self.stats = ContactStats()
+        self.stats = stats if stats is not None else ContactStats()
         self._counts = [0, 0]           # substeps, substeps in contact
+        # Dynamic control: per-joint bound on |measured - setpoint| (0: none); exceeding it stops the motion.
+        self.path_tolerance = path_tolerance
+        self.aborted = ""               # why the motion was stopped early ("" when it was not)
 
     @property
     def done(self):
-        return self.k >= self.n
+        return self.k >= self.n or bool(self.aborted)
 
     @property
     def remaining(self):
@@ -128,7 +139,7 @@ class Simulator:
                 self.robot = p.loadURDF(str(urdf_path), [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
             except pybullet.error as exc:
                 raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
-            self._setup_robot(list(joints), base_link, dict(fixed_joint_positions or {}))
+            self._setup_robot(str(urdf_path), list(joints), base_link, dict(fixed_joint_positions or {}))
             self._setup_world()
             self._setup_collision_filters()
         except Exception:
@@ -142,7 +153,7 @@ class Simulator:
         self.reset_robot([min(max(0.0, lo), hi) for lo, hi in zip(self.lower, self.upper)])
 
     # ------------------------------------------------------------------ setup
-    def _setup_robot(self, joints, base_link, fixed):
+    def _setup_robot(self, urdf_path, joints, base_link, fixed):
         p, robot = self._p, self.robot
         n = p.getNumJoints(robot)
         root_name = p.getBodyInfo(robot)[0].decode()
@@ -177,22 +188,14 @@ class Simulator:
         self.joint_names = tuple(joints)
         self.base_link = base_link
         self.joint_indices = [joint_info[name][0] for name in joints]
-        lower, upper, vmax, effort = [], [], [], []
-        for name in joints:
-            info = joint_info[name]
-            lo, hi = float(info[8]), float(info[9])
-            if hi < lo:      # continuous joint: PyBullet reports lower=0, upper=-1
-                lo, hi = -math.inf, math.inf
-            v = float(info[11])
-            lower.append(lo)
-            upper.append(hi)
-            vmax.append(v if v > 0 else math.inf)
-            effort.append(float(info[10]) if info[10] > 0 else 1000.0)
-        self.lower, self.upper = tuple(lower), tuple(upper)
-        self.velocity_limits = tuple(vmax)
-        self._effort = effort
-        self._lower_np, self._upper_np = np.array(lower), np.array(upper)
-        self._vmax_np = np.array(vmax)
+        # Position and velocity limits: the URDF's, read once for all Python code (moverl_sim.urdf.JointLimits).
+        with open(urdf_path, encoding="utf-8") as fh:
+            limits = JointLimits.from_urdf(fh.read(), joints)
+        self.lower, self.upper = tuple(limits.lower.tolist()), tuple(limits.upper.tolist())
+        self.velocity_limits = tuple(limits.velocity.tolist())
+        self._effort = [float(joint_info[name][10]) if joint_info[name][10] > 0 else 1000.0 for name in joints]
+        self._lower_np, self._upper_np = limits.lower.copy(), limits.upper.copy()
+        self._vmax_np = limits.velocity.copy()
 
         # Uncontrolled movable joints: held at fixed_joint_positions (default 0 clipped to the limits).
         for name in fixed:
@@ -306,18 +309,15 @@ class Simulator:
             self._object_bodies[obj.id] = body
             self._body_object[body] = obj.id
         # Moving obstacles: (body, centre xyz, quaternion, motion)
-        self._movers = [(self._object_bodies[o.id], o.xyz, list(o.quaternion), o.motion)
+        self._movers = [(self._object_bodies[o.id], o, list(o.quaternion))
                         for o in self.world.objects if o.motion is not None]
         self._place_movers(0.0)
 
     def _place_movers(self, t):
         """Put every moving obstacle at its pose at motion time t."""
         cid = self._cid if hasattr(self, "_cid") else self._p._client
-        for body, (x, y, z), quat, motion in self._movers:
-            s = motion.amplitude * math.sin(2.0 * math.pi * t / motion.period + motion.phase)
-            a = motion.axis
-            pybullet.resetBasePositionAndOrientation(body, [x + a[0] * s, y + a[1] * s, z + a[2] * s], quat,
-                                                     physicsClientId=cid)
+        for body, obj, quat in self._movers:
+            pybullet.resetBasePositionAndOrientation(body, obj.position_at(t), quat, physicsClientId=cid)
 
     def _setup_collision_filters(self):
         p, robot = self._p, self.robot
@@ -362,6 +362,11 @@ class Simulator:
     @property
     def has_moving_obstacles(self):
         return bool(self._movers)
+
+    @property
+    def motion_epoch(self):
+        """Simulated time (s) at which motion time was 0 (the last restart_motions(), or the start)."""
+        return self._motion_epoch / self.physics_hz
 
     def restart_motions(self):
         """Restart the obstacles' motions: motion time 0 now (sim time is unchanged)."""
@@ -447,13 +452,20 @@ class Simulator:
                                               targetPositions=arr.tolist(), forces=self._effort)
         return self.joint_positions()
 
-    def prepare(self, times, positions):
+    def prepare(self, times, positions, path_tolerance=None, velocities=None, accelerations=None):
         """Validate a trajectory and sample it at every physics substep. Nothing moves.
 
         times: time_from_start (s) of each point, strictly increasing, >= 0.
         positions: one row per point, one column per controlled joint.
-        A first point at t=0 must equal the current state (within 1e-4); without one the motion
-        starts from the current state. Raises InvalidTrajectory or LimitViolation.
+        A first point at t=0 must equal the current state clamped into the joint limits (within 1e-4; a dynamic robot
+        may stand a little beyond a limit); without one the motion starts from the current state.
+        path_tolerance: per joint, the largest |measured - setpoint| allowed while the motion runs (0 or None: no
+        bound); exceeding it stops the robot where it is (dynamic control only: kinematic control is exact).
+        velocities, accelerations: per point (or None). When every point has them, dynamic control follows the cubic
+        (velocities) or quintic (both) spline through the points, as joint_trajectory_controller does; kinematic
+        control and position-only trajectories move linearly between points (on the same segments when the points
+        are samples of straight moves).
+        Raises InvalidTrajectory or LimitViolation.
         """
         n = len(self.joint_indices)
         try:
@@ -466,27 +478,36 @@ class Simulator:
         if P.ndim != 2 or P.shape[0] != t.shape[0] or P.shape[1] != n:
             raise InvalidTrajectory("expected %d points x %d joints (%s), got positions of shape %s"
                                     % (t.shape[0], n, ", ".join(self.joint_names), P.shape))
-        if not np.all(np.isfinite(t)):
+        # A finite sum means every value is finite (a NaN or inf makes it NaN or inf): one reduction on the hot path.
+        if not math.isfinite(t.sum()) and not np.all(np.isfinite(t)):
             raise InvalidTrajectory("times contain NaN or inf")
-        if not np.all(np.isfinite(P)):
+        if not math.isfinite(P.sum()) and not np.all(np.isfinite(P)):
             i = int(np.argmax(~np.all(np.isfinite(P), axis=1)))
             raise InvalidTrajectory("point %d contains NaN or inf: %s" % (i, P[i].tolist()))
         if t[0] < 0:
             raise InvalidTrajectory("negative time_from_start %g at point 0" % t[0])
         if t.shape[0] > 1:
-            dts = np.diff(t)
-            if np.any(dts <= 0):
+            dts = t[1:] - t[:-1]
+            if dts.min() <= 0:
                 i = int(np.argmax(dts <= 0))
                 raise InvalidTrajectory("times must be strictly increasing: point %d at %g s, point %d at %g s"
                                         % (i, t[i], i + 1, t[i + 1]))
-        bad = (P < self._lower_np - POSITION_TOLERANCE) | (P > self._upper_np + POSITION_TOLERANCE)
-        if bad.any():
+        if (P < self._lower_np - POSITION_TOLERANCE).any() or (P > self._upper_np + POSITION_TOLERANCE).any():
+            bad = (P < self._lower_np - POSITION_TOLERANCE) | (P > self._upper_np + POSITION_TOLERANCE)
             i = int(np.argmax(bad.any(axis=1)))
             self._check_positions(P[i], "point %d" % i)
-        current = np.array(self.joint_positions())
+        current = np.minimum(np.maximum(np.array(self.joint_positions()), self._lower_np), self._upper_np)
+        tolerance = None
+        if path_tolerance is not None and len(path_tolerance) > 0:
+            tolerance = np.asarray(path_tolerance, dtype=float).reshape(-1)
+            if tolerance.shape != (n,) or not np.all(np.isfinite(tolerance)) or np.any(tolerance < 0):
+                raise InvalidTrajectory("path_tolerance must have %d finite values >= 0, got %s"
+                                        % (n, tolerance.tolist()))
+            if not np.any(tolerance > 0) or self.control == "kinematic":
+                tolerance = None
         if t[0] == 0.0:
             dev = np.abs(P[0] - current)
-            if np.any(dev > START_TOLERANCE):
+            if dev.max() > START_TOLERANCE:
                 j = int(np.argmax(dev))
                 raise InvalidTrajectory("the point at t=0 must be the current state: joint %s is %.6g, "
                                         "currently %.6g" % (self.joint_names[j], P[0, j], current[j]))
@@ -499,21 +520,48 @@ class Simulator:
         T = float(t[-1])
         nsub = int(math.ceil(T * self.physics_hz - 1e-9)) if T > 0 else 0
         if nsub == 0:
-            return Motion([], [], tuple(P[-1].tolist()))
-        dts = np.diff(t)
+            return Motion([], [], tuple(P[-1].tolist()), tolerance)
+        dts = t[1:] - t[:-1]
         vel = (P[1:] - P[:-1]) / dts[:, None]
         over = np.abs(vel) > self._vmax_np * (1.0 + VELOCITY_TOLERANCE)
-        if over.any():
+        if over.max():
             s, j = np.unravel_index(int(np.argmax(over)), over.shape)
             raise LimitViolation("segment %.3g s -> %.3g s: joint %s moves at %.6g rad/s, above its velocity "
                                  "limit %.6g" % (t[s], t[s + 1], self.joint_names[j], abs(vel[s, j]),
                                                  self.velocity_limits[j]))
         ts = np.minimum(np.arange(1, nsub + 1, dtype=float) * self.dt, T)
-        seg = np.clip(np.searchsorted(t, ts, side="left") - 1, 0, len(dts) - 1)
+        seg = t.searchsorted(ts, side="left") - 1
+        np.clip(seg, 0, len(dts) - 1, out=seg)
         alpha = (ts - t[seg]) / dts[seg]
         q = P[seg] + alpha[:, None] * (P[seg + 1] - P[seg])
         q[-1] = P[-1]
-        return Motion(q[:, :, None].tolist(), vel[seg][:, :, None].tolist(), tuple(P[-1].tolist()))
+        velocity, setpoints = vel[seg], None
+        if self.control == "dynamic":
+            V, A = self._spline_data(velocities, accelerations, len(positions), t.shape[0], n)
+            if V is not None:   # the controller's spline through the points
+                q, _ = spline_at(t, P, V, A, ts)
+                q[-1] = P[-1]
+            # Motor setpoints: the trajectory at each substep's start (see Motion.setpoints).
+            sp, sv = spline_at(t, P, V, A, np.concatenate(([0.0], ts[:-1])))
+            setpoints = sp.tolist()
+            if V is not None:
+                velocity = sv
+        return Motion(q[:, :, None].tolist(), velocity[:, :, None].tolist(), tuple(P[-1].tolist()), tolerance,
+                      setpoints=setpoints)
+
+    @staticmethod
+    def _spline_data(velocities, accelerations, points, rows, n):
+        """Velocities / accelerations as arrays with one row per trajectory row (a prepended current state is at
+        rest), or None when not every point has them."""
+        def table(values):
+            if values is None or len(values) != points or any(len(r) != n for r in values):
+                return None
+            arr = np.asarray(values, dtype=float)
+            if not np.all(np.isfinite(arr)):
+                raise InvalidTrajectory("velocities / accelerations contain NaN or inf")
+            return np.vstack((np.zeros((1, n)), arr)) if rows == points + 1 else arr
+        V = table(velocities)
+        return V, (table(accelerations) if V is not None else None)
 
     # ------------------------------------------------------------------ execution
     def execute(self, times, positions):
@@ -535,9 +583,11 @@ class Simulator:
             step = pybullet.stepSimulation
             motor = pybullet.setJointMotorControlArray
             mode, effort = pybullet.POSITION_CONTROL, self._effort
+            if motion.setpoints is None:
+                motion.setpoints = [[v[0] for v in t] for t in motion.targets]
         accumulate = self._accumulate
         stats = motion.stats
-        targets, vels = motion.targets, motion.velocities
+        targets, vels, setpoints = motion.targets, motion.velocities, motion.setpoints
         k0 = motion.k
         k1 = min(motion.n, k0 + max(0, int(max_substeps)))
         in_contact = 0
@@ -546,19 +596,31 @@ class Simulator:
             place = self._place_movers
             t_base = self._substeps_total - self._motion_epoch - k0 + 1   # substep k runs at motion time (t_base + k)/hz
             hz = self.physics_hz
-        for k in range(k0, k1):
+        tolerance = motion.path_tolerance
+        k = k0
+        while k < k1:
             if movers:
                 place((t_base + k) / hz)
             if kinematic:
                 reset(robot, idx, targets[k], vels[k])
                 detect(physicsClientId=cid)
             else:
-                motor(robot, idx, mode, targetPositions=[v[0] for v in targets[k]],
+                motor(robot, idx, mode, targetPositions=setpoints[k],
                       targetVelocities=[v[0] for v in vels[k]], forces=effort, physicsClientId=cid)
                 step(physicsClientId=cid)
             pts = get_contacts(robot, physicsClientId=cid)
             if pts and accumulate(pts, stats):
                 in_contact += 1
+            k += 1
+            if tolerance is not None:
+                err = np.abs(np.array(self.joint_positions()) - np.array([v[0] for v in targets[k - 1]]))
+                if np.any(err > tolerance):
+                    j = int(np.argmax(err - tolerance))
+                    motion.aborted = ("joint %s left its path tolerance: %.6g from its setpoint, tolerance %.6g "
+                                      "(stopped %.3f s into the motion)"
+                                      % (self.joint_names[j], err[j], tolerance[j], k / self.physics_hz))
+                    break
+        k1 = k
         ran = k1 - k0
         motion.k = k1
         stats.substeps += ran
@@ -575,21 +637,57 @@ class Simulator:
             self._reset_states(self.robot, self.joint_indices, final, [[0.0]] * len(final))
             self._q = tuple(motion.final)
         else:
+            # An aborted motion stops where the robot is; a finished one holds its last setpoint.
+            hold = list(self.joint_positions()) if motion.aborted else list(motion.final)
             self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
-                                              targetPositions=list(motion.final), forces=self._effort)
+                                              targetPositions=hold, forces=self._effort)
         motion.stats.total_contact_substeps = self._total_contact_substeps
         return ExecutionResult(self.joint_positions(), motion.stats)
 
-    def hold(self, substeps=1):
-        """Let time pass with the robot holding still (realtime idling). No contacts are recorded."""
+    def stop(self):
+        """Hold where the robot is now (dynamic control: the motors' setpoint becomes the measured position)."""
+        if self.control == "dynamic":
+            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
+                                              targetPositions=list(self.joint_positions()), forces=self._effort)
+        return self.joint_positions()
+
+    def servo(self, q, v, stats, q_end=None):
+        """One physics substep of a controller that computes its setpoint every substep (moverl_sim.follow): q, v
+        are the trajectory at the substep's start, q_end at its end (kinematic control puts the robot there exactly;
+        dynamic control's motors track (q, v)). Contacts are added to stats."""
+        q_end = q if q_end is None else q_end
+        motion = Motion([[[x] for x in q_end]], [[[x] for x in v]], tuple(q_end), stats=stats,
+                        setpoints=[list(q)])
+        self.advance(motion, 1)
+        if self.control == "kinematic":
+            self._q = tuple(float(x) for x in q_end)
+        return motion
+
+    def hold(self, substeps=1, stats=None):
+        """Let time pass with the robot holding still (realtime idling). With stats, contacts are detected at every
+        substep and added to it (ground truth while idle: a moving obstacle may come to the robot); without, none."""
         substeps = int(substeps)
         if substeps <= 0:
             return
-        if self.control == "dynamic":
+        if self.control == "dynamic" or stats is not None:
+            cid, robot = self._cid, self.robot
+            in_contact = 0
             for i in range(substeps):
                 if self._movers:
                     self._place_movers((self._substeps_total - self._motion_epoch + i + 1) / self.physics_hz)
-                pybullet.stepSimulation(physicsClientId=self._cid)
+                if self.control == "dynamic":
+                    pybullet.stepSimulation(physicsClientId=cid)
+                else:
+                    pybullet.performCollisionDetection(physicsClientId=cid)
+                if stats is not None:
+                    pts = pybullet.getContactPoints(robot, physicsClientId=cid)
+                    if pts and self._accumulate(pts, stats):
+                        in_contact += 1
+            if stats is not None:
+                stats.substeps += substeps
+                stats.substeps_in_contact += in_contact
+                self._total_contact_substeps += in_contact
+                stats.total_contact_substeps = self._total_contact_substeps
         self._substeps_total += substeps
         if self._movers:
             self._place_movers(self.motion_time)

@@ -21,13 +21,15 @@ def sim_stamp(seconds):
     return rospy.Time.from_sec(max(0.0, seconds))
 
 
-def world_to_msg(world, stamp_sec=0.0):
+def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
     """moverl_sim.world.World -> moverl_msgs/World (SolidPrimitive conventions, rpy -> quaternion).
 
-    Poses are those at motion time 0; moving objects carry their motion (ObstacleMotion)."""
+    Poses are those at motion time 0; moving objects carry their motion (ObstacleMotion); motion_epoch_sec is when
+    motion time was 0 (seconds on the driver's clock)."""
     msg = WorldMsg()
     msg.header.frame_id = world.frame
     msg.header.stamp = sim_stamp(stamp_sec)
+    msg.motion_epoch = sim_stamp(motion_epoch_sec)
     msg.name = world.name
     if "goal" in WorldMsg.__slots__:   # float64[] goal, added to World.msg after the first contract
         msg.goal = list(world.goal) if world.goal is not None else []

@@ -2,10 +2,16 @@
 
 ROS-free except for the optional ``rospkg`` lookup of ``package://`` URIs.
 """
+import math
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 
-__all__ = ["UrdfError", "resolve_uri", "rewrite_mesh_paths", "robot_description"]
+__all__ = ["UrdfError", "JointLimits", "CONTINUOUS_JOINT_LIMIT", "resolve_uri", "rewrite_mesh_paths",
+           "robot_description"]
+
+#: Position limits (rad) given to continuous joints, as the planning scene's RobotModel::kContinuousJointLimit does.
+CONTINUOUS_JOINT_LIMIT = 2.0 * math.pi
 
 
 class UrdfError(Exception):
@@ -67,6 +73,57 @@ def resolve_uri(uri, base_dir=None):
     if os.path.isabs(uri):
         return os.path.normpath(uri)
     return os.path.normpath(os.path.join(base_dir if base_dir is not None else os.getcwd(), uri))
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Position and velocity limits of the controlled joints, in their configured order: THE Python reading of a
+    URDF's <limit> elements (the simulator, the env and its action scaling use it; C++ reads them once too, in the
+    planning scene's RobotModel). Continuous joints get +-CONTINUOUS_JOINT_LIMIT."""
+
+    names: tuple
+    lower: "np.ndarray"
+    upper: "np.ndarray"
+    velocity: "np.ndarray"
+
+    @classmethod
+    def from_urdf(cls, urdf_xml: str, joints) -> "JointLimits":
+        """Read the limits of `joints` from URDF text.
+
+        Raises:
+            ValueError: the URDF does not parse, a joint is missing, not revolute, prismatic or continuous, or has no
+                usable <limit> (finite lower < upper for revolute and prismatic joints, velocity > 0).
+        """
+        import numpy as np   # here: robot_description runs this module under a python without numpy
+
+        try:
+            root = ET.fromstring(urdf_xml)
+        except ET.ParseError as exc:
+            raise ValueError(f"the robot description is not valid XML: {exc}") from exc
+        by_name = {j.get("name"): j for j in root.iter("joint")}
+        lower, upper, velocity = [], [], []
+        for name in joints:
+            joint = by_name.get(name)
+            if joint is None:
+                raise ValueError(f"joint '{name}' is not in the URDF (it has: {sorted(n for n in by_name if n)})")
+            kind, limit = joint.get("type"), joint.find("limit")
+            if kind not in ("revolute", "prismatic", "continuous") or limit is None:
+                raise ValueError(f"joint '{name}' must be revolute, prismatic or continuous with a <limit>")
+            vel = float(limit.get("velocity", "nan"))
+            if kind == "continuous":
+                lo, hi = -CONTINUOUS_JOINT_LIMIT, CONTINUOUS_JOINT_LIMIT
+            else:
+                lo, hi = (float(limit.get(k, "nan")) for k in ("lower", "upper"))
+            if not (np.isfinite([lo, hi, vel]).all() and lo < hi and vel > 0):
+                raise ValueError(f"joint '{name}' has unusable limits lower={lo} upper={hi} velocity={vel}")
+            lower.append(lo)
+            upper.append(hi)
+            velocity.append(vel)
+        return cls(tuple(joints), np.array(lower), np.array(upper), np.array(velocity))
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
 
 
 def _parse_urdf(text, source):

@@ -48,8 +48,10 @@ def rpy_to_quaternion(rpy):
 class ObjectMotion:
     """A translation of an obstacle over motion time t (s since the motions (re)started).
 
-    oscillate: centre + axis * amplitude * sin(2 pi t / period + phase), axis a unit vector; the object's
-    ``xyz`` is the centre of the swing, its orientation does not change.
+    oscillate: the object moves along the unit axis by amplitude * sin(2 pi t / period + phase) about the centre of
+    its swing (the world file's ``xyz``); its orientation does not change. displacement() is THE motion formula of the
+    Python code (the simulator, the messages, the env); the planning scene's C++ twin is ObstacleMotion::displacement
+    (collision_checker.h), and both are checked on the same cases (moverl_sim/test/fixtures/obstacle_motion_cases.txt).
     """
     type: str = "oscillate"
     axis: Tuple[float, float, float] = (1.0, 0.0, 0.0)   # unit vector (normalised by the parser)
@@ -57,9 +59,14 @@ class ObjectMotion:
     period: float = 1.0                                   # s
     phase: float = 0.0                                    # rad
 
-    def offset(self, t):
-        """Displacement (dx, dy, dz) from the centre at motion time t."""
-        s = self.amplitude * math.sin(2.0 * math.pi * t / self.period + self.phase)
+    def displacement(self, t):
+        """Scalar displacement along the axis at motion time t from the pose at t = 0 (moverl_msgs/ObstacleMotion
+        convention): amplitude * (sin(2 pi t / period + phase) - sin(phase))."""
+        return self.amplitude * (math.sin(2.0 * math.pi * t / self.period + self.phase) - math.sin(self.phase))
+
+    def start_offset(self):
+        """The pose at t = 0 minus the centre of the swing: axis * amplitude * sin(phase)."""
+        s = self.amplitude * math.sin(self.phase)
         return (self.axis[0] * s, self.axis[1] * s, self.axis[2] * s)
 
     @property
@@ -83,12 +90,22 @@ class WorldObject:
         """Orientation as (x, y, z, w)."""
         return rpy_to_quaternion(self.rpy)
 
-    def position_at(self, t):
-        """Centre position at motion time t (xyz for a static object)."""
+    @property
+    def start(self):
+        """Position at motion time 0 (xyz for a static object; for a moving one, where its swing starts)."""
         if self.motion is None:
             return self.xyz
-        d = self.motion.offset(t)
-        return (self.xyz[0] + d[0], self.xyz[1] + d[1], self.xyz[2] + d[2])
+        o = self.motion.start_offset()
+        return (self.xyz[0] + o[0], self.xyz[1] + o[1], self.xyz[2] + o[2])
+
+    def position_at(self, t):
+        """Position at motion time t (xyz for a static object)."""
+        if self.motion is None:
+            return self.xyz
+        x, y, z = self.start
+        s = self.motion.displacement(t)
+        a = self.motion.axis
+        return (x + a[0] * s, y + a[1] * s, z + a[2] * s)
 
 
 @dataclass(frozen=True)

@@ -1,15 +1,23 @@
 #!/usr/bin/env python3
-"""MoveRL speed benchmark (prints figures; not a test).
+"""MoveRL speed benchmark (prints figures and ratios; not a test).
 
-    ./run.sh bench [--steps 3000] [--json out.json]
+    ./run.sh bench [--steps 3000] [--reps 3] [--json out.json]
 
-Measures, in one run, each part in its own process (rospy allows one ROS master per process):
-  1. env steps/s through the full ROS graph (sim + planning scene + shield), shield on
-  2. the same, shield off (unchecked baseline)
-  3. the same task stepped in PyBullet without ROS (moverl_sim's core + the same action scaling)
-  4. panda-gym PandaReachJoints-v3 as the reference
-  5. p50/p99 latency of the shield's state check, path check, and of OMPL planning (scene ~plan service)
-Random actions from a fixed seed; episodes reset as usual (resets are included in the step rate).
+Measures, in one run, each configuration in its own process (rospy allows one ROS master per process):
+  1. env steps/s through the full ROS graph (simulator + shield hosting the planning scene), shield on, the simulator's
+     lockstep driver services (training), on the table and the human (walking) worlds; once on the table with the
+     planning scene in a process of its own (scene_process:=own: one more round trip per step)
+  2. panda-gym PandaReachJoints-v3, the reference
+  3. the same graph through the standard driver (FollowJointTrajectory + joint_states, the simulator in real time):
+     what a real robot costs, paced by the wall clock (a step lasts dt = 0.05 s of motion at least)
+  4. the shield-on graph with obstacles sensed (OctoMap), and shield off (unchecked baseline)
+  5. the same task stepped in PyBullet without ROS (moverl_sim's core + the same action scaling)
+  6. p50/p99 latency of the shield's state check, path check, and of OMPL planning (scene ~plan service)
+Besides steps/s, each worker measures CPU seconds per env step summed over every process of the env and its graph
+(/proc utime + stime of the env's own process and of every process of the graph it launched). This shared 2-core VM
+varies by 30 % from run to run, so 1 and 2 run --reps times, interleaved (table, human, panda-gym, table, ...), and the
+ratios to panda-gym are medians over those repetitions. Random actions from a fixed seed; episodes reset as usual
+(resets are included in the step rate).
 """
 
 from __future__ import annotations
@@ -33,31 +41,58 @@ def _percentiles(xs):
             "n": int(xs.size)}
 
 
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def _cpu_seconds(pids) -> float:
+    """utime + stime (s) of these processes so far (those that are gone count 0)."""
+    total = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += int(fields[11]) + int(fields[12])
+        except (OSError, IndexError, ValueError):
+            continue
+    return total / TICK
+
+
+def _graph_pids(env) -> list[int]:
+    """The env's process and every process of the graph it launched."""
+    graph = getattr(env.unwrapped, "_graph", None)
+    return [os.getpid()] + ([p.pid for p in graph.processes()] if graph is not None else [])
+
+
 def _rollout(env, steps, seed):
-    """Random actions for `steps` env steps; returns (steps/s, infos)."""
+    """Random actions for `steps` env steps; returns (steps/s, CPU s per step of every process, infos)."""
     env.action_space.seed(seed)
     env.reset(seed=seed)
     infos = []
+    pids = _graph_pids(env)
+    cpu0 = _cpu_seconds(pids)
     t0 = time.perf_counter()
     for _ in range(steps):
         _, _, term, trunc, info = env.step(env.action_space.sample())
         infos.append((info, dict(getattr(env.unwrapped, "last_timing", {}))))
         if term or trunc:
             env.reset()
-    return steps / (time.perf_counter() - t0), infos
+    wall = time.perf_counter() - t0
+    return steps / wall, (_cpu_seconds(pids) - cpu0) / steps, infos
 
 
-def worker_graph(shield: bool, steps: int, seed: int, plans: int, obstacles: str = "objects") -> dict:
+def worker_graph(shield: bool, steps: int, seed: int, plans: int, obstacles: str = "objects",
+                 driver: str = "sim_service", env_id: str = "MoveRL/PandaReachTable-v0",
+                 scene_process: str = "shield") -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
 
-    env = gym.make("MoveRL/PandaReachTable-v0", shield=shield, graph="launch",
-                   launch_args={"obstacles": obstacles})
+    env = gym.make(env_id, shield=shield, graph="launch",
+                   launch_args={"obstacles": obstacles, "driver": driver, "scene_process": scene_process})
     try:
-        _rollout(env, 200, seed)  # warm-up: connections, caches
-        rate, infos = _rollout(env, steps, seed)
-        out = {"steps_per_s": rate, "steps": steps,
+        _rollout(env, 200 if driver == "sim_service" else 20, seed)  # warm-up: connections, caches
+        rate, cpu, infos = _rollout(env, steps, seed)
+        out = {"steps_per_s": rate, "cpu_ms_per_step": cpu * 1e3, "steps": steps,
                "verdicts": _count(i["verdict"] for i, _ in infos),
                "contacts": int(sum(max(i["contacts"], 0) for i, _ in infos)),
                "round_trip": _percentiles([t["round_trip"] for _, t in infos])}
@@ -74,7 +109,7 @@ def _plan_latency(env, n: int, seed: int) -> dict:
     """Time the scene's ~plan service on problems the shield really plans for: both ends collision-free, the
     straight segment between them colliding (free straight segments are returned without planning)."""
     import rospy
-    from moverl_msgs.srv import CheckPath, PlanPath
+    from moverl_msgs.srv import CheckPath, CheckPathResponse, PlanPath, PlanPathResponse
 
     plan = rospy.ServiceProxy("/planning_scene/plan", PlanPath, persistent=True)
     check_path = rospy.ServiceProxy("/planning_scene/check_path", CheckPath, persistent=True)
@@ -85,13 +120,13 @@ def _plan_latency(env, n: int, seed: int) -> dict:
         tried += 1
         a = rng.uniform(lo, hi)
         b = np.clip(a + rng.uniform(-1, 1, a.size) * env.scaler.max_delta * 4, lo, hi)
-        if env._backend.check_state(a).outcome or env._backend.check_state(b).outcome:
+        if not all(env._backend.check_state(x) for x in (a, b)):
             continue
-        if check_path(start=list(a), goal=list(b)).outcome == 0:
+        if check_path(start=list(a), goal=list(b)).outcome == CheckPathResponse.VALID:
             continue
         res = plan(start=list(a), goal=list(b), planner="", time_limit=0.0)
         times.append(res.planning_time)
-        solved += res.outcome == 0
+        solved += res.outcome == PlanPathResponse.SUCCESS
     plan.close()
     check_path.close()
     out = _percentiles(times)
@@ -100,15 +135,17 @@ def _plan_latency(env, n: int, seed: int) -> dict:
 
 
 def worker_bullet(steps: int, seed: int) -> dict:
-    """The same task without ROS: PyBullet execution with contact checks, same action scaling and dt."""
+    """The same env without ROS: its PyBullet backend (moverl_sim's core in this process, contacts counted, no shield),
+    the same action scaling, dt, reward and starts."""
     import gymnasium as gym
 
-    from moverl_gym.bullet_env import BulletReachEnv
+    import moverl_gym  # noqa: F401
 
-    env = gym.wrappers.TimeLimit(BulletReachEnv(), max_episode_steps=100)
+    env = gym.make("MoveRL/PandaReachTable-v0", backend="bullet", shield=False)
     try:
-        rate, infos = _rollout(env, steps, seed)
-        return {"steps_per_s": rate, "steps": steps, "contacts": int(sum(i["contacts"] for i, _ in infos))}
+        rate, cpu, infos = _rollout(env, steps, seed)
+        return {"steps_per_s": rate, "cpu_ms_per_step": cpu * 1e3, "steps": steps,
+                "contacts": int(sum(i["contacts"] for i, _ in infos))}
     finally:
         env.close()
 
@@ -119,8 +156,8 @@ def worker_pandagym(steps: int, seed: int) -> dict:
 
     env = gym.make("PandaReachJoints-v3")
     try:
-        rate, _ = _rollout(env, steps, seed)
-        return {"steps_per_s": rate, "steps": steps}
+        rate, cpu, _ = _rollout(env, steps, seed)
+        return {"steps_per_s": rate, "cpu_ms_per_step": cpu * 1e3, "steps": steps}
     finally:
         env.close()
 
@@ -137,51 +174,103 @@ def run_worker(name: str, args) -> dict:
                            f"benchmark worker {name}", timeout=1800)
 
 
+def _median(runs, key):
+    return float(np.median([r[key] for r in runs]))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--steps", type=int, default=3000, help="env steps per measurement")
+    p.add_argument("--reps", type=int, default=3, help="interleaved repetitions of the shield-on and panda-gym runs")
     p.add_argument("--plans", type=int, default=50, help="planning problems (straight path colliding) to time")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--only-ratios", action="store_true", help="measure the shield-on worlds and panda-gym only")
     p.add_argument("--json", help="also write all figures to this file")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
 
     if args.worker:
+        human = "MoveRL/PandaReachHuman-v0"
         fn = {"shield_on": lambda: worker_graph(True, args.steps, args.seed, args.plans),
+              "shield_on_human": lambda: worker_graph(True, args.steps, args.seed, 0, env_id=human),
               "shield_off": lambda: worker_graph(False, args.steps, args.seed, 0),
+              "shield_scene_own": lambda: worker_graph(True, args.steps, args.seed, 0, scene_process="own"),
               "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
+              # real time: a step lasts at least dt of wall time, so fewer steps say as much
+              "shield_standard": lambda: worker_graph(True, min(args.steps, 500), args.seed, 0,
+                                                      driver="follow_joint_trajectory"),
               "bullet": lambda: worker_bullet(args.steps, args.seed),
               "pandagym": lambda: worker_pandagym(args.steps, args.seed)}[args.worker]
         print(json.dumps(fn()))
         return 0
 
-    results = {}
-    for name in ("shield_on", "shield_octomap", "shield_off", "bullet", "pandagym"):
+    reps = {"shield_on": [], "shield_on_human": [], "pandagym": []}
+    for rep in range(args.reps):
+        for name in reps:
+            print(f"measuring {name} ({args.steps} steps), repetition {rep + 1} of {args.reps} ...", flush=True)
+            reps[name].append(run_worker(name, args))
+    results = {"repetitions": reps}
+    others = () if args.only_ratios else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off",
+                                          "bullet")
+    for name in others:
         print(f"measuring {name} ({args.steps} steps) ...", flush=True)
         results[name] = run_worker(name, args)
-    on, off = results["shield_on"], results["shield_off"]
-    print("\n== MoveRL benchmark (random actions, seed %d, %d steps each, %d cores) ==" %
-          (args.seed, args.steps, os.cpu_count()))
-    print(f"{'configuration':52s} {'env steps/s':>12s}")
-    print(f"{'MoveRL, full ROS graph, shield ON':52s} {on['steps_per_s']:12.0f}")
-    octo = results["shield_octomap"]
-    print(f"{'  same, obstacles sensed (2 depth cameras + OctoMap)':52s} {octo['steps_per_s']:12.0f}")
-    print(f"{'MoveRL, full ROS graph, shield OFF':52s} {off['steps_per_s']:12.0f}")
-    print(f"{'same task in PyBullet, no ROS, no shield':52s} {results['bullet']['steps_per_s']:12.0f}")
-    print(f"{'panda-gym PandaReachJoints-v3 (reference)':52s} {results['pandagym']['steps_per_s']:12.0f}")
-    print(f"{'original MoveRL (paper logs)':52s} {'1.2-2.7':>12s}")
-    print("\nlatency (shield on)                p50 ms    p99 ms      n")
+    on, human, pg = reps["shield_on"], reps["shield_on_human"], reps["pandagym"]
+    ratios = {}
+    for label, runs in (("table", on), ("human", human)):
+        ratios[label] = {
+            "steps_per_s": _median(runs, "steps_per_s"), "cpu_ms_per_step": _median(runs, "cpu_ms_per_step"),
+            # per repetition: each shield-on run against the panda-gym run next to it
+            "speed_ratio": float(np.median([r["steps_per_s"] / g["steps_per_s"] for r, g in zip(runs, pg)])),
+            "cpu_ratio": float(np.median([r["cpu_ms_per_step"] / g["cpu_ms_per_step"] for r, g in zip(runs, pg)]))}
+    results["ratios"] = ratios
+    print("\n== MoveRL benchmark (random actions, seed %d, %d steps each, %d cores, %d interleaved repetitions) ==" %
+          (args.seed, args.steps, os.cpu_count(), args.reps))
+    print(f"{'configuration':56s} {'env steps/s':>12s} {'CPU ms/step':>12s}")
+    print(f"{'MoveRL, full ROS graph, shield ON, table (median)':56s} {ratios['table']['steps_per_s']:12.0f} "
+          f"{ratios['table']['cpu_ms_per_step']:12.2f}")
+    print(f"{'MoveRL, full ROS graph, shield ON, human walking (median)':56s} {ratios['human']['steps_per_s']:12.0f} "
+          f"{ratios['human']['cpu_ms_per_step']:12.2f}")
+    print(f"{'panda-gym PandaReachJoints-v3 (reference, median)':56s} {_median(pg, 'steps_per_s'):12.0f} "
+          f"{_median(pg, 'cpu_ms_per_step'):12.2f}")
+    for name, label in (("shield_scene_own", "  shield ON, planning scene in its own process (table)"),
+                        ("shield_standard", "  shield ON, standard driver, simulator in real time"),
+                        ("shield_octomap", "  shield ON, obstacles sensed (depth cameras + OctoMap)"),
+                        ("shield_off", "MoveRL, full ROS graph, shield OFF"),
+                        ("bullet", "same task in PyBullet, no ROS, no shield")):
+        if name in results:
+            r = results[name]
+            print(f"{label:56s} {r['steps_per_s']:12.1f} {r['cpu_ms_per_step']:12.2f}")
+    print(f"{'original MoveRL (paper logs)':56s} {'1.2-2.7':>12s}")
+    print("\nratios to panda-gym (median over the repetitions, each run against the panda-gym run next to it):")
+    for label in ("table", "human"):
+        r = ratios[label]
+        print(f"  {label:6s} steps/s {r['speed_ratio']:.2f}x (target >= 0.8x)   CPU per step {r['cpu_ratio']:.2f}x "
+              f"(target <= 1.5x)")
+    first = on[0]
+    print("\nlatency (shield on, table, first repetition)   p50 ms    p99 ms      n")
     for key, label in (("round_trip", "env step round trip"), ("state_check", "state check (self + world)"),
-                       ("path_check", "path check (straight segment)"), ("planning", "OMPL planning, straight path colliding")):
-        v = on[key]
-        print(f"{label:32s} {v['p50_ms']:9.3f} {v['p99_ms']:9.3f} {v['n']:6d}")
-    print(f"OctoMap mode: state check p50 {octo['state_check']['p50_ms']:.3f} ms, path check p50 "
-          f"{octo['path_check']['p50_ms']:.3f} ms, contacts {octo['contacts']}")
-    print(f"\nplanning solved {on['planning']['solved']}/{on['planning']['n']} (planner and time limit: "
+                       ("path_check", "path check (straight segment)"),
+                       ("planning", "OMPL planning, straight path colliding")):
+        v = first[key]
+        print(f"{label:44s} {v['p50_ms']:9.3f} {v['p99_ms']:9.3f} {v['n']:6d}")
+    if "shield_standard" in results:
+        std = results["shield_standard"]
+        print(f"standard driver, real time: round trip p50 {std['round_trip']['p50_ms']:.1f} ms ({std['steps']} steps; "
+              "a step lasts >= dt = 0.05 s: at most 20 steps/s)")
+    if "shield_octomap" in results:
+        octo = results["shield_octomap"]
+        print(f"OctoMap mode: state check p50 {octo['state_check']['p50_ms']:.3f} ms, path check p50 "
+              f"{octo['path_check']['p50_ms']:.3f} ms, contacts {octo['contacts']}")
+    print(f"\nplanning solved {first['planning']['solved']}/{first['planning']['n']} (planner and time limit: "
           "config/planning_scene.yaml; the time includes path simplification)")
-    print(f"verdicts shield on: {on['verdicts']}")
-    print(f"ground-truth contacts: shield on {on['contacts']}, shield off {off['contacts']}, "
-          f"PyBullet-only {results['bullet']['contacts']}")
+    print(f"verdicts shield on (table, first repetition): {first['verdicts']}")
+    contacts = {"shield on (all repetitions)": sum(r["contacts"] for r in on + human)}
+    for name in ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off", "bullet"):
+        if name in results:
+            contacts[name] = results[name]["contacts"]
+    print("ground-truth contacts: " + ", ".join(f"{k} {v}" for k, v in contacts.items()) +
+          " (the standard driver has no ground truth: -1 per step, counted as 0)")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=2)

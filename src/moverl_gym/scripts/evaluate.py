@@ -2,9 +2,12 @@
 """Evaluate a trained MoveRL agent: run episodes with the run's env id and shield setting (own ROS graph).
 
     python src/moverl_gym/scripts/evaluate.py runs/study/ppo_PandaReachTable-v0_on_s0 --episodes 50 --deterministic
+    python src/moverl_gym/scripts/evaluate.py runs/rllib_ppo_PandaReachTable-v0_on_s0   # an RLlib run (rllib_train.py)
 
-Reads config.yaml next to the model (algo, env, shield), prints and writes JSON (default <run>/eval.json):
-success rate, mean return and length, ground-truth contacts (total and per episode), shield interventions.
+Reads config.yaml of the run (algo, env, shield), prints and writes JSON (default <run>/eval.json): success rate, mean
+return and length, ground-truth contacts (total and per episode), shield interventions. The model is an SB3 run
+folder or .zip (train.py, any --n-envs), or an RLlib run folder or checkpoint folder (rllib_train.py: its RLModule is
+restored without starting Ray).
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ import moverl_gym  # noqa: F401  (registers the env ids)
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", type=Path, help="a run folder (with model.zip and config.yaml) or a model .zip")
+    p.add_argument("model", type=Path, help="a run folder (with model.zip or an RLlib checkpoint/, and config.yaml), a "
+                                           "model .zip or an RLlib checkpoint folder")
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--deterministic", action="store_true", help="mean action instead of sampling")
     p.add_argument("--seed", type=int, default=1000, help="env seed (start configurations); not a training seed")
@@ -36,9 +40,14 @@ def parse_args(argv=None):
 
 
 def resolve(path: Path) -> tuple[Path, dict]:
-    """(model zip, training config) from a run folder or a model file."""
+    """(model zip or RLlib checkpoint folder, training config) from a run folder, a model file or a checkpoint."""
+    from moverl_gym.rllib import is_checkpoint
+
     path = path.resolve()
-    model = path / "model.zip" if path.is_dir() else path
+    if is_checkpoint(path) or is_checkpoint(path / "checkpoint"):
+        model = path if is_checkpoint(path) else path / "checkpoint"
+    else:
+        model = path / "model.zip" if path.is_dir() else path
     run = model.parent
     if run.name == "checkpoints":  # a checkpoint: the config is in the run folder
         run = run.parent
@@ -57,12 +66,21 @@ def main(argv=None) -> int:
     except FileNotFoundError as e:
         print(e, file=sys.stderr)
         return 2
-    from stable_baselines3 import PPO, SAC, TD3
-
     algo = config["algo"]
     shield = config["shield"] if args.shield is None else args.shield == "on"
-    model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(str(model_path), device="cpu")
     env = gym.make(config["env"], shield=shield, graph=args.graph)
+    try:
+        if config.get("framework") == "rllib":
+            from moverl_gym.rllib import CheckpointPolicy
+
+            model = CheckpointPolicy(model_path, env.action_space)
+        else:
+            from stable_baselines3 import PPO, SAC, TD3
+
+            model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(str(model_path), device="cpu")
+    except BaseException:
+        env.close()
+        raise
     episodes = []
     t0 = time.perf_counter()
     try:
@@ -89,7 +107,8 @@ def main(argv=None) -> int:
         return np.array([e.get(k, 0) for e in episodes], dtype=float)
 
     result = {
-        "model": str(model_path), "env": config["env"], "algo": algo, "shield": bool(shield),
+        "model": str(model_path), "framework": config.get("framework", "sb3"), "env": config["env"], "algo": algo,
+        "shield": bool(shield),
         "trained_with_shield": bool(config["shield"]), "deterministic": args.deterministic,
         "episodes": len(episodes), "seed": args.seed,
         "success_rate": float(col("success").mean()), "mean_return": float(col("return").mean()),
@@ -102,11 +121,18 @@ def main(argv=None) -> int:
         "wall_time": wall, "steps_per_second": float(col("length").sum() / wall) if wall > 0 else float("nan"),
         "per_episode": episodes,
     }
-    out = args.out or model_path.parent / "eval.json"
-    if out.parent.name == "checkpoints":
-        out = out.parent.parent / f"eval_{model_path.stem}.json"
+    if args.out:
+        out = args.out
+    elif config.get("framework") == "rllib":   # <run>/checkpoint or <run>/checkpoints/iter_<n>
+        out = (model_path.parent / "eval.json" if model_path.name == "checkpoint"
+               else model_path.parent.parent / f"eval_{model_path.name}.json")
+    else:
+        out = model_path.parent / "eval.json"
+        if out.parent.name == "checkpoints":
+            out = out.parent.parent / f"eval_{model_path.stem}.json"
     out.write_text(json.dumps(result, indent=2))
-    print(f"== {algo.upper()} {config['env']} (trained shield {'on' if config['shield'] else 'off'}), evaluated "
+    rllib = "RLlib " if config.get("framework") == "rllib" else ""
+    print(f"== {rllib}{algo.upper()} {config['env']} (trained shield {'on' if config['shield'] else 'off'}), evaluated "
           f"shield {'on' if shield else 'off'}, {'deterministic' if args.deterministic else 'stochastic'} policy, "
           f"{len(episodes)} episodes")
     print(f"success rate {result['success_rate']:.1%}   mean return {result['mean_return']:.2f} "

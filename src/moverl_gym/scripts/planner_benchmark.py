@@ -31,12 +31,16 @@ import sys
 import time
 from pathlib import Path
 
+from moverl_msgs.srv import CheckPathResponse, CheckStateResponse, PlanPathResponse
+
 from moverl_gym.workers import run_json_worker
 
 DEFAULT_PLANNERS = ["RRT", "RRTConnect", "RRTstar", "BiTRRT", "PRM", "EST", "KPIECE1", "LBKPIECE1", "SBL", "TRRT"]
 SHORT_DELTA = 0.3           # rad per joint, short pairs
-PLAN_SUCCESS, PLAN_INVALID_REQUEST = 0, 4
-OUTCOMES = {0: "SUCCESS", 1: "START_INVALID", 2: "GOAL_INVALID", 3: "NO_SOLUTION", 4: "INVALID_REQUEST"}
+PLAN_SUCCESS, PLAN_INVALID_REQUEST = PlanPathResponse.SUCCESS, PlanPathResponse.INVALID_REQUEST
+#: PlanPath outcome names by code (from the generated message class: the .srv is the one source of the codes).
+OUTCOMES = {getattr(PlanPathResponse, n): n for n in dir(PlanPathResponse)
+            if n.isupper() and isinstance(getattr(PlanPathResponse, n), int)}
 ROW_FIELDS = ["world", "planner", "pair", "kind", "outcome", "solved", "planning_time", "call_time",
               "path_length", "straight_length", "straight_collision", "waypoints", "path_valid"]
 SUMMARY_FIELDS = ["world", "planner", "problems", "solved", "solved_rate", "time_median_solved", "time_p90_solved",
@@ -131,7 +135,7 @@ def worker(world_path: str, args) -> dict:
     import rospy
     from moverl_msgs.srv import CheckPath, CheckState, PlanPath
 
-    from moverl_gym import backend as ros
+    from moverl_gym import ros_backend as ros
     from moverl_gym.graph import LaunchedGraph
 
     world = Path(world_path).stem
@@ -153,10 +157,10 @@ def worker(world_path: str, args) -> dict:
             while attempts < max_attempts:
                 attempts += 1
                 a = rng.uniform(lower, upper)
-                if check(positions=a.tolist()).outcome != 0:
+                if check(positions=a.tolist()).outcome != CheckStateResponse.VALID:
                     continue
                 b = short_goal(a, lower, upper, rng) if kind == "short" else rng.uniform(lower, upper)
-                if check(positions=b.tolist()).outcome != 0:
+                if check(positions=b.tolist()).outcome != CheckStateResponse.VALID:
                     continue
                 pc = path_check(start=a.tolist(), goal=b.tolist()).outcome
                 if pc in (0, 3):
@@ -190,7 +194,7 @@ def worker(world_path: str, args) -> dict:
                 if solved:
                     pts = [list(p.positions) for p in res.path.points]
                     valid = len(pts) >= 2 and all(
-                        path_check(start=p, goal=q).outcome == 0 for p, q in zip(pts[:-1], pts[1:]))
+                        path_check(start=p, goal=q).outcome == CheckPathResponse.VALID for p, q in zip(pts[:-1], pts[1:]))
                     valid = valid and np.allclose(pts[0], a, atol=1e-6) and np.allclose(pts[-1], b, atol=1e-6)
                 rows.append({"world": world, "planner": name, "pair": i, "kind": kind,
                              "outcome": OUTCOMES.get(res.outcome, str(res.outcome)), "solved": int(solved),

@@ -1,5 +1,37 @@
 """Assertions, connections and a rollout shared by the live (rostest) tests of the shield and the env."""
 
+import threading
+
+
+class GroundTruthContacts:
+    """Every contact the simulator saw, from its ~contacts reports (one per finished motion, and while idle): the
+    ground truth when the shield's driver reports none (the standard FollowJointTrajectory interface)."""
+
+    def __init__(self, topic="/sim/contacts"):
+        import rospy
+        from moverl_msgs.msg import ContactReport
+
+        self._lock = threading.Lock()
+        self.pairs = {}            # (a, b) -> deepest penetration (m)
+        self.substeps_in_contact = 0
+        self.reports = 0
+        self._sub = rospy.Subscriber(topic, ContactReport, self._on_report, queue_size=100)
+
+    def _on_report(self, msg):
+        with self._lock:
+            self.reports += 1
+            self.substeps_in_contact += msg.substeps_in_contact
+            for p in msg.pairs:
+                self.pairs[(p.a, p.b)] = max(self.pairs.get((p.a, p.b), 0.0), p.depth)
+
+    def snapshot(self):
+        """(number of distinct pairs, substeps in contact, reports) so far."""
+        with self._lock:
+            return len(self.pairs), self.substeps_in_contact, self.reports
+
+    def close(self):
+        self._sub.unregister()
+
 
 class LiveAssertions:
     """Mixin for unittest.TestCase classes that step the live shield or env."""

@@ -10,7 +10,7 @@ import gymnasium as gym
 import pytest
 
 import moverl_gym  # noqa: F401
-from moverl_gym import backend as ros
+from moverl_gym import ros_backend as ros
 from moverl_gym.graph import GraphError, LaunchedGraph
 from moverl_gym.paths import config_file
 

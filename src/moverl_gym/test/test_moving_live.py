@@ -22,12 +22,15 @@ import rospy
 import rostest
 from live_helpers import LiveAssertions
 from moverl_msgs.msg import ObstacleMotion
-from moverl_msgs.srv import GetWorld, ValidateMotion
+from moverl_msgs.srv import CheckStateResponse, GetWorld, ShieldStepResponse, ValidateMotion
 
 import moverl_gym  # noqa: F401
 
-SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH, UNCHECKED = 0, 1, 3, 4, 6
-VALID = 0
+SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH, UNCHECKED = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
+                                                             ShieldStepResponse.DISCARDED_POSE,
+                                                             ShieldStepResponse.DISCARDED_PATH,
+                                                             ShieldStepResponse.UNCHECKED)
+VALID = CheckStateResponse.VALID
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 LEFT = [-0.8] + HOME[1:]     # hand well to the right (-y) of the wall's plane
 RIGHT = [0.8] + HOME[1:]

@@ -19,13 +19,15 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
-from moverl_msgs.srv import CheckPath, CheckState, GetWorld, ResetRobot, ShieldStep
+from moverl_msgs.srv import (CheckPath, CheckState, CheckStateResponse, GetWorld, ResetRobot, ShieldStep,
+                             ShieldStepResponse)
 
 import moverl_gym  # noqa: F401
 from moverl_gym.registration import OBSERVATIONS, ROBOT, SCENARIOS, VERSION
 
-SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH = 0, 1, 3, 4
-VALID, WORLD_COLLISION = 0, 2
+SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
+                                                  ShieldStepResponse.DISCARDED_POSE, ShieldStepResponse.DISCARDED_PATH)
+VALID, WORLD_COLLISION = CheckStateResponse.VALID, CheckStateResponse.WORLD_COLLISION
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 
 # Configurations (found with PyBullet IK, checked with the planning scene; see the world file headers).

@@ -5,6 +5,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 
@@ -58,9 +59,46 @@ def test_finish_row_and_outputs():
     assert set(row) == set(audit.FIELDS)
     assert "table" in audit.format_table([row])
     md = audit.format_markdown([row], "cmd", skipped=[("case", "missing")])
-    assert "| table | 3 |" in md and "obstacles: objects" in md and "`case` skipped" in md
+    assert "| table | random | 3 |" in md and "obstacles: objects" in md and "`case` skipped" in md
     md = audit.format_markdown([row], "cmd", obstacles="octomap")
     assert md.startswith("# Collision audit (octomap mode)") and "OctoMap built from the world's depth cameras" in md
+    assert row["kind"] == "random"
+    assert "(my_arm)" in audit.format_markdown([row], "cmd", robot="my_arm")
+
+
+def _wall(lo=0.5, hi=0.505):
+    """A thin wall across joint 0 in a toy 2-joint configuration space: collides for lo <= q0 <= hi."""
+    return lambda q: lo <= q[0] <= hi
+
+
+def test_bisect_boundary_brackets_the_contact():
+    collides = _wall()
+    out, inside, evaluations = audit.bisect_boundary(collides, [0.0, 0.0], [0.502, 0.3], 1e-6)
+    assert not collides(out) and collides(inside)
+    assert np.max(np.abs(inside - out)) <= 1e-6 and abs(inside[0] - 0.5) < 1e-6
+    assert 15 <= evaluations <= 25
+
+
+def test_segment_states_respect_the_step():
+    s = audit.segment_states([0.0, 0.0], [0.1, -0.05], 0.03)
+    assert s.shape == (5, 2) and np.allclose(s[0], 0) and np.allclose(s[-1], [0.1, -0.05])
+    assert np.max(np.abs(np.diff(s, axis=0))) <= 0.03
+
+
+def test_crossing_through_a_thin_wall_has_scene_free_ends():
+    collides = _wall()
+    scene_free = lambda q: not (0.49 <= q[0] <= 0.515)  # the scene pads the wall by 1 cm
+    lower, upper = [-1.0, -1.0], [1.0, 1.0]
+    q0, q1, span = audit.crossing_through(collides, scene_free, [0.5001, 0.0], [1.0, 0.3], lower, upper)
+    for q in (q0, q1):
+        assert not collides(q) and scene_free(q)
+    assert q0[0] < 0.49 and q1[0] > 0.515
+    assert span == pytest.approx(0.005, abs=4e-3)  # to two steps of 2e-3 rad
+    assert any(collides(q) for q in audit.segment_states(q0, q1, 1e-4))
+
+    # no crossing when the obstacle is too thick along that line, or a side leaves the joint limits
+    assert audit.crossing_through(_wall(-0.5, 0.7), scene_free, [0.5, 0.0], [1.0, 0.0], lower, upper) is None
+    assert audit.crossing_through(collides, scene_free, [0.5001, 0.99], [0.01, 1.0], lower, upper) is None
 
 
 # ----------------------------------------------------------------------------- planner benchmark
@@ -108,3 +146,46 @@ def test_estimate_grows_with_the_work():
     e = bench.estimate_seconds(50, 10, 3, 0.1)
     assert 150 < e < 300
     assert bench.estimate_seconds(50, 10, 3, 0.2) > e
+
+
+# ----------------------------------------------------------------------------- pushing policy
+push = _load("pushing_policy_audit")
+
+
+def test_pushing_policy_drives_straight_at_the_target_at_full_speed():
+    rng = np.random.default_rng(0)
+    pol = push.PushingPolicy([np.array([1.0, -0.5, 0.0])], np.array([0.1, 0.1, 0.2]), rng, noise=0.0, switch=50)
+    a = pol.act(np.zeros(3))
+    assert np.allclose(a, [1.0, -0.5, 0.0])           # largest need at full speed, the others in proportion
+    assert np.allclose(pol.act([0.995, -0.5, 0.0]), [0.05, 0.0, 0.0])  # close: exactly what is left
+    pol.feedback(True)
+    pol.feedback(True)
+    assert np.allclose(pol.act(np.zeros(3)), [0.25, -0.125, 0.0])  # held twice: creeping at a quarter
+    for _ in range(10):
+        pol.feedback(True)
+    assert pol.scale == push.PushingPolicy.MIN_SCALE
+    pol.feedback(False)
+    assert pol.scale == 2 * push.PushingPolicy.MIN_SCALE
+    pol.reset()
+    assert pol.scale == 1.0
+    noisy = push.PushingPolicy([np.ones(3)], np.full(3, 0.1), rng, noise=0.5)
+    assert all(np.all(np.abs(noisy.act(np.zeros(3))) <= 1.0) for _ in range(100))
+    with pytest.raises(ValueError):
+        push.PushingPolicy([], np.ones(3), rng)
+
+
+def test_pushing_targets_penetrate_and_spread_over_objects():
+    # a toy world: object "wall" where q0 > 0.5 (depth grows with q0), object "floor" where q1 < -0.8
+    def contacts(q):
+        out = {}
+        if q[0] > 0.5:
+            out[("link", "wall")] = 0.1 * (q[0] - 0.5)
+        if q[1] < -0.8:
+            out[("link", "floor")] = 0.1
+        return out
+
+    rng = np.random.default_rng(1)
+    targets, per = push.pushing_targets(contacts, [0.0, 0.0], [-1.0, -1.0], [1.0, 1.0], rng, n=40, tries=4000)
+    assert set(per) == {"wall", "floor"} and per["wall"] == per["floor"] == 20
+    assert all(any(d >= push.MIN_DEPTH for d in contacts(q).values()) for q in targets)
+    assert all(q[0] >= 0.55 or q[1] < -0.8 for q in targets)  # deep enough

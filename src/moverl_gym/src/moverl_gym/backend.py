@@ -1,118 +1,103 @@
-"""The env's connection to the ROS graph: persistent service proxies, nothing else.
+"""What the env needs from a robot, as plain data (no ROS types): the interface of its backends.
 
-Per env step exactly one call is made (the shield's ~step); reset makes a handful. Proxies are created
-once; a broken connection is re-opened once, and if that fails the error is raised at once (no waiting,
-no retries loops): the shield fails closed, the env raises.
+The env's logic (observation, reward, obstacle poses, starts, goals) works on these dataclasses and numpy arrays only.
+Two backends implement the interface:
+  - RosBackend (moverl_gym.ros_backend): the shield of a live ROS graph, which the env launches or attaches to; every
+    action is checked by the planning scene and executed by the robot's driver (a simulator or a real robot).
+  - BulletBackend (moverl_gym.bullet_backend): the same robot and world stepped by moverl_sim's PyBullet core in the
+    env's own process; no ROS, no shield (every step is UNCHECKED, contacts are the physics engine's). It is the speed
+    reference of the benchmark, and it lets check_env, seeding and reward tests run without a roscore.
 """
 
 from __future__ import annotations
 
-import os
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
 
 import numpy as np
-
-from .graph import GraphError
-
-SHIELD_STEP = "/shield/step"
-SHIELD_RESET = "/shield/reset"
-SCENE_CHECK = "/planning_scene/check_state"
-SCENE_FK = "/planning_scene/fk"
-SIM_WORLD = "/sim/get_world"
-REQUIRED_SERVICES = (SHIELD_STEP, SHIELD_RESET, SCENE_CHECK, SCENE_FK, SIM_WORLD)
-
-_NODE_MASTER: str | None = None  # rospy allows one node (one master) per process
+from moverl_sim.world import ObjectMotion
 
 
-class _Proxy:
-    def __init__(self, name, srv_type):
-        import rospy
+@dataclass(frozen=True)
+class Obstacle:
+    """One world object as the env sees it."""
 
-        self._rospy = rospy
-        self.name = name
-        self.type = srv_type
-        self._proxy = rospy.ServiceProxy(name, srv_type, persistent=True)
-
-    def __call__(self, request):
-        try:
-            return self._proxy.call(request)
-        except (self._rospy.ServiceException, self._rospy.ROSException, OSError):
-            self._proxy.close()
-            self._proxy = self._rospy.ServiceProxy(self.name, self.type, persistent=True)
-            try:
-                return self._proxy.call(request)
-            except (self._rospy.ServiceException, self._rospy.ROSException, OSError) as exc:
-                raise GraphError(f"service {self.name} is unreachable ({exc}); is the MoveRL graph up?") from exc
-
-    def close(self):
-        self._proxy.close()
+    id: str
+    pose: np.ndarray                      # x, y, z, qx, qy, qz, qw at motion time 0, robot base frame
+    observed: bool                        # part of the observation
+    motion: "ObjectMotion | None" = None  # None: static
 
 
-def init_node(master_uri: str) -> None:
-    """Start this process's rospy node on master_uri (once; later calls must use the same port)."""
-    global _NODE_MASTER
-    import rospy
-
-    if _NODE_MASTER is not None:
-        if _NODE_MASTER != master_uri:
-            raise GraphError(
-                f"this process already talks to the ROS master {_NODE_MASTER}; rospy allows one master per "
-                "process. Run one env per process (e.g. SubprocVecEnv) to use several graphs."
-            )
-        return
-    if rospy.core.is_initialized():  # the host program (e.g. a rostest) already made this process a node
-        import rosgraph
-
-        bound = rosgraph.get_master_uri()
-        if bound.rstrip("/") != master_uri.rstrip("/"):
-            raise GraphError(f"this process's rospy node uses the master at {bound}, not {master_uri}")
-        _NODE_MASTER = master_uri
-        return
-    os.environ["ROS_MASTER_URI"] = master_uri
-    os.environ.setdefault("ROS_HOSTNAME", "127.0.0.1")
-    rospy.init_node("moverl_env", anonymous=True, disable_signals=True, disable_rosout=True)
-    _NODE_MASTER = master_uri
+@dataclass(frozen=True)
+class WorldInfo:
+    name: str
+    goal: "tuple | None"                  # the world's default end-effector goal
+    obstacles: tuple                      # of Obstacle
+    motion_epoch: float = 0.0             # driver clock (s) at which motion time was 0
 
 
-class RosBackend:
-    """Persistent proxies to the shield, the planning scene and the simulator."""
+@dataclass
+class StepResult:
+    """The answer to one step (codes: moverl_msgs/ShieldStep)."""
 
-    def __init__(self, wait_timeout: float = 30.0):
-        import rospy
-        from moverl_msgs import srv
-        from moverl_msgs.srv import CheckState, GetFK, GetWorld, ResetRobot, ShieldStep
+    verdict: int
+    message: str
+    q: np.ndarray                         # controlled joints after the step
+    stamp: float                          # their stamp, driver clock (s)
+    ee: np.ndarray                        # end-effector pose after the step (x, y, z, qx, qy, qz, qw)
+    contacts: int                         # ground-truth contact pairs of the step's motion; -1 when unknown
+    contact_substeps: int                 # physics substeps in contact; -1 when unknown
+    unsafe_cause: int = 0                 # ShieldStep.unsafe_cause
+    strategy: str = ""
+    planning_time: float = 0.0
+    driver_error_code: int = 0            # control_msgs/FollowJointTrajectoryResult code, 0 when none
+    timing: dict = field(default_factory=dict)  # state_check, path_check, planning, execution (s)
 
-        self._srv = srv
 
-        for name in REQUIRED_SERVICES:
-            try:
-                rospy.wait_for_service(name, timeout=wait_timeout)  # once, at construction
-            except rospy.ROSException as exc:
-                raise GraphError(f"service {name} is not available after {wait_timeout} s") from exc
-        self._step = _Proxy(SHIELD_STEP, ShieldStep)
-        self._reset = _Proxy(SHIELD_RESET, ResetRobot)
-        self._check = _Proxy(SCENE_CHECK, CheckState)
-        self._fk = _Proxy(SCENE_FK, GetFK)
-        self._world = _Proxy(SIM_WORLD, GetWorld)
-        self.robot_description = rospy.get_param("/robot_description")
-        self.joints = list(rospy.get_param("/robot/joints"))
-        self.home = list(rospy.get_param("/robot/home"))
-        self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
+@dataclass
+class ResetResult:
+    success: bool
+    message: str
+    q: "np.ndarray | None"
+    stamp: float
+    motion_epoch: float                   # when motion time is 0 from now on (driver clock, s)
+    unreachable: bool = False             # a planned reset found no path to a free target: try another
 
-    def step(self, target: np.ndarray, duration: float):
-        return self._step(self._srv.ShieldStepRequest(target=list(map(float, target)), duration=float(duration)))
 
-    def reset_robot(self, q: np.ndarray):
-        return self._reset(self._srv.ResetRobotRequest(positions=list(map(float, q))))
+class Backend(ABC):
+    """A robot the env drives. Attributes set by every implementation:
 
-    def check_state(self, q: np.ndarray):
-        return self._check(self._srv.CheckStateRequest(positions=list(map(float, q))))
+    joints (names, configured order), urdf (URDF text), home (configuration), ee_link, shield_enabled, world
+    (WorldInfo), restartable (True when restart() can relaunch a failed backend: a simulated graph the env launched).
+    """
 
-    def fk(self, q: np.ndarray):
-        return self._fk(self._srv.GetFKRequest(positions=list(map(float, q)), links=[]))
+    joints: list
+    urdf: str
+    home: list
+    shield_enabled: bool
+    world: WorldInfo
+    restartable: bool = False
 
-    def world(self):
-        return self._world(self._srv.GetWorldRequest()).world
+    @abstractmethod
+    def step(self, target: np.ndarray, duration: float) -> StepResult:
+        """Move towards target (through the shield, if any)."""
 
-    def close(self):
-        for p in (self._step, self._reset, self._check, self._fk, self._world):
-            p.close()
+    @abstractmethod
+    def reset(self, q: "np.ndarray | None") -> ResetResult:
+        """Bring the robot to q for a new episode; None: stay where it is and report its state."""
+
+    @abstractmethod
+    def check_state(self, q: np.ndarray) -> bool:
+        """True when q is collision-free (with the shield's margins when there is one)."""
+
+    @abstractmethod
+    def ee_pose(self, q: np.ndarray) -> np.ndarray:
+        """End-effector pose (x, y, z, qx, qy, qz, qw) at q."""
+
+    @abstractmethod
+    def restart(self) -> None:
+        """Tear a failed backend down and start it again; only called when `restartable`."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release everything (a launched graph: every process of it is gone when close() returns)."""

@@ -1,52 +1,63 @@
 """MoveRL reach env: a Gymnasium env whose every action passes the safety shield of a live ROS graph.
 
-Paper sections 4.2-4.6. Action: Box[-1, 1]^n, scaled to delta q within +-dt * qdot_limit, clipped to the
+The env's logic works on plain data (moverl_gym.backend): the ROS backend (the default) talks to the shield of a
+graph the env launches or attaches to; the PyBullet backend (backend="bullet", no shield) steps the same robot and
+world in-process, without a roscore. Paper sections 4.2-4.6. Action: Box[-1, 1]^n, scaled to delta q within +-dt * qdot_limit, clipped to the
 joint limits (ActionScaler). Observation: joint angles (obs_type="joints") and/or the end-effector pose,
 the goal, and the pose of every observed obstacle (7 numbers each). Reward: ReachTask. Each episode starts
 at a random collision-free configuration; it terminates at the goal and is truncated after
-max_episode_steps (by the TimeLimit wrapper that gym.make adds).
+config.max_episode_steps (config/env.yaml, or task={"max_episode_steps": n}): the env counts them itself.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import time
 
 import gymnasium as gym
 import numpy as np
+from control_msgs.msg import FollowJointTrajectoryResult as _Fjt
+from moverl_msgs.srv import ShieldStepResponse as _Step
+from moverl_msgs.srv import ValidateMotionResponse as _Motion
 
-from . import backend as ros
-from .graph import GraphError, LaunchedGraph, master_alive, service_exists
-from .paths import config_file, world_file
+from .backend import Backend
+from .errors import MoveRLError
+from .graph import GraphError
+from .paths import config_file
 from .robot import ActionScaler, JointLimits
 from .task import ReachTask, TaskConfig
 
-#: Shield verdicts (moverl_msgs/ShieldStep) by code.
-VERDICTS = {0: "safe", 1: "replanned", 2: "discarded_self", 3: "discarded_pose", 4: "discarded_path",
-            5: "discarded_start", 6: "unchecked", 7: "truncated", 10: "invalid_request",
-            11: "scene_unavailable", 12: "execution_failed"}
+#: Shield verdicts by code, named as in moverl_msgs/ShieldStep (the generated class is the one source of the codes).
+VERDICTS = {getattr(_Step, name): name.lower() for name in dir(_Step)
+            if name.isupper() and isinstance(getattr(_Step, name), int)}
 #: The collision the shield found (and prevented or avoided) for each verdict.
-#: For 7 (truncated, strategy last_safe) it depends on the step: see _collision_type (unsafe_cause).
-COLLISION_TYPES = {1: "path", 2: "self", 3: "pose", 4: "path", 5: "start", 7: "path"}
-#: ShieldStep.unsafe_cause codes (ValidateMotion outcomes) -> collision type.
-UNSAFE_CAUSES = {1: "self", 2: "pose", 3: "path", 4: "start"}
+#: For TRUNCATED (strategy last_safe) it depends on the step: see _collision_type (unsafe_cause).
+COLLISION_TYPES = {_Step.REPLANNED: "path", _Step.DISCARDED_SELF: "self", _Step.DISCARDED_POSE: "pose",
+                   _Step.DISCARDED_PATH: "path", _Step.DISCARDED_START: "start", _Step.TRUNCATED: "path"}
+#: ShieldStep.unsafe_cause codes (moverl_msgs/ValidateMotion outcomes) -> collision type.
+UNSAFE_CAUSES = {_Motion.SELF_COLLISION: "self", _Motion.POSE_COLLISION: "pose", _Motion.PATH_COLLISION: "path",
+                 _Motion.START_IN_COLLISION: "start"}
 #: Verdicts that count as discarded (the action was unsafe: the agent gets safety_penalty). A truncated step
 #: (strategy last_safe) moved only along the safe part of the unsafe action: it counts too.
-DISCARDED = frozenset({2, 3, 4, 5, 7})
-FAILURES = frozenset({10, 11, 12})
+DISCARDED = frozenset({_Step.DISCARDED_SELF, _Step.DISCARDED_POSE, _Step.DISCARDED_PATH, _Step.DISCARDED_START,
+                       _Step.TRUNCATED})
+#: Verdicts after which the env cannot go on (MoveRLError), with the component that failed.
+FAILURES = {_Step.INVALID_REQUEST: "shield (invalid request)", _Step.SCENE_UNAVAILABLE: "planning scene",
+            _Step.EXECUTION_FAILED: "robot driver (refused the move)", _Step.DRIVER_UNAVAILABLE: "robot driver",
+            _Step.STATE_UNAVAILABLE: "robot joint states"}
+#: The driver stopped the move on the way (e.g. the arm was blocked): the episode ends (truncated).
+ABORTED = _Step.ABORTED
+#: control_msgs/FollowJointTrajectoryResult error codes by value (info["driver_error"]).
+DRIVER_ERRORS = {getattr(_Fjt, name): name for name in dir(_Fjt)
+                 if name.isupper() and isinstance(getattr(_Fjt, name), int) and getattr(_Fjt, name) != _Fjt.SUCCESSFUL}
 OBS_TYPES = ("joints", "ee")
 
 
-class MoveRLError(RuntimeError):
-    """The shield or the driver failed: the robot did not move and the env cannot go on."""
-
-
-def _collision_type(verdict: int, res) -> "str | None":
+def _collision_type(verdict: int, unsafe_cause: int) -> "str | None":
     """The collision the shield found for this step (None when none): from the verdict, and for a truncated
-    step from the response's unsafe_cause (self, pose or path), else "path"."""
-    if verdict == 7:
-        return UNSAFE_CAUSES.get(getattr(res, "unsafe_cause", 0), "path")
+    step from the step's unsafe_cause (self, pose or path), else "path"."""
+    if verdict == _Step.TRUNCATED:
+        return UNSAFE_CAUSES.get(unsafe_cause, "path")
     return COLLISION_TYPES.get(verdict)
 
 
@@ -58,60 +69,70 @@ class MoveRLReachEnv(gym.Env):
         obs_type: "joints" (joint angles + ee pose + goal + obstacles) or "ee" (ee pose + goal + obstacles).
         shield: shield on (True) or the unchecked baseline (False).
         graph: "auto" (attach to $ROS_MASTER_URI if it serves MoveRL, else launch), "attach" or "launch".
+        backend: "ros" (the shield of a live graph) or "bullet" (the same robot and world in PyBullet, in this process:
+            no ROS, no shield; shield must be False), or a moverl_gym.backend.Backend instance.
         robot: robot config name (config/robots/<robot>.yaml) for a launched graph.
         goal: override the world's goal [x, y, z].
         launch_args: extra roslaunch arguments (gui, mode, ...).
         task: overrides of config/env.yaml (dt, kappa, ...).
+        recover: when a component of the graph fails (MoveRLError), end the episode (truncated, info["graph_failure"]
+            says what failed) instead of raising, and tear the graph down and relaunch it at the next reset()
+            (info["graph_restarts"] counts them; info["graph_failures"] counts failures, including those a reset()
+            finds between episodes, which relaunches at once and names the failure in its info). Only for a graph this env launched with the simulator: never with a
+            real robot, where a failure stops the run. Bounded: max_graph_restarts relaunches in a row, each failing
+            within restart_min_steps steps (config/env.yaml), end the run with MoveRLError. "auto": on exactly when
+            this env launched the graph with the simulator.
     """
 
     metadata = {"render_modes": []}
 
     def __init__(self, world: str = "table", obs_type: str = "joints", shield: bool = True, graph: str = "auto",
                  robot: str = "panda", goal=None, launch_args: dict | None = None, task: dict | None = None,
-                 render_mode=None):
+                 render_mode=None, recover: "bool | str" = False, backend: "str | Backend" = "ros"):
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {OBS_TYPES}, got {obs_type!r}")
-        if graph not in ("auto", "attach", "launch"):
-            raise ValueError(f"graph must be 'auto', 'attach' or 'launch', got {graph!r}")
         if render_mode is not None:
             raise ValueError("rendering is done by the simulator (launch with gui:=true), not by the env")
+        if recover not in (True, False, "auto"):
+            raise ValueError(f"recover must be True, False or 'auto', got {recover!r}")
         self.obs_type = obs_type
         self.config = TaskConfig.from_yaml(config_file("env.yaml"), **(task or {}))
-        self._graph = None
+        self.graph_restarts = 0          # relaunches so far (reported in every info)
+        self.graph_failures = 0          # failures found so far, at a step or a reset (reported in every info)
+        self._failure = None             # what failed, until the next reset relaunches the graph
+        self._restarts_in_a_row = 0
+        self._steps_since_restart = 0
         self._backend = None
         try:
-            self._connect(graph, dict(world=world, robot=robot, shield=shield, **(launch_args or {})))
+            if isinstance(backend, Backend):
+                self._backend = backend
+            elif backend == "bullet":
+                from .bullet_backend import BulletBackend
+
+                self._backend = BulletBackend(world, robot, (launch_args or {}).get("robot_config"), shield=shield)
+            elif backend == "ros":
+                from .ros_backend import RosBackend
+
+                self._backend = RosBackend(graph, dict(world=world, robot=robot, shield=shield, **(launch_args or {})),
+                                           call_timeout=self.config.step_timeout,
+                                           reset_timeout=self.config.reset_timeout)
+            else:
+                raise ValueError(f"backend must be 'ros', 'bullet' or a Backend, got {backend!r}")
+            b = self._backend
+            self.attached = bool(getattr(b, "attached", False))
+            if recover is True and not b.restartable:
+                raise ValueError("recover=True relaunches the graph the env launched with the simulator; it is never "
+                                 "used with an attached graph or a real robot (there a failure stops the run)")
+            self.recover = b.restartable if recover == "auto" else bool(recover)
             self._setup(world, shield, goal)
         except BaseException:
             self.close()
             raise
 
-    # -- graph ---------------------------------------------------------------------------------------------
-    def _connect(self, graph: str, launch_args: dict) -> None:
-        uri = os.environ.get("ROS_MASTER_URI", "")
-        attachable = bool(uri) and master_alive(uri) and service_exists(uri, ros.SHIELD_STEP)
-        if graph == "attach" and not attachable:
-            raise GraphError(f"no MoveRL graph (service {ros.SHIELD_STEP}) at ROS_MASTER_URI={uri or '<unset>'}")
-        if graph == "launch" or (graph == "auto" and not attachable):
-            wf = world_file(launch_args["world"])
-            if not wf.exists():
-                known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
-                raise ValueError(f"no world file {wf} (worlds available: {known})")
-            launch_args = {k: v for k, v in launch_args.items() if k != "world"}
-            launch_args["world_file"] = str(wf)
-            port = None
-            if ros._NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
-                port = int(ros._NODE_MASTER.rsplit(":", 1)[1])
-                if master_alive(ros._NODE_MASTER):
-                    raise GraphError("this process already runs a MoveRL graph; close that env first, or use "
-                                     "one process per env (SubprocVecEnv)")
-            self._graph = LaunchedGraph(launch_args, port=port, wait_for=ros.REQUIRED_SERVICES)
-            uri = self._graph.uri
-            self.attached = False
-        else:
-            self.attached = True
-        ros.init_node(uri)
-        self._backend = ros.RosBackend()
+    @property
+    def _graph(self):
+        """The LaunchedGraph of the ROS backend (None when attached or not ROS)."""
+        return getattr(self._backend, "graph", None)
 
     def _setup(self, world: str, shield: bool, goal) -> None:
         b = self._backend
@@ -119,71 +140,119 @@ class MoveRLReachEnv(gym.Env):
             raise GraphError(f"the attached graph has the shield {'on' if b.shield_enabled else 'off'}, "
                              f"but the env was asked for shield={shield}")
         self.shield_enabled = b.shield_enabled
-        self.limits = JointLimits.from_urdf(b.robot_description, b.joints)
+        self.limits = JointLimits.from_urdf(b.urdf, b.joints)
         self._home = np.clip(np.asarray(b.home, dtype=np.float64), self.limits.lower, self.limits.upper)
         self.scaler = ActionScaler(self.limits, self.config.dt)
-        w = b.world()
+        w = b.world
         self.world_name = w.name
         if self.attached and world and os.sep not in str(world) and world != w.name:
             raise GraphError(f"the attached graph runs world '{w.name}', the env was asked for '{world}'")
+        if goal is None and w.goal is None:
+            raise ValueError(f"world '{w.name}' has no goal: give one (goal=[x, y, z])")
         self.task = ReachTask(self.config, goal if goal is not None else list(w.goal))
-        self._observed = [o.id for o in w.objects if o.observed]
-        self._obstacles0 = self._obstacle_vector(w)          # observed poses at motion time 0
+        observed = [o for o in w.obstacles if o.observed]
+        self._obstacles0 = np.concatenate([o.pose for o in observed]) if observed else np.zeros(0)  # at motion time 0
         self._obstacles = self._obstacles0
-        # Observed moving obstacles: (offset of x in the obstacle vector, axis, amplitude, period, phase).
-        self._movers = []
-        for k, oid in enumerate(self._observed):
-            m = getattr(next(o for o in w.objects if o.id == oid), "motion", None)
-            if m is not None and m.type != 0 and m.amplitude > 0.0:
-                self._movers.append((7 * k, np.array(m.axis, dtype=np.float64), m.amplitude, m.period, m.phase))
-        self._motion_epoch = None   # stamp (s) of the last reset: motion time 0
+        # Observed moving obstacles: (offset of x in the obstacle vector, their motion).
+        self._movers = [(7 * k, np.asarray(o.motion.axis), o.motion) for k, o in enumerate(observed)
+                        if o.motion is not None]
+        self._motion_epoch = w.motion_epoch
         n = self.limits.size
-        size = (n if obs_type_has_joints(self.obs_type) else 0) + 7 + 3 + 7 * len(self._observed)
+        size = (n if obs_type_has_joints(self.obs_type) else 0) + 7 + 3 + 7 * len(observed)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         self.q = None
         self.last_timing = {}
 
-    def _obstacles_at(self, stamp) -> np.ndarray:
-        """Observed obstacle poses at the state stamp `stamp` (motion time = stamp - stamp of the last reset)."""
+    def _obstacles_at(self, stamp: float) -> np.ndarray:
+        """Observed obstacle poses at the state stamp `stamp` (motion time = stamp - the motion epoch)."""
         if not self._movers:
             return self._obstacles0
-        t = (stamp - self._motion_epoch).to_sec()
+        t = stamp - self._motion_epoch
         out = self._obstacles0.copy()
-        for i, axis, amplitude, period, phase in self._movers:
-            out[i:i + 3] += axis * (amplitude * (math.sin(2.0 * math.pi * t / period + phase) - math.sin(phase)))
+        for i, axis, motion in self._movers:
+            out[i:i + 3] += axis * motion.displacement(t)
         return out
-
-    def _obstacle_vector(self, w) -> np.ndarray:
-        poses = {o.id: o.pose for o in w.objects}
-        out = []
-        for oid in self._observed:
-            p = poses[oid]
-            out += [p.position.x, p.position.y, p.position.z,
-                    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]
-        return np.array(out, dtype=np.float64)
 
     # -- gym API -------------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         options = options or {}
+        restarted = None
+        if self._failure is not None:
+            restarted = self._relaunch()
+        try:
+            obs, info = self._reset(options)
+        except MoveRLError as exc:
+            if not self.recover:
+                raise
+            # The graph failed before the episode started (found by this reset, or the relaunched graph failed
+            # again): relaunch now; the reset's info names the failure (info["graph_failure"]) so that it is counted
+            # like a failure that ends an episode.
+            self._fail(exc)
+            obs, info = self.reset(seed=None, options=options)
+            info.setdefault("graph_failure", str(exc))
+            return obs, info
+        info["graph_restarts"] = self.graph_restarts
+        info["graph_failures"] = self.graph_failures
+        if restarted is not None:
+            info["graph_restart"] = restarted
+        return obs, info
+
+    def _fail(self, exc: Exception) -> None:
+        """Recovery: remember what failed; the next reset() relaunches, unless this keeps happening."""
+        self._failure = str(exc)
+        self.graph_failures += 1
+        quick = self._steps_since_restart < self.config.restart_min_steps
+        self._restarts_in_a_row = self._restarts_in_a_row + 1 if quick else 1
+        if self._restarts_in_a_row > self.config.max_graph_restarts:
+            raise MoveRLError(f"the graph failed {self._restarts_in_a_row} times in a row, each within "
+                              f"{self.config.restart_min_steps} steps of a relaunch; giving up. Last failure: "
+                              f"{exc}") from exc
+
+    def _relaunch(self) -> str:
+        """Tear the failed graph down and launch it again (same arguments, same master port). Returns what failed."""
+        failure, self._failure = self._failure, None
+        self._backend.restart()
+        self.graph_restarts += 1
+        self._steps_since_restart = 0
+        self.q = None
+        return failure
+
+    def _reset(self, options):
         if "goal" in options:
             self.task = ReachTask(self.config, options["goal"])
         elif self.config.goal_noise > 0:
             self.task = ReachTask(self.config, self._sample_goal())
-        q = np.asarray(options["start"], dtype=np.float64) if "start" in options else self._sample_start()
-        res = self._backend.reset_robot(q)
-        if not res.success:
-            raise MoveRLError(f"could not place the robot at the start configuration: {res.message}")
-        self.q = np.array(res.state.position, dtype=np.float64)
-        self._motion_epoch = res.state.header.stamp   # the reset restarted the obstacles' motions
-        self._obstacles = self._obstacles_at(res.state.header.stamp)
-        fk = self._backend.fk(self.q)
-        if not fk.success:
-            raise MoveRLError(f"forward kinematics failed: {fk.message}")
-        self.ee = _pose_array(fk.poses[0])
+        res = self._reset_robot(options.get("start"))
+        self._episode_steps = 0
+        self.q = res.q
+        self._motion_epoch = res.motion_epoch   # a simulator reset restarts the obstacles' motions; a move does not
+        self._obstacles = self._obstacles_at(res.stamp)
+        self.ee = self._backend.ee_pose(self.q)
         self.distance = self.task.distance(self.ee[:3])
         return self._observation(), {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
+
+    def _reset_robot(self, start):
+        """Bring the robot to the episode's start through the shield: `start` (a configuration), "current" (stay where
+        the robot is) or None (a random collision-free start; with a driver that moves the robot there, a start it
+        finds no path to is replaced by another sample)."""
+        if isinstance(start, str):
+            if start != "current":
+                raise ValueError(f'options["start"] must be a configuration or "current", got {start!r}')
+            res = self._backend.reset(None)   # the robot stays; the backend reports its state
+            if not res.success:
+                raise MoveRLError(f"could not read the robot's state: {res.message}")
+            return res
+        attempts = 1 if start is not None else self.config.start_sampling_attempts
+        for _ in range(attempts):
+            q = np.asarray(start, dtype=np.float64) if start is not None else self._sample_start()
+            res = self._backend.reset(q)
+            if res.success:
+                return res
+            if not res.unreachable:
+                break
+        raise MoveRLError(f"could not bring the robot to the start configuration: {res.message}")
 
     def _sample_goal(self) -> np.ndarray:
         """A goal in the reachable region: the end-effector position of a random collision-free configuration
@@ -192,11 +261,8 @@ class MoveRLReachEnv(gym.Env):
         hi = np.minimum(self.limits.upper, self._home + self.config.goal_noise)
         for _ in range(self.config.start_sampling_attempts):
             q = self.np_random.uniform(lo, hi)
-            if self._backend.check_state(q).outcome != 0:
-                continue
-            fk = self._backend.fk(q)
-            if fk.success:
-                return _pose_array(fk.poses[0])[:3]
+            if self._backend.check_state(q):
+                return self._backend.ee_pose(q)[:3]
         raise MoveRLError(f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
                           f"random samples of world '{self.world_name}'")
 
@@ -209,52 +275,70 @@ class MoveRLReachEnv(gym.Env):
             hi = np.minimum(hi, self._home + noise)
         for _ in range(self.config.start_sampling_attempts):
             q = self.np_random.uniform(lo, hi)
-            if self._backend.check_state(q).outcome != 0:
-                continue
-            fk = self._backend.fk(q)
-            if fk.success and not self.task.is_success(self.task.distance(_pose_array(fk.poses[0])[:3])):
+            if self._backend.check_state(q) and not self.task.is_success(
+                    self.task.distance(self._backend.ee_pose(q)[:3])):
                 return q
         raise MoveRLError(f"no collision-free start configuration found in {self.config.start_sampling_attempts} "
                           f"random samples of world '{self.world_name}'")
 
     def step(self, action):
-        if self.q is None:
+        if self.q is None or self._failure is not None:
             raise gym.error.ResetNeeded("call reset() before step()")
         target = self.scaler.command(self.q, action)  # raises ValueError on bad shape / NaN / inf
         t0 = time.perf_counter()
-        res = self._backend.step(target, self.config.dt)
+        try:
+            res = self._backend.step(target, self.config.dt)
+            verdict = res.verdict
+            if verdict in FAILURES:
+                raise MoveRLError(f"{FAILURES[verdict]} failed ({VERDICTS[verdict]}): {res.message}")
+        except MoveRLError as exc:
+            if not self.recover:
+                raise
+            self._fail(exc)
+            # The episode ends here; the next reset() relaunches the graph. The robot did not move.
+            info = {"verdict": "graph_failed", "graph_failure": str(exc), "graph_restarts": self.graph_restarts,
+                    "graph_failures": self.graph_failures,
+                    "collision_type": None, "discarded": False, "replanned": False, "contacts": 0,
+                    "contact_substeps": 0, "cost": 0.0, "distance": self.distance, "is_success": False,
+                    "driver_error": None, "strategy": "", "planning_time": 0.0}
+            return self._observation(), 0.0, False, True, info
         round_trip = time.perf_counter() - t0
-        verdict = res.verdict
-        if verdict in FAILURES:
-            raise MoveRLError(f"shield verdict {VERDICTS[verdict]}: {res.message}")
-        self.q = np.array(res.state.position, dtype=np.float64)
-        self.ee = _pose_array(res.ee_pose)
+        self._steps_since_restart += 1
+        self.q = res.q
+        self.ee = res.ee
         if self._movers:
-            self._obstacles = self._obstacles_at(res.state.header.stamp)
+            self._obstacles = self._obstacles_at(res.stamp)
         d = self.task.distance(self.ee[:3])
         discarded = verdict in DISCARDED
         reward = self.task.reward(self.distance, d, discarded)
         self.distance = d
         success = self.task.is_success(d)
-        c = res.contacts
-        contacts = (c.world_contacts + c.self_contacts) if c.available else -1
-        self.last_timing = dict(round_trip=round_trip, state_check=res.state_check_time,
-                                path_check=res.path_check_time, planning=res.planning_time,
-                                execution=res.execution_time)
+        contacts = res.contacts
+        self.last_timing = dict(round_trip=round_trip, **res.timing)
         info = {
             "verdict": VERDICTS.get(verdict, str(verdict)),
-            "collision_type": _collision_type(verdict, res),
+            "collision_type": _collision_type(verdict, res.unsafe_cause),
             "discarded": discarded,
-            "replanned": verdict == 1,
+            "replanned": verdict == _Step.REPLANNED,
             "strategy": res.strategy,
             "planning_time": float(res.planning_time),
             "contacts": int(contacts),
-            "contact_substeps": int(c.substeps_in_contact) if c.available else -1,
+            "contact_substeps": int(res.contact_substeps),
             "cost": float(discarded or contacts > 0),
             "distance": d,
             "is_success": success,
+            "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,
+            "graph_restarts": self.graph_restarts,
+            "graph_failures": self.graph_failures,
         }
-        return self._observation(), reward, success, False, info
+        # The driver stopped the move on the way (a path or goal tolerance, e.g. the arm was blocked): the robot
+        # stands where it stopped, and the episode ends here (truncated; info["driver_error"] says why).
+        aborted = verdict == ABORTED
+        if aborted:
+            info["driver_message"] = res.message
+        self._episode_steps += 1
+        truncated = aborted or (not success and self._episode_steps >= self.config.max_episode_steps)
+        return self._observation(), reward, success, truncated, info
 
     def _observation(self) -> np.ndarray:
         parts = [self.q] if obs_type_has_joints(self.obs_type) else []
@@ -262,18 +346,12 @@ class MoveRLReachEnv(gym.Env):
         return np.concatenate(parts).astype(np.float32)
 
     def close(self):
+        """Close the backend: a graph this env launched is gone, every process of it, when close() returns (see
+        moverl_gym.graph.LaunchedGraph.close)."""
         if self._backend is not None:
-            self._backend.close()
-            self._backend = None
-        if self._graph is not None:
-            self._graph.close()
-            self._graph = None
+            backend, self._backend = self._backend, None
+            backend.close()
 
 
 def obs_type_has_joints(obs_type: str) -> bool:
     return obs_type == "joints"
-
-
-def _pose_array(pose) -> np.ndarray:
-    return np.array([pose.position.x, pose.position.y, pose.position.z,
-                     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w])

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from .paths import config_file
-from .task import TaskConfig
-
 #: Scenario name -> world file name in worlds/.
 SCENARIOS = {"Table": "table", "Human": "human", "Case": "case"}
 #: Observation kind suffix -> obs_type.
@@ -18,11 +15,12 @@ ENV_IDS: list[str] = [f"MoveRL/{ROBOT}Reach{s}{o}-{VERSION}" for s in SCENARIOS 
 
 
 def register_envs() -> None:
-    max_steps = TaskConfig.from_yaml(config_file("env.yaml")).max_episode_steps
+    """Register every id. Episodes are truncated by the env itself after config/env.yaml's max_episode_steps (so that
+    task={"max_episode_steps": n} changes it): no TimeLimit wrapper is registered."""
     for scenario, world in SCENARIOS.items():
         for suffix, obs_type in OBSERVATIONS.items():
             env_id = f"MoveRL/{ROBOT}Reach{scenario}{suffix}-{VERSION}"
             if env_id in gym.registry:
                 continue
-            gym.register(env_id, entry_point="moverl_gym.env:MoveRLReachEnv", max_episode_steps=max_steps,
+            gym.register(env_id, entry_point="moverl_gym.env:MoveRLReachEnv",
                          kwargs={"world": world, "obs_type": obs_type})

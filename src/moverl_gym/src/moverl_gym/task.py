@@ -23,6 +23,10 @@ class TaskConfig:
     start_noise: float = 0.2
     goal_noise: float = 0.0
     start_sampling_attempts: int = 1000
+    step_timeout: float = 4.0
+    reset_timeout: float = 60.0
+    max_graph_restarts: int = 3
+    restart_min_steps: int = 100
 
     @classmethod
     def from_yaml(cls, path: Path, **overrides) -> "TaskConfig":

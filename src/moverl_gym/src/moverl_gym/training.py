@@ -12,9 +12,9 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[2] / "config" / "hyperparams"
-EPISODE_FIELDS = ["episode", "timesteps", "return", "length", "success", "interventions", "discarded_self",
+EPISODE_FIELDS = ["episode", "env", "timesteps", "return", "length", "success", "interventions", "discarded_self",
                   "discarded_pose", "discarded_path", "discarded_start", "replanned", "contacts",
-                  "contact_substeps", "cost", "wall_time", "truncated"]
+                  "contact_substeps", "cost", "wall_time", "truncated", "graph_failure", "graph_restarts"]
 
 
 def load_hyperparams(algo: str, env_id: str, path: Path | None = None) -> dict:
@@ -33,7 +33,11 @@ def load_hyperparams(algo: str, env_id: str, path: Path | None = None) -> dict:
 class EpisodeLogger(BaseCallback):
     """Per-episode return, length, success, shield interventions by type and ground-truth contacts.
 
-    Written as CSV rows (episodes.csv) and as TensorBoard scalars; totals kept for the final summary.
+    Written as CSV rows (episodes.csv) and as TensorBoard scalars; totals kept for the final summary. With a vectorised
+    env (train.py --n-envs N) every sub-env has its own running counters: a row's `env` column is the index of the
+    sub-env (its own process and graph) the episode ran in, `timesteps` the total over all sub-envs when it ended, and
+    `graph_restarts` that sub-env's relaunches so far (the summary adds up the last value of every sub-env, and so for
+    graph failures, which include those a reset found between episodes).
     """
 
     def __init__(self, csv_path: Path, verbose: int = 0):
@@ -41,6 +45,9 @@ class EpisodeLogger(BaseCallback):
         self.csv_path = Path(csv_path)
         self.rows: list[dict] = []
         self.totals = Counter()
+        self.failures: list[str] = []   # what failed, for every episode a graph failure ended
+        self.restarts: dict[int, int] = {}  # sub-env index -> its graph relaunches so far
+        self.failure_counts: dict[int, int] = {}  # sub-env index -> its graph failures so far (steps and resets)
         self._t0 = time.perf_counter()
 
     def _on_training_start(self) -> None:
@@ -65,15 +72,21 @@ class EpisodeLogger(BaseCallback):
             ep["contacts"] += max(info.get("contacts", 0), 0)
             ep["contact_substeps"] += max(info.get("contact_substeps", 0), 0)
             ep["cost"] += info.get("cost", 0.0)
+            ep["graph_restarts"] = info.get("graph_restarts", 0)   # relaunches so far (env recovery)
+            if verdict == "graph_failed":                           # this episode ended because the graph failed
+                ep["graph_failure"] = 1
+                self.failures.append(info.get("graph_failure", ""))
+            self.restarts[i] = int(ep["graph_restarts"])
+            self.failure_counts[i] = int(info.get("graph_failures", 0))
             if dones[i]:
                 ep["success"] = int(bool(info.get("is_success", False)))
-                self._finish(ep)
+                self._finish(ep, i)
                 self._ep[i] = Counter()
         return True
 
-    def _finish(self, ep: Counter) -> None:
+    def _finish(self, ep: Counter, env_index: int) -> None:
         row = {k: ep.get(k, 0) for k in EPISODE_FIELDS}
-        row.update(episode=len(self.rows) + 1, timesteps=self.num_timesteps,
+        row.update(episode=len(self.rows) + 1, env=env_index, timesteps=self.num_timesteps,
                    wall_time=round(time.perf_counter() - self._t0, 3), **{"return": round(ep["return"], 4)})
         self.rows.append(row)
         self._writer.writerow(row)
@@ -81,7 +94,7 @@ class EpisodeLogger(BaseCallback):
         for key in ("interventions", "replanned", "truncated", "contacts", "contact_substeps", "cost",
                     "discarded_self", "discarded_pose", "discarded_path", "discarded_start"):
             self.totals[key] += row[key]
-        for key in ("return", "length", "success", "interventions", "contacts", "cost"):
+        for key in ("return", "length", "success", "interventions", "contacts", "cost", "graph_restarts"):
             self.logger.record(f"episode/{key}", float(row[key]))
 
     def _on_training_end(self) -> None:
@@ -101,6 +114,9 @@ class EpisodeLogger(BaseCallback):
                                                          "discarded_start")},
             "contacts": int(self.totals["contacts"]),
             "contact_substeps": int(self.totals["contact_substeps"]),
+            "graph_failures": int(sum(self.failure_counts.values())),   # incl. those a reset found between episodes
+            "graph_restarts": int(sum(self.restarts.values())),
+            "failures": self.failures,
             "steps_per_second": self.num_timesteps / elapsed if elapsed > 0 else float("nan"),
             "wall_time": elapsed,
         }

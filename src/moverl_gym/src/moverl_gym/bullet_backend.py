@@ -1,0 +1,117 @@
+"""The env's PyBullet backend: the same robot and world stepped by moverl_sim's core in the env's own process.
+
+No ROS and no shield: every step is executed straight (verdict UNCHECKED) and the physics engine counts its contacts,
+as the simulator node does. Same URDF, robot config, world file, joint limits, action scaling, dt, reward and start
+sampling as the ROS backend (the env's logic is shared); what it lacks is exactly what MoveRL adds: the ROS graph and
+the safety shield. It is the speed reference of the benchmark, and it runs the env's check_env, seeding and reward
+tests without a roscore. Collision-free starts and goals are sampled against the physics engine's contacts (there is
+no planning scene).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import yaml
+from moverl_msgs.srv import ShieldStepResponse
+
+from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
+from .paths import config_file, world_file
+
+
+class BulletBackend(Backend):
+    """Args:
+    world: world name (worlds/<world>.yaml) or path. robot: config/robots/<robot>.yaml. robot_config: its path instead.
+    shield: must be False (there is no shield here).
+    """
+
+    def __init__(self, world: str = "table", robot: str = "panda", robot_config: "str | None" = None,
+                 shield: bool = False):
+        if shield:
+            raise ValueError("the PyBullet backend has no shield: use shield=False, or the ROS backend")
+        from moverl_sim.urdf import robot_description
+        from moverl_sim.world import load_world
+
+        path = robot_config or config_file(f"robots/{robot}.yaml")
+        with open(path) as f:
+            rc = yaml.safe_load(f)["robot"]
+        self._args = (world, rc)
+        self.urdf = robot_description(rc["urdf"])
+        self.joints = list(rc["joints"])
+        self.home = list(rc["home"])
+        self.ee_link = rc["ee_link"]
+        self.shield_enabled = False
+        self.restartable = True
+        wf = world_file(world)
+        if not wf.exists():
+            known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
+            raise ValueError(f"no world file {wf} (worlds available: {known})")
+        self._world = load_world(str(wf))
+        self.world = WorldInfo(
+            name=self._world.name, goal=self._world.goal,
+            obstacles=tuple(Obstacle(id=o.id, pose=np.array(list(o.start) + list(o.quaternion)), observed=o.observed,
+                                     motion=o.motion) for o in self._world.objects),
+            motion_epoch=0.0)
+        self.sim = None
+        self._start()
+
+    def _start(self) -> None:
+        import os
+        import tempfile
+
+        from moverl_sim.core import Simulator
+
+        _, rc = self._args
+        fd, self._urdf_path = tempfile.mkstemp(prefix="moverl_bullet_", suffix=".urdf")
+        with os.fdopen(fd, "w") as f:
+            f.write(self.urdf)
+        self.sim = Simulator(self._urdf_path, self.joints, rc["base_link"], rc.get("fixed_joint_positions"),
+                             self._world)
+        self.sim.reset_robot(np.clip(self.home, self.sim.lower, self.sim.upper))
+        self._ee = {name: i for i, name in self.sim.link_names.items()}[self.ee_link]
+
+    def _ee_now(self) -> np.ndarray:
+        s = self.sim._p.getLinkState(self.sim.robot, self._ee, computeForwardKinematics=True)
+        return np.array(list(s[4]) + list(s[5]))
+
+    def step(self, target: np.ndarray, duration: float) -> StepResult:
+        q0 = np.array(self.sim.joint_positions())
+        result = self.sim.execute([0.0, duration], [q0, target])
+        c = result.contacts
+        return StepResult(verdict=ShieldStepResponse.UNCHECKED, message="", q=np.array(result.positions),
+                          stamp=self.sim.sim_time, ee=self._ee_now(), contacts=c.world_contacts + c.self_contacts,
+                          contact_substeps=c.substeps_in_contact)
+
+    def reset(self, q: "np.ndarray | None") -> ResetResult:
+        if q is not None:
+            try:
+                self.sim.reset_robot(q)
+            except ValueError as exc:
+                return ResetResult(False, str(exc), None, self.sim.sim_time, self.sim.motion_epoch)
+            self.sim.restart_motions()   # as the simulator node's reset does
+        return ResetResult(True, "", np.array(self.sim.joint_positions()), self.sim.sim_time, self.sim.motion_epoch)
+
+    def check_state(self, q: np.ndarray) -> bool:
+        keep = self.sim.joint_positions()
+        self.sim.reset_robot(q)
+        free = not self.sim.contacts_now().in_contact
+        self.sim.reset_robot(keep)
+        return free
+
+    def ee_pose(self, q: np.ndarray) -> np.ndarray:
+        keep = self.sim.joint_positions()
+        self.sim.reset_robot(q)
+        pose = self._ee_now()
+        self.sim.reset_robot(keep)
+        return pose
+
+    def restart(self) -> None:
+        self.close()
+        self._start()
+
+    def close(self) -> None:
+        import os
+
+        if self.sim is not None:
+            self.sim.close()
+            self.sim = None
+            os.unlink(self._urdf_path)

@@ -1,0 +1,331 @@
+"""The env's ROS backend: the shield of a live ROS graph (moverl_gym.backend's interface), which it launches
+(moverl_gym.graph.LaunchedGraph, on a free port) or attaches to.
+
+Per env step exactly one call is made (the shield's ~step); reset makes a handful. Proxies are created
+once; a broken connection is re-opened once, and if that fails the error is raised at once (no waiting,
+no retries loops): the shield fails closed, the env raises.
+
+Every call has a deadline (ROS 1 service calls have none): a watchdog thread closes the call's persistent
+connection when it passes, the blocked call returns, MoveRLError names the node that did not answer, and the next
+call opens a new connection, so a stalled node that wakes up can never deliver its late reply as the answer to a
+later request. Requests that move the robot also carry their deadline (`not_after`): a node that serves one after
+it, refuses it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+
+import numpy as np
+
+from moverl_sim.world import ObjectMotion
+
+from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
+from .errors import MoveRLError
+from .graph import GraphError, LaunchedGraph, master_alive, service_exists
+from .paths import world_file
+
+SHIELD_STEP = "/shield/step"
+SHIELD_RESET = "/shield/reset"
+SCENE_CHECK = "/planning_scene/check_state"
+SCENE_FK = "/planning_scene/fk"
+SCENE_WORLD = "/planning_scene/get_world"   # the world as its source (simulator or world server) describes it
+REQUIRED_SERVICES = (SHIELD_STEP, SHIELD_RESET, SCENE_CHECK, SCENE_FK, SCENE_WORLD)
+
+_NODE_MASTER: str | None = None  # rospy allows one node (one master) per process
+
+
+class _Watchdog:
+    """One daemon thread that runs an action when the armed deadline passes (one call at a time: the env's).
+
+    Arming does not wake the thread unless the new deadline comes before the one it sleeps until: a notify per call
+    would wake it on every env step, and the woken thread takes the GIL from the calling thread in the middle of its
+    socket write (measured: the request's send went from 0.08 to 0.5 ms). Steps a few ms apart with deadlines seconds
+    away find it asleep until an earlier deadline; it wakes then, sees the newer one and sleeps again."""
+
+    def __init__(self):
+        self._cv = threading.Condition()
+        self._armed = None      # (deadline on time.monotonic(), action, token)
+        self._wake_at = math.inf  # when the thread wakes up next (inf: when notified)
+        self._fired = set()
+        self._next = 0
+        self._closed = False
+        threading.Thread(target=self._run, name="moverl_deadlines", daemon=True).start()
+
+    def arm(self, timeout: float, action) -> int:
+        with self._cv:
+            self._next += 1
+            deadline = time.monotonic() + timeout
+            self._armed = (deadline, action, self._next)
+            if deadline < self._wake_at:
+                self._cv.notify()
+            return self._next
+
+    def disarm(self, token: int) -> bool:
+        """Cancel the armed action; True if it already fired (waits until it finished)."""
+        with self._cv:
+            if self._armed is not None and self._armed[2] == token:
+                self._armed = None
+                return False
+            return token in self._fired
+
+    def close(self):
+        with self._cv:
+            self._closed = True
+            self._cv.notify()
+
+    def _run(self):
+        with self._cv:
+            while not self._closed:
+                now = time.monotonic()
+                if self._armed is not None and self._armed[0] <= now:
+                    _, action, token = self._armed
+                    self._armed = None
+                    try:
+                        action()        # under the lock: disarm() returns only after it finished
+                    finally:
+                        self._fired.add(token)
+                    continue
+                self._wake_at = self._armed[0] if self._armed is not None else math.inf
+                self._cv.wait(None if self._wake_at == math.inf else self._wake_at - now)
+
+
+def _node_of(service: str) -> str:
+    return service.rsplit("/", 1)[0] or "/"
+
+
+class _Proxy:
+    def __init__(self, name, srv_type, watchdog: _Watchdog, timeout: float):
+        import rospy
+
+        self._rospy = rospy
+        self.name = name
+        self.type = srv_type
+        self.timeout = timeout
+        self._watchdog = watchdog
+        self._proxy = rospy.ServiceProxy(name, srv_type, persistent=True)
+
+    def __call__(self, request, timeout: float | None = None):
+        timeout = self.timeout if timeout is None else timeout
+        if hasattr(request, "not_after"):
+            request.not_after = time.time() + timeout
+        errors = (self._rospy.ServiceException, self._rospy.ROSException, OSError)
+        for attempt in range(2):
+            proxy = self._proxy
+            token = self._watchdog.arm(timeout, proxy.close)   # closing the socket unblocks the call
+            try:
+                return proxy.call(request)
+            except errors as exc:
+                if self._watchdog.disarm(token):
+                    self._renew()
+                    raise MoveRLError(f"node {_node_of(self.name)} did not answer {self.name} within its deadline of "
+                                      f"{timeout:.1f} s (stalled?): connection dropped, nothing more is sent to it") \
+                        from exc
+                self._renew()
+                if attempt == 1:
+                    from .graph import master_alive
+
+                    master = os.environ.get("ROS_MASTER_URI", "")
+                    if master and not master_alive(master):
+                        raise MoveRLError(f"the graph is down: its ROS master {master} does not answer (roslaunch "
+                                          f"shuts the whole graph down when a required node, the simulator, dies); "
+                                          f"{self.name}: {exc}") from exc
+                    raise MoveRLError(f"node {_node_of(self.name)} is unreachable ({self.name}: {exc}); is the MoveRL "
+                                      "graph up?") from exc
+            finally:
+                self._watchdog.disarm(token)
+
+    def _renew(self):
+        self._proxy.close()
+        self._proxy = self._rospy.ServiceProxy(self.name, self.type, persistent=True)
+
+    def close(self):
+        self._proxy.close()
+
+
+def init_node(master_uri: str) -> None:
+    """Start this process's rospy node on master_uri (once; later calls must use the same port)."""
+    global _NODE_MASTER
+    import rospy
+
+    if _NODE_MASTER is not None:
+        if _NODE_MASTER != master_uri:
+            raise GraphError(
+                f"this process already talks to the ROS master {_NODE_MASTER}; rospy allows one master per "
+                "process. Run one env per process (e.g. SubprocVecEnv) to use several graphs."
+            )
+        return
+    if rospy.core.is_initialized():  # the host program (e.g. a rostest) already made this process a node
+        import rosgraph
+
+        bound = rosgraph.get_master_uri()
+        if bound.rstrip("/") != master_uri.rstrip("/"):
+            raise GraphError(f"this process's rospy node uses the master at {bound}, not {master_uri}")
+        _NODE_MASTER = master_uri
+        return
+    os.environ["ROS_MASTER_URI"] = master_uri
+    os.environ.setdefault("ROS_HOSTNAME", "127.0.0.1")
+    rospy.init_node("moverl_env", anonymous=True, disable_signals=True, disable_rosout=True)
+    _NODE_MASTER = master_uri
+
+
+class RosBackend(Backend):
+    """The shield and the planning scene of a live graph, through persistent proxies whose calls have deadlines.
+
+    Args:
+        graph: "auto" (attach to $ROS_MASTER_URI if it serves MoveRL, else launch), "attach" or "launch".
+        launch_args: roslaunch arguments for a launched graph: world (a name or a path), robot, shield, driver, ...
+        call_timeout: deadline of every call but resets (config/env.yaml step_timeout).
+        reset_timeout: deadline of the shield's ~reset (config/env.yaml reset_timeout).
+        wait_timeout: seconds to wait for the services at start-up.
+    """
+
+    def __init__(self, graph: str, launch_args: dict, call_timeout: float, reset_timeout: float,
+                 wait_timeout: float = 30.0):
+        if graph not in ("auto", "attach", "launch"):
+            raise ValueError(f"graph must be 'auto', 'attach' or 'launch', got {graph!r}")
+        self._launch_args = dict(launch_args)
+        self._timeouts = (call_timeout, reset_timeout, wait_timeout)
+        self._graph = None
+        self._proxies = ()
+        self._watchdog = None
+        try:
+            self._connect(graph)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- graph --------------------------------------------------------------------------------------------------
+    def _connect(self, graph: str) -> None:
+        import rospy
+        from moverl_msgs.srv import CheckState, GetFK, GetWorld, ResetRobot, ShieldStep
+
+        uri = os.environ.get("ROS_MASTER_URI", "")
+        attachable = bool(uri) and master_alive(uri) and service_exists(uri, SHIELD_STEP)
+        if graph == "attach" and uri and not attachable:
+            # A graph that is still coming up (rostest starts the test with the nodes): give it the start-up budget.
+            deadline = time.monotonic() + self._timeouts[2]
+            while not attachable and time.monotonic() < deadline:
+                time.sleep(0.1)
+                attachable = master_alive(uri) and service_exists(uri, SHIELD_STEP)
+        if graph == "attach" and not attachable:
+            raise GraphError(f"no MoveRL graph (service {SHIELD_STEP}) at ROS_MASTER_URI={uri or '<unset>'} "
+                             f"after {self._timeouts[2] if uri else 0} s")
+        self.attached = not (graph == "launch" or (graph == "auto" and not attachable))
+        if not self.attached:
+            args = {k: v for k, v in self._launch_args.items() if k != "world"}
+            wf = world_file(self._launch_args["world"])
+            if not wf.exists():
+                known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
+                raise ValueError(f"no world file {wf} (worlds available: {known})")
+            args["world_file"] = str(wf)
+            port = None
+            if _NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
+                port = int(_NODE_MASTER.rsplit(":", 1)[1])
+                if master_alive(_NODE_MASTER):
+                    raise GraphError("this process already runs a MoveRL graph; close that env first, or use "
+                                     "one process per env (SubprocVecEnv)")
+            self._graph = LaunchedGraph(args, port=port, wait_for=REQUIRED_SERVICES)
+            uri = self._graph.uri
+        init_node(uri)
+        call_timeout, reset_timeout, wait_timeout = self._timeouts
+        for name in REQUIRED_SERVICES:
+            try:
+                rospy.wait_for_service(name, timeout=wait_timeout)  # once, at start-up
+            except rospy.ROSException as exc:
+                raise GraphError(f"service {name} is not available after {wait_timeout} s") from exc
+        self._watchdog = _Watchdog()
+        self._step = _Proxy(SHIELD_STEP, ShieldStep, self._watchdog, call_timeout)
+        self._reset = _Proxy(SHIELD_RESET, ResetRobot, self._watchdog, reset_timeout)
+        self._check = _Proxy(SCENE_CHECK, CheckState, self._watchdog, call_timeout)
+        self._fk = _Proxy(SCENE_FK, GetFK, self._watchdog, call_timeout)
+        self._world = _Proxy(SCENE_WORLD, GetWorld, self._watchdog, call_timeout)
+        self._proxies = (self._step, self._reset, self._check, self._fk, self._world)
+        self._srv = {"step": ShieldStep._request_class, "reset": ResetRobot._request_class,
+                     "check": CheckState._request_class, "fk": GetFK._request_class}
+        self.urdf = rospy.get_param("/robot_description")
+        self.joints = list(rospy.get_param("/robot/joints"))
+        self.home = list(rospy.get_param("/robot/home"))
+        self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
+        self.world = _world_info(self._world(GetWorld._request_class()).world)
+        simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
+        self.restartable = simulated   # never a real robot's graph, nor one this env did not launch
+
+    @property
+    def graph(self):
+        """The LaunchedGraph this backend started (None when attached)."""
+        return self._graph
+
+    def restart(self) -> None:
+        """Tear the failed graph down and launch it again (same arguments, same master port)."""
+        if not self.restartable:
+            raise RuntimeError("only a simulated graph this env launched can be relaunched")
+        self.close()
+        self._connect("launch")
+
+    # -- the interface ------------------------------------------------------------------------------------------
+    def step(self, target: np.ndarray, duration: float) -> StepResult:
+        res = self._step(self._srv["step"](target=target.tolist(), duration=float(duration)))
+        c = res.contacts
+        known = c.available
+        return StepResult(verdict=res.verdict, message=res.message, q=np.array(res.state.position),
+                          stamp=res.state.header.stamp.to_sec(), ee=_pose_array(res.ee_pose),
+                          contacts=(c.world_contacts + c.self_contacts) if known else -1,
+                          contact_substeps=c.substeps_in_contact if known else -1, unsafe_cause=res.unsafe_cause,
+                          strategy=res.strategy, planning_time=res.planning_time,
+                          driver_error_code=res.driver_error_code,
+                          timing={"state_check": res.state_check_time, "path_check": res.path_check_time,
+                                  "planning": res.planning_time, "execution": res.execution_time})
+
+    def reset(self, q: "np.ndarray | None") -> ResetResult:
+        res = self._reset(self._srv["reset"](positions=[] if q is None else [float(x) for x in q]))
+        return ResetResult(success=res.success, message=res.message,
+                           q=np.array(res.state.position) if res.state.position else None,
+                           stamp=res.state.header.stamp.to_sec(), motion_epoch=res.motion_epoch.to_sec(),
+                           unreachable=res.unreachable)
+
+    def check_state(self, q: np.ndarray) -> bool:
+        from moverl_msgs.srv import CheckStateResponse
+
+        return self._check(self._srv["check"](positions=[float(x) for x in q])).outcome == CheckStateResponse.VALID
+
+    def ee_pose(self, q: np.ndarray) -> np.ndarray:
+        fk = self._fk(self._srv["fk"](positions=[float(x) for x in q], links=[]))
+        if not fk.success:
+            raise MoveRLError(f"forward kinematics failed: {fk.message}")
+        return _pose_array(fk.poses[0])
+
+    def close(self) -> None:
+        """Close the service connections, then stop the graph if this backend launched it: every process of the
+        graph is gone when close() returns (see moverl_gym.graph.LaunchedGraph.close)."""
+        try:
+            for p in self._proxies:
+                p.close()
+            self._proxies = ()
+            if self._watchdog is not None:
+                self._watchdog.close()
+                self._watchdog = None
+        finally:
+            if self._graph is not None:
+                graph, self._graph = self._graph, None
+                graph.close()
+
+
+def _pose_array(pose) -> np.ndarray:
+    return np.array([pose.position.x, pose.position.y, pose.position.z,
+                     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w])
+
+
+def _world_info(w) -> WorldInfo:
+    """moverl_msgs/World -> WorldInfo (plain data)."""
+    obstacles = []
+    for o in w.objects:
+        m = o.motion
+        motion = (ObjectMotion(axis=tuple(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase)
+                  if m.type != 0 and m.amplitude > 0.0 else None)
+        obstacles.append(Obstacle(id=o.id, pose=_pose_array(o.pose), observed=bool(o.observed), motion=motion))
+    return WorldInfo(name=w.name, goal=tuple(w.goal) if len(w.goal) else None, obstacles=tuple(obstacles),
+                     motion_epoch=w.motion_epoch.to_sec())

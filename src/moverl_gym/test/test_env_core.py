@@ -1,0 +1,152 @@
+"""The env's logic without a roscore: MoveRLReachEnv on its PyBullet backend (the same robot, worlds, action scaling,
+reward, starts and episode rules as on the ROS backend; no shield).
+
+Gymnasium's and SB3's check_env, seed determinism, the reward and success rules, episode truncation, and that the
+moving obstacles the env observes are where the simulator has them."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import moverl_gym  # noqa: F401
+import moverl_gym.bullet_backend
+from moverl_gym.env import VERDICTS
+from moverl_gym.errors import MoveRLError
+
+IDS = ["MoveRL/PandaReachTable-v0", "MoveRL/PandaReachHumanEE-v0", "MoveRL/PandaReachCase-v0"]
+
+
+def make(env_id, **kwargs):
+    return gym.make(env_id, backend="bullet", shield=False, **kwargs)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_check_env(env_id):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make(env_id)
+    try:
+        check_env(env.unwrapped, skip_render_check=True)
+        sb3_check_env(env.unwrapped, warn=True)
+    finally:
+        env.close()
+
+
+def test_seed_determinism():
+    env = make("MoveRL/PandaReachHuman-v0")
+    try:
+        actions = np.random.default_rng(3).uniform(-1, 1, (150, 7)).astype(np.float32)
+        runs = []
+        for _ in range(2):
+            obs, _ = env.reset(seed=11)
+            trace = [obs]
+            for a in actions:
+                obs, r, term, trunc, info = env.step(a)
+                trace += [obs, np.array([r, term, trunc, info["contacts"]])]
+                if term or trunc:
+                    trace.append(env.reset()[0])
+            runs.append(trace)
+        for a, b in zip(*runs):
+            np.testing.assert_array_equal(a, b)
+    finally:
+        env.close()
+
+
+def test_reward_success_and_truncation():
+    env = make("MoveRL/PandaReachTable-v0", task={"max_episode_steps": 5})
+    try:
+        u = env.unwrapped
+        env.reset(seed=0)
+        d0 = u.distance
+        _, r, term, trunc, info = env.step(np.zeros(7, dtype=np.float32))   # stand still: only the step penalty
+        assert r == pytest.approx(u.config.step_penalty) and not term and not trunc
+        assert info["verdict"] == VERDICTS[6] == "unchecked" and info["distance"] == pytest.approx(d0)
+        for _ in range(3):
+            _, _, _, trunc, _ = env.step(np.zeros(7, dtype=np.float32))
+            assert not trunc
+        _, _, _, trunc, _ = env.step(np.zeros(7, dtype=np.float32))
+        assert trunc   # the 5th step: task={"max_episode_steps": 5} is honoured
+        # At the goal: an episode that starts at home with the goal 5 cm from its end effector succeeds at once.
+        home = u._backend.home
+        goal = u._backend.ee_pose(np.array(home))[:3] + [0.05, 0.0, 0.0]
+        env.reset(seed=0, options={"start": home, "goal": goal.tolist()})
+        _, r, term, _, info = env.step(np.zeros(7, dtype=np.float32))
+        assert term and info["is_success"] and r == pytest.approx(u.config.goal_reward)
+    finally:
+        env.close()
+
+
+def test_observed_moving_obstacles_are_where_the_simulator_has_them():
+    env = make("MoveRL/PandaReachHuman-v0")
+    try:
+        u = env.unwrapped
+        env.reset(seed=2)
+        for _ in range(40):
+            obs, _, term, trunc, _ = env.step(env.action_space.sample())
+            if term or trunc:
+                obs, _ = env.reset()
+        sim = u._backend.sim
+        positions = sim.obstacle_positions()
+        observed = [o for o in u._backend.world.obstacles if o.observed]
+        n = u.limits.size
+        tail = obs[n + 7 + 3:].reshape(len(observed), 7)
+        for o, pose in zip(observed, tail):
+            np.testing.assert_allclose(pose[:3], positions[o.id], atol=1e-6, err_msg=o.id)
+    finally:
+        env.close()
+
+
+def test_the_bullet_backend_has_no_shield():
+    with pytest.raises(ValueError, match="no shield"):
+        gym.make("MoveRL/PandaReachTable-v0", backend="bullet")   # shield=True by default
+
+
+class _FailsOnce(moverl_gym.bullet_backend.BulletBackend):
+    """The PyBullet backend with one failure injected where a graph's can happen: at a step or at a reset."""
+
+    def __init__(self, where: str):
+        super().__init__("table")
+        self.where, self.failed, self.restarts = where, False, 0
+
+    def _maybe_fail(self, where):
+        if self.where == where and not self.failed:
+            self.failed = True
+            raise MoveRLError("simulator (/sim) failed: injected")
+
+    def step(self, target, duration):
+        self._maybe_fail("step")
+        return super().step(target, duration)
+
+    def reset(self, q):
+        self._maybe_fail("reset")
+        return super().reset(q)
+
+    def restart(self):
+        self.restarts += 1
+        super().restart()
+
+
+@pytest.mark.parametrize("where", ["step", "reset"])
+def test_recovery_counts_a_failure_found_at_a_step_or_at_a_reset(where):
+    """A failure ends the episode (at a step) or is found by the next reset (between episodes); either way the env
+    relaunches, and info counts it once: graph_failures 1, graph_restarts 1; a reset that found it names it."""
+    backend = _FailsOnce(where)
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=backend, shield=False, recover=True)
+    try:
+        _, info = env.reset(seed=0)
+        if where == "step":
+            assert info["graph_failures"] == 0
+            _, _, term, trunc, info = env.step(np.zeros(7, dtype=np.float32))
+            assert info["verdict"] == "graph_failed" and trunc and not term
+            assert info["graph_failures"] == 1 and backend.restarts == 0
+            _, info = env.reset()
+            assert "graph_failure" not in info   # counted by the step that ended the episode
+        else:
+            assert "injected" in info["graph_failure"]
+        assert info["graph_restart"] and info["graph_failures"] == 1 and info["graph_restarts"] == 1
+        assert backend.restarts == 1
+        _, _, _, _, info = env.step(np.zeros(7, dtype=np.float32))
+        assert info["verdict"] == "unchecked" and info["graph_failures"] == 1
+    finally:
+        env.close()

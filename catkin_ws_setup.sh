@@ -10,11 +10,12 @@ APT_PACKAGES=(
   ros-base-dev python3-rospy python3-roslaunch python3-rostest librostest-dev rosbash python3-tf2-ros
   libtf2-ros-dev catkin ros-message-generation ros-message-runtime ros-std-srvs libstd-srvs-dev python3-std-srvs
   libfcl-dev libompl-dev liboctomap-dev liburdfdom-dev liburdf-dev liborocos-kdl-dev libkdl-parser-dev
-  libeigen3-dev libassimp-dev libgtest-dev
+  libeigen3-dev libassimp-dev libgtest-dev libyaml-cpp-dev
   ros-sensor-msgs ros-geometry-msgs ros-shape-msgs ros-trajectory-msgs ros-visualization-msgs
   libsensor-msgs-dev libgeometry-msgs-dev libshape-msgs-dev libtrajectory-msgs-dev libvisualization-msgs-dev
   libstd-msgs-dev python3-sensor-msgs python3-geometry-msgs python3-shape-msgs python3-trajectory-msgs
   python3-visualization-msgs python3-tf2-msgs libtf2-msgs-dev
+  libactionlib-dev python3-actionlib ros-actionlib-msgs libactionlib-msgs-dev python3-actionlib-msgs
   python3-venv python3-dev build-essential cmake
 )
 
@@ -45,7 +46,7 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   log "installing Python requirements into .venv"
   # (this machine's pip configuration warns about local package folders it cannot use: harmless, filtered)
   .venv/bin/pip install -q --disable-pip-version-check -r requirements.txt 2>&1 | grep -v "is ignored: it is neither" || true
-  .venv/bin/python -c "import torch, pybullet, gymnasium, stable_baselines3" || { echo "Python requirements failed to install"; exit 1; }
+  .venv/bin/python -c "import torch, pybullet, gymnasium, stable_baselines3, ray.rllib" || { echo "Python requirements failed to install"; exit 1; }
   echo "$want" > "$stamp"
 else
   log "Python requirements: up to date"

@@ -9,6 +9,7 @@ cd "$(dirname "$0")/.."
 set +u; source ./env.sh; set -u  # ROS's setup scripts read unset variables
 export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
 live=1; [ "${1:-}" = "--no-live" ] && live=0
+RESULTS=$(mktemp -d /tmp/moverl_test_results.XXXXXX)  # rostest's XML results (its default is a shared ~/.ros path)
 passed=0; failed=0; failures=()
 suite() {
   local name=$1; shift
@@ -18,26 +19,52 @@ suite() {
   else failed=$((failed + 1)); failures+=("$name"); echo "-- $name: FAILED ($((SECONDS - t0)) s)"; fi
 }
 
+# A rostest suite. Without --text: with it, rostest exits 0 even when its tests fail or its test node dies
+# ("overall test result is not accurate when --text is enabled"); without it, a failure exits non-zero and rostest
+# prints the failing tests' tracebacks.
+live_rostest() { rostest --results-base-dir "$RESULTS" moverl_gym "$@"; }
+
 # Tier 1: C++ cores (gtest binaries built by catkin_ws_setup.sh).
 for bin in devel/lib/*/test_* devel/lib/*/*_test; do
   [ -x "$bin" ] && suite "gtest $(basename "$bin")" "$bin"
 done
 # Tier 2: Python cores.
-suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/moverl_sim/test src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py
+suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/test src/moverl_sim/test \
+  src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
+  src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py
+suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
+  src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
-  suite "pytest graph start-up errors, real-time clock" python -m pytest -q -p no:cacheprovider \
-    src/moverl_gym/test/test_graph_errors.py src/moverl_gym/test/test_realtime_live.py
-  suite "pytest train.py smoke (PPO, SAC, TD3), study --quick" python -m pytest -q -p no:cacheprovider \
+  suite "pytest graph start-up errors, lifecycle (close, SIGSTOP, SIGKILL, sockets), real-time clock" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py \
+    src/moverl_gym/test/test_graph_lifecycle.py src/moverl_gym/test/test_realtime_live.py
+  suite "pytest dynamic control and the standard driver in real time (pushing policies)" python -m pytest -q \
+    -p no:cacheprovider src/moverl_gym/test/test_driver_modes_live.py
+  suite "pytest stalled components (SIGSTOP of sim, scene, shield; both drivers)" python -m pytest -q \
+    -p no:cacheprovider src/moverl_gym/test/test_stall_live.py
+  suite "pytest recovery (simulator killed mid-training: relaunched with recovery on, clear error off)" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_recovery_live.py
+  suite "pytest fuzzing of every service and subscribed topic (both drivers' graphs)" python -m pytest -q \
+    -p no:cacheprovider src/moverl_gym/test/test_fuzz_live.py
+  suite "pytest soak, short (memory, descriptors, processes, latency sampled; the long run is scripts/soak.py)" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_soak_short.py
+  suite "pytest train.py smoke (PPO, SAC, TD3, PPO with 2 envs + evaluate), study --quick" python -m pytest -q -p no:cacheprovider \
     src/moverl_gym/test/test_train_smoke.py src/moverl_gym/test/test_study.py
-  suite "rostest shield_live" rostest --text moverl_gym shield_live.test
-  suite "rostest scenario_human" rostest --text moverl_gym scenario_human.test
-  suite "rostest scenario_case" rostest --text moverl_gym scenario_case.test
-  suite "rostest strategies_live" rostest --text moverl_gym strategies_live.test
-  suite "rostest moving_obstacle" rostest --text moverl_gym moving_obstacle.test
-  suite "rostest sensed_obstacle (OctoMap)" rostest --text moverl_gym sensed_obstacle.test
-  suite "rostest env_live (shield on)" rostest --text moverl_gym env_live.test shield:=true
-  suite "rostest env_live (shield off)" rostest --text moverl_gym env_live.test shield:=false
+  suite "pytest RLlib on a 2-node local Ray cluster (runners on different nodes; resumed with a simulator and a runner killed)" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_rllib_live.py
+  suite "rostest shield_live" live_rostest shield_live.test
+  suite "rostest scenario_human" live_rostest scenario_human.test
+  suite "rostest scenario_case" live_rostest scenario_case.test
+  suite "rostest strategies_live" live_rostest strategies_live.test
+  suite "rostest moving_obstacle" live_rostest moving_obstacle.test
+  suite "rostest sensed_obstacle (OctoMap)" live_rostest sensed_obstacle.test
+  suite "rostest standard_driver (FollowJointTrajectory, real time)" live_rostest standard_driver.test
+  suite "rostest minimal_driver (a driver not ours, its faults)" live_rostest minimal_driver.test
+  suite "rostest env_live (shield on)" live_rostest env_live.test shield:=true
+  suite "rostest env_live (shield off)" live_rostest env_live.test shield:=false
+  suite "pytest collision parity + pushing policy (every robot config, short)" python -m pytest -q -p no:cacheprovider \
+    src/moverl_gym/test/test_parity_live.py
 fi
 
 echo

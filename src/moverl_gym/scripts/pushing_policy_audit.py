@@ -100,6 +100,7 @@ def worker(robot_config: str, world: str, shield: bool, steps: int, seed: int, s
     from gymnasium.wrappers import TimeLimit
 
     from moverl_sim.core import Simulator
+    from moverl_sim.settings import sim_settings
     from moverl_sim.urdf import resolve_uri
     from moverl_sim.world import load_world
 
@@ -110,7 +111,7 @@ def worker(robot_config: str, world: str, shield: bool, steps: int, seed: int, s
     rc = yaml.safe_load(Path(robot_config).read_text())["robot"]
     rng = np.random.default_rng(seed)
     sim = Simulator(resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"),
-                    load_world(str(world_file(world))))
+                    load_world(str(world_file(world))), **sim_settings())
     try:
         def contacts(q):
             sim.reset_robot(q)

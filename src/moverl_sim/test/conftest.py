@@ -33,7 +33,8 @@ def table_world():
 
 def make_sim(panda_urdf, world, **kwargs):
     from moverl_sim.core import Simulator
-    return Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, world, **kwargs)
+    from moverl_sim.settings import sim_settings
+    return Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, world, **{**sim_settings(), **kwargs})
 
 
 @pytest.fixture(scope="module")

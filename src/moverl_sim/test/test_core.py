@@ -179,16 +179,18 @@ def test_world_shapes_collide(panda_urdf):
 
 
 def test_bad_configuration_is_reported(panda_urdf, table_world):
+    from moverl_sim.settings import sim_settings
+    kw = sim_settings()
     with pytest.raises(ValueError, match="panda_jointX.*panda_joint1"):
-        Simulator(panda_urdf, JOINTS[:6] + ["panda_jointX"], "panda_link0", FIXED, table_world)
+        Simulator(panda_urdf, JOINTS[:6] + ["panda_jointX"], "panda_link0", FIXED, table_world, **kw)
     with pytest.raises(ValueError, match="base link 'nope'"):
-        Simulator(panda_urdf, JOINTS, "nope", FIXED, table_world)
+        Simulator(panda_urdf, JOINTS, "nope", FIXED, table_world, **kw)
     with pytest.raises(ValueError, match="panda_joint8"):
-        Simulator(panda_urdf, JOINTS[:6] + ["panda_joint8"], "panda_link0", FIXED, table_world)   # fixed joint
+        Simulator(panda_urdf, JOINTS[:6] + ["panda_joint8"], "panda_link0", FIXED, table_world, **kw)   # fixed joint
     with pytest.raises(ValueError, match="nope_joint"):
-        Simulator(panda_urdf, JOINTS, "panda_link0", {"nope_joint": 0.0}, table_world)
+        Simulator(panda_urdf, JOINTS, "panda_link0", {"nope_joint": 0.0}, table_world, **kw)
     with pytest.raises(ValueError, match="control"):
-        Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, table_world, control="magic")
+        Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, table_world, physics_hz=240, control="magic")
 
 
 def test_link_poses(home_sim):

@@ -59,13 +59,14 @@ class BulletBackend(Backend):
         import tempfile
 
         from moverl_sim.core import Simulator
+        from moverl_sim.settings import sim_settings
 
         _, rc = self._args
         fd, self._urdf_path = tempfile.mkstemp(prefix="moverl_bullet_", suffix=".urdf")
         with os.fdopen(fd, "w") as f:
             f.write(self.urdf)
         self.sim = Simulator(self._urdf_path, self.joints, rc["base_link"], rc.get("fixed_joint_positions"),
-                             self._world)
+                             self._world, **sim_settings())
         self.sim.reset_robot(np.clip(self.home, self.sim.lower, self.sim.upper))
         self._ee = {name: i for i, name in self.sim.link_names.items()}[self.ee_link]
 

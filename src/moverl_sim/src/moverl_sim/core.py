@@ -109,12 +109,14 @@ class Simulator:
         the world are ignored.
     fixed_joint_positions: {joint: value} for movable joints that are not controlled (held there).
     world: a moverl_sim.world.World.
+    physics_hz, control: required, no default here: their one home is config/sim.yaml (moverl_sim.settings reads it
+        for code that runs without the node's parameters).
     control: "kinematic" (joints set exactly at every substep, collision detection only) or
         "dynamic" (position-controlled motors track the setpoint, full physics).
     """
 
-    def __init__(self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None,
-                 physics_hz=240.0, gui=False, control="kinematic"):
+    def __init__(self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None, *,
+                 physics_hz, control, gui=False):
         if control not in ("kinematic", "dynamic"):
             raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
         physics_hz = float(physics_hz)

@@ -57,7 +57,8 @@ def test_bad_actions_are_rejected(action, match):
 
 
 def test_reward_follows_the_paper():
-    cfg = TaskConfig(kappa=10.0, goal_reward=10.0, step_penalty=-0.2, safety_penalty=-1.0, goal_tolerance=0.1)
+    cfg = TaskConfig.from_yaml(config_file("env.yaml"), kappa=10.0, goal_reward=10.0, step_penalty=-0.2,
+                               safety_penalty=-1.0, goal_tolerance=0.1)
     task = ReachTask(cfg, [0.4, 0.2, 0.2])
     assert task.distance([0.4, 0.2, 0.5]) == pytest.approx(0.3)
     assert task.reward(0.5, 0.4, discarded=False) == pytest.approx(10 * 0.1 - 0.2)
@@ -75,6 +76,9 @@ def test_task_config_reads_the_yaml_and_rejects_unknown_keys(tmp_path: Path):
     bad = tmp_path / "env.yaml"
     bad.write_text("dt: 0.05\nkapa: 10\n")
     with pytest.raises(ValueError, match="kapa"):
+        TaskConfig.from_yaml(bad)
+    bad.write_text("dt: 0.05\nkappa: 10\n")   # a key left out has no default elsewhere
+    with pytest.raises(ValueError, match="missing task settings.*goal_reward"):
         TaskConfig.from_yaml(bad)
 
 

@@ -11,22 +11,23 @@ import yaml
 
 @dataclass(frozen=True)
 class TaskConfig:
-    """Constants of the reach task; every field is documented in config/env.yaml."""
+    """Constants of the reach task. Every field is required: config/env.yaml is the one place where each is set and
+    documented (from_yaml reads it; gym.make(id, task={...}) overrides single keys)."""
 
-    dt: float = 0.05
-    kappa: float = 10.0
-    goal_reward: float = 10.0
-    step_penalty: float = -0.2
-    safety_penalty: float = -1.0
-    goal_tolerance: float = 0.10
-    max_episode_steps: int = 100
-    start_noise: float = 0.2
-    goal_noise: float = 0.0
-    start_sampling_attempts: int = 1000
-    step_timeout: float = 4.0
-    reset_timeout: float = 60.0
-    max_graph_restarts: int = 3
-    restart_min_steps: int = 100
+    dt: float
+    kappa: float
+    goal_reward: float
+    step_penalty: float
+    safety_penalty: float
+    goal_tolerance: float
+    max_episode_steps: int
+    start_noise: float
+    goal_noise: float
+    start_sampling_attempts: int
+    step_timeout: float
+    reset_timeout: float
+    max_graph_restarts: int
+    restart_min_steps: int
 
     @classmethod
     def from_yaml(cls, path: Path, **overrides) -> "TaskConfig":
@@ -37,6 +38,9 @@ class TaskConfig:
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown task settings {sorted(unknown)} (known: {sorted(known)})")
+        missing = known - set(data)
+        if missing:
+            raise ValueError(f"{path}: missing task settings {sorted(missing)}")
         types = {f.name: f.type for f in fields(cls)}
         return cls(**{k: (int(v) if types[k] in (int, "int") else float(v)) for k, v in data.items()})
 

@@ -19,15 +19,17 @@
 
 #include "deadline.h"
 #include "moverl_planning_scene/robot_model.h"
+#include "moverl_planning_scene/unset.h"
 
 namespace moverl_shield {
 
-/// \brief What the shield needs to know about the scene besides its answers.
+/// \brief What the shield needs to know about the scene besides its answers: read from the scene (its YAML), never
+///        defaulted here (kUnset until read).
 struct SceneFacts {
-  std::vector<double> joint_radius_bounds;  ///< per joint, m of robot motion per unit of joint motion (bound)
-  double padding = 0.0;                     ///< obstacle inflation (m)
-  double path_resolution = 0.0;             ///< max motion of a robot point between checked states (m)
-  double planning_time = 0.0;               ///< the scene's default planning time limit (s)
+  std::vector<double> joint_radius_bounds;                ///< per joint, m of robot motion per unit of joint motion
+  double padding = moverl_planning_scene::kUnset;          ///< obstacle inflation (m)
+  double path_resolution = moverl_planning_scene::kUnset;  ///< max motion of a robot point between checked states (m)
+  double planning_time = moverl_planning_scene::kUnset;    ///< the scene's planning time limit (s)
 };
 
 class SceneAccess {

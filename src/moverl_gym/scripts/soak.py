@@ -34,22 +34,10 @@ PAGE = os.sysconf("SC_PAGE_SIZE")
 
 
 def tree(root: int) -> list[int]:
-    """Every process below root, from /proc's parent links."""
-    children = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry))
-    out, todo = [], [root]
-    while todo:
-        for c in children.get(todo.pop(), []):
-            out.append(c)
-            todo.append(c)
-    return out
+    """The pids of every process below root (moverl_gym.proctree: its own tree, from /proc's parent links)."""
+    from moverl_gym.proctree import tree as proc_tree
+
+    return [p.pid for p in proc_tree(root) if p.pid != root]
 
 
 def proc_sample(pid: int) -> "dict | None":

@@ -13,38 +13,10 @@ import sys
 import time
 from pathlib import Path
 
-import pytest
+from moverl_gym import proctree
 
 TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 STEPS = 1000
-
-
-def descendants(pid: int) -> list[int]:
-    """Every process below pid (its own tree, from /proc: not by name across the machine)."""
-    children = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            with open(f"/proc/{entry}/stat") as f:
-                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        children.setdefault(ppid, []).append(int(entry))
-    out, todo = [], [pid]
-    while todo:
-        for c in children.get(todo.pop(), []):
-            out.append(c)
-            todo.append(c)
-    return out
-
-
-def cmdline(pid: int) -> str:
-    try:
-        with open(f"/proc/{pid}/cmdline", "rb") as f:
-            return f.read().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
 
 
 def train_and_kill_the_simulator(tmp_path, recover: str):
@@ -56,7 +28,7 @@ def train_and_kill_the_simulator(tmp_path, recover: str):
     killed = None
     while time.monotonic() < deadline and proc.poll() is None:
         if episodes.exists() and len(episodes.read_text().splitlines()) > 3:   # training is under way
-            sims = [p for p in descendants(proc.pid) if "sim_node" in cmdline(p)]
+            sims = [p.pid for p in proctree.tree(proc.pid) if "sim_node" in proctree.cmdline(p.pid)]
             assert len(sims) == 1, sims
             os.kill(sims[0], signal.SIGKILL)
             killed = sims[0]

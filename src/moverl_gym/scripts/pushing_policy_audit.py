@@ -3,18 +3,21 @@
 
     python src/moverl_gym/scripts/pushing_policy_audit.py --worlds case --steps 3000
     python src/moverl_gym/scripts/pushing_policy_audit.py --robot-config my_arm.yaml --worlds table human case
+    python src/moverl_gym/scripts/pushing_policy_audit.py --worlds table human case --shield on --control dynamic \
+        --out docs/dynamic_control/pushing
 
 Random actions near home rarely reach the obstacles; this policy does. Before the run it samples configurations
 within +-spread rad of the robot's home in which a link penetrates a world object by at least 5 mm (PyBullet, in
 this process; the same number of targets for every object it can reach). Every episode (and every --switch steps) it
 picks one of them and drives all joints straight at it (the action keeps the direction of target - q), with
 noise, and goes on pushing when the shield holds the arm still, creeping: the push halves after every held step
-(down to 1/16 of full speed) and doubles after an executed one, so the arm closes in on the padded obstacles. Contacts are the physics
-engine's ground truth along every motion (info["contacts"]): with the shield on they must be 0; with it off they
-show that the policy does push into the obstacles.
+(down to 1/16 of full speed) and doubles after an executed one, so the arm closes in on the padded obstacles.
+Contacts are the physics engine's ground truth along every motion (info["contacts"]): with the shield on they
+must be 0; with it off they show that the policy does push into the obstacles.
 
 Each run (robot config x world x shield) uses its own process and ROS graph. Writes docs/pushing_policy/audit.md and
-.csv (or --out); exit code 1 if a shielded run made any contact.
+.csv (or --out); exit code 1 if a shielded run made any contact. --control dynamic runs the simulator's
+position-controlled motors (the mode closest to hardware); any error the env raises fails the run.
 """
 
 from __future__ import annotations
@@ -72,12 +75,13 @@ class PushingPolicy:
         if self.k % self.switch == 0:
             self.target = self.targets[self.rng.integers(len(self.targets))]
         need = (self.target - np.asarray(q, dtype=float)) / self.max_delta  # actions that would get there in 1 step
-        a = need / max(1.0, float(np.max(np.abs(need))))                   # full speed, same direction
+        a = need / max(1.0, float(np.max(np.abs(need))))  # full speed, same direction
         return np.clip(self.scale * a + self.noise * self.rng.normal(size=a.size), -1.0, 1.0)
 
 
-def pushing_targets(contacts, home, lower, upper, rng, n: int = 200, spread: float = 1.0,
-                    tries: int = 20000) -> tuple[list, dict]:
+def pushing_targets(
+    contacts, home, lower, upper, rng, n: int = 200, spread: float = 1.0, tries: int = 20000
+) -> tuple[list, dict]:
     """Up to n configurations, among `tries` uniform ones within +-spread of home (clipped to the limits), that
     penetrate a world object by at least MIN_DEPTH, as evenly spread over the objects as they can be (n / objects
     each). contacts(q) returns a dict {(link, object): depth}. Returns (targets, {object: how many})."""
@@ -94,25 +98,40 @@ def pushing_targets(contacts, home, lower, upper, rng, n: int = 200, spread: flo
     return targets, {obj: min(len(qs), per) for obj, qs in by_object.items()}
 
 
-def worker(robot_config: str, world: str, shield: bool, steps: int, seed: int, spread: float, switch: int,
-           noise: float) -> dict:
+def worker(
+    robot_config: str,
+    world: str,
+    shield: bool,
+    steps: int,
+    seed: int,
+    spread: float,
+    switch: int,
+    noise: float,
+    control: str | None = None,
+) -> dict:
     import yaml
     from gymnasium.wrappers import TimeLimit
 
+    from moverl_gym.env import MoveRLReachEnv
+    from moverl_gym.paths import config_file, world_file
+    from moverl_gym.task import TaskConfig
     from moverl_sim.core import Simulator
     from moverl_sim.settings import sim_settings
     from moverl_sim.urdf import resolve_uri
     from moverl_sim.world import load_world
 
-    from moverl_gym.env import MoveRLReachEnv
-    from moverl_gym.paths import config_file, world_file
-    from moverl_gym.task import TaskConfig
-
     rc = yaml.safe_load(Path(robot_config).read_text())["robot"]
     rng = np.random.default_rng(seed)
-    sim = Simulator(resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"),
-                    load_world(str(world_file(world))), **sim_settings())
+    sim = Simulator(
+        resolve_uri(rc["urdf"]),
+        rc["joints"],
+        rc["base_link"],
+        rc.get("fixed_joint_positions"),
+        load_world(str(world_file(world))),
+        **sim_settings(),
+    )
     try:
+
         def contacts(q):
             sim.reset_robot(q)
             return sim.contacts_now().world_pairs
@@ -121,15 +140,21 @@ def worker(robot_config: str, world: str, shield: bool, steps: int, seed: int, s
     finally:
         sim.close()
     max_steps = TaskConfig.from_yaml(config_file("env.yaml")).max_episode_steps
-    env = TimeLimit(MoveRLReachEnv(world=world, shield=shield, graph="launch",
-                                   launch_args={"robot_config": str(robot_config)}), max_episode_steps=max_steps)
+    env = TimeLimit(
+        MoveRLReachEnv(
+            world=world,
+            shield=shield,
+            graph="launch",
+            launch_args={"robot_config": str(robot_config), **({"control": control} if control else {})},
+        ),
+        max_episode_steps=max_steps,
+    )
     try:
         inner = env.unwrapped
         policy = PushingPolicy(targets, inner.scaler.max_delta, rng, noise=noise, switch=switch)
         env.reset(seed=seed)
         contacts_total = contact_steps = episodes = unsensed = unsensed_moves = 0
         verdicts: dict[str, int] = {}
-        pairs: dict[str, int] = {}
         t0 = time.perf_counter()
         for _ in range(steps):
             _, _, term, trunc, info = env.step(policy.act(inner.q))
@@ -147,18 +172,32 @@ def worker(robot_config: str, world: str, shield: bool, steps: int, seed: int, s
         rate = steps / (time.perf_counter() - t0)
     finally:
         env.close()
-    return {"robot": rc.get("name", Path(robot_config).stem), "world": world, "shield": shield, "steps": steps,
-            "episodes": episodes, "contacts": contacts_total, "steps_with_contact": contact_steps,
-            "unsensed_steps": unsensed, "unsensed_moves": unsensed_moves,
-            "steps_per_s": round(rate, 1), "verdicts": verdicts, "targets": per_object}
+    return {
+        "robot": rc.get("name", Path(robot_config).stem),
+        "world": world,
+        "control": control or "",
+        "shield": shield,
+        "steps": steps,
+        "episodes": episodes,
+        "contacts": contacts_total,
+        "steps_with_contact": contact_steps,
+        "unsensed_steps": unsensed,
+        "unsensed_moves": unsensed_moves,
+        "steps_per_s": round(rate, 1),
+        "verdicts": verdicts,
+        "targets": per_object,
+    }
 
 
 def main(argv=None) -> int:
     from moverl_gym.paths import config_file, repo_root
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--robot-config", action="append",
-                   help="robot config file(s) (format of config/robots/*.yaml); default: every config/robots/*.yaml")
+    p.add_argument(
+        "--robot-config",
+        action="append",
+        help="robot config file(s) (format of config/robots/*.yaml); default: every config/robots/*.yaml",
+    )
     p.add_argument("--worlds", nargs="+", default=["case"])
     p.add_argument("--shield", choices=["on", "off", "both"], default="both")
     p.add_argument("--steps", type=int, default=3000)
@@ -166,30 +205,72 @@ def main(argv=None) -> int:
     p.add_argument("--spread", type=float, default=1.0, help="targets within +-spread rad of home")
     p.add_argument("--switch", type=int, default=50, help="steps between target changes")
     p.add_argument("--noise", type=float, default=0.3, help="standard deviation of the noise added to the actions")
+    p.add_argument(
+        "--control",
+        choices=["kinematic", "dynamic"],
+        default=None,
+        help="the simulator's control mode (default: config/sim.yaml's)",
+    )
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
     p.add_argument("--worker", nargs=3, metavar=("CONFIG", "WORLD", "on|off"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
         config, world, shield = args.worker
-        print(json.dumps(worker(config, world, shield == "on", args.steps, args.seed, args.spread, args.switch,
-                                args.noise)))
+        print(
+            json.dumps(
+                worker(
+                    config,
+                    world,
+                    shield == "on",
+                    args.steps,
+                    args.seed,
+                    args.spread,
+                    args.switch,
+                    args.noise,
+                    args.control,
+                )
+            )
+        )
         return 0
 
-    configs = [Path(c).resolve() for c in args.robot_config] if args.robot_config else \
-        sorted(config_file("robots").glob("*.yaml"))
+    configs = (
+        [Path(c).resolve() for c in args.robot_config]
+        if args.robot_config
+        else sorted(config_file("robots").glob("*.yaml"))
+    )
     shields = ["on", "off"] if args.shield == "both" else [args.shield]
     rows = []
     for config in configs:
         for world in args.worlds:
             for shield in shields:
                 print(f"{config.name} in {world}, shield {shield}: {args.steps} pushing steps ...", flush=True)
-                r = run_json_worker(__file__, ["--worker", str(config), world, shield, "--steps", args.steps,
-                                               "--seed", args.seed, "--spread", args.spread, "--switch", args.switch,
-                                               "--noise", args.noise],
-                                    f"worker {config.name} {world} shield {shield}")
+                r = run_json_worker(
+                    __file__,
+                    [
+                        "--worker",
+                        str(config),
+                        world,
+                        shield,
+                        "--steps",
+                        args.steps,
+                        "--seed",
+                        args.seed,
+                        "--spread",
+                        args.spread,
+                        "--switch",
+                        args.switch,
+                        "--noise",
+                        args.noise,
+                        *(["--control", args.control] if args.control else []),
+                    ],
+                    f"worker {config.name} {world} shield {shield}",
+                )
                 rows.append(r)
-                print(f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
-                      f"targets per object {r['targets']}; {r['steps_per_s']} steps/s", flush=True)
+                print(
+                    f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
+                    f"targets per object {r['targets']}; {r['steps_per_s']} steps/s",
+                    flush=True,
+                )
     out = args.out or repo_root() / "docs" / "pushing_policy"
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "audit.csv", "w", newline="") as f:
@@ -201,28 +282,41 @@ def main(argv=None) -> int:
     if args.robot_config:
         cmd += "".join(f" --robot-config {c}" for c in args.robot_config)
     cmd += " --worlds " + " ".join(args.worlds) + f" --steps {args.steps}"
-    for name in ("shield", "seed", "spread", "switch", "noise"):
+    for name in ("shield", "seed", "spread", "switch", "noise", "control"):
         if getattr(args, name) != p.get_default(name):
             cmd += f" --{name} {getattr(args, name)}"
-    lines = ["# Pushing-policy contact audit", "", "Command:", "", f"    {cmd}", "",
-             "A policy that drives the joints straight at configurations where a link penetrates a world "
-             f"object (>= 5 mm, within +-{args.spread} rad of home, spread over the objects), with noise (sd "
-             f"{args.noise}), and keeps pushing when the shield holds the arm, creeping (the push halves after a "
-             "held step, down to 1/16, and doubles after an executed one); new target every episode and every "
-             f"{args.switch} steps. contacts = distinct robot contact pairs the physics engine saw during each step's "
-             "motion, summed over the steps (must be 0 with the shield on). Steps before the first executed motion "
-             "of a run report no contact information (the driver has not reported yet); they did not move "
-             "(unsensed moves must be 0).", "",
-             "| robot | world | shield | steps | episodes | contacts | steps with contact | unsensed moves | verdicts | "
-             "targets per object | steps/s |",
-             "|---|---|---|---:|---:|---:|---:|---:|---|---|---:|"]
+    if args.out:
+        cmd += f" --out {args.out}"
+    lines = [
+        "# Pushing-policy contact audit",
+        "",
+        "Command:",
+        "",
+        f"    {cmd}",
+        "",
+        "A policy that drives the joints straight at configurations where a link penetrates a world "
+        f"object (>= 5 mm, within +-{args.spread} rad of home, spread over the objects), with noise (sd "
+        f"{args.noise}), and keeps pushing when the shield holds the arm, creeping (the push halves after a "
+        "held step, down to 1/16, and doubles after an executed one); new target every episode and every "
+        f"{args.switch} steps. contacts = distinct robot contact pairs the physics engine saw during each step's "
+        "motion, summed over the steps (must be 0 with the shield on). Steps before the first executed motion "
+        "of a run report no contact information (the driver has not reported yet); they did not move "
+        "(unsensed moves must be 0).",
+        "",
+        "| robot | world | control | shield | steps | episodes | contacts | steps with contact | unsensed moves | "
+        "verdicts | targets per object | steps/s |",
+        "|---|---|---|---|---:|---:|---:|---:|---:|---|---|---:|",
+    ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
         t = ", ".join(f"{k} {n}" for k, n in sorted(r["targets"].items()))
-        lines.append(f"| {r['robot']} | {r['world']} | {'on' if r['shield'] else 'off'} | {r['steps']} | "
-                     f"{r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | {r['unsensed_moves']} | "
-                     f"{v} | {t} | "
-                     f"{r['steps_per_s']} |")
+        lines.append(
+            f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {'on' if r['shield'] else 'off'} | "
+            f"{r['steps']} | "
+            f"{r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | {r['unsensed_moves']} | "
+            f"{v} | {t} | "
+            f"{r['steps_per_s']} |"
+        )
     (out / "audit.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'audit.md'}")
     bad = [r for r in rows if r["shield"] and (r["contacts"] > 0 or r["unsensed_moves"] > 0)]

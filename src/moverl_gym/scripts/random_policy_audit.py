@@ -2,12 +2,26 @@
 """Random-policy contact audit over every registered env id, shield on and off (a long experiment, not a test).
 
     python src/moverl_gym/scripts/random_policy_audit.py [--steps 10000] [--ids MoveRL/PandaReachCase-v0 ...]
+    python src/moverl_gym/scripts/random_policy_audit.py --control dynamic --shield on --steps 3000 \
+        --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 MoveRL/PandaReachCase-v0 --out docs/dynamic_control
 
 For each id and shield setting: uniformly random actions from a fixed seed for --steps env steps (episodes
 reset as usual), counting the physics engine's ground-truth contacts along every motion and the shield's
 verdicts. With the shield on the count must be 0; with it off it shows what the shield prevents. Each run uses
-its own process and ROS graph. Writes docs/random_policy/audit.md and .csv; exit code 1 if a shielded run
-made any contact. CI runs a short version of this inside the live tests (300-3,000 steps per id).
+its own process and ROS graph. Writes docs/random_policy/audit.md and .csv (or --out); exit code 1 if a shielded
+run made any contact. Any error the env raises (for example a reported state beyond a joint limit that the shield
+refuses) ends the run and fails the audit. CI runs a short version of this inside the live tests (300-3,000 steps
+per id).
+
+--control dynamic drives the simulator's position-controlled motors (config/sim.yaml, the mode closest to
+hardware): the arm lags and overshoots its commands, and the reported states can lie a little beyond the joint
+limits. The table's "beyond limit" column is the largest such excursion the env saw (it must not raise).
+--world replaces every id's world (a name in worlds/ or a YAML path), e.g. the live tests' moving wall; --start
+fixes every episode's start configuration (reset option "start"), e.g. one clear of that wall's swing:
+
+    python src/moverl_gym/scripts/random_policy_audit.py --control dynamic --shield on --steps 3000 \
+        --ids MoveRL/PandaReachTable-v0 --world src/moverl_gym/test/worlds/moving_wall.yaml \
+        --start -0.65 -0.785 0 -2.356 0 1.571 0.785 --out docs/dynamic_control/moving_wall
 """
 
 from __future__ import annotations
@@ -24,31 +38,60 @@ from moverl_gym.workers import run_json_worker
 DOCS = Path(__file__).resolve().parents[3] / "docs" / "random_policy"
 
 
-def worker(env_id: str, shield: bool, steps: int, seed: int) -> dict:
+def worker(
+    env_id: str,
+    shield: bool,
+    steps: int,
+    seed: int,
+    control: str | None = None,
+    world: str | None = None,
+    start: list | None = None,
+) -> dict:
     import gymnasium as gym
+    import numpy as np
 
     import moverl_gym  # noqa: F401
 
-    env = gym.make(env_id, shield=shield, graph="launch")
+    kwargs = {"launch_args": {"control": control}} if control else {}
+    if world:
+        kwargs["world"] = world
+    env = gym.make(env_id, shield=shield, graph="launch", **kwargs)
     try:
+        limits = env.unwrapped.scaler.limits
         env.action_space.seed(seed)
-        env.reset(seed=seed)
+        options = {"start": start} if start else None
+        env.reset(seed=seed, options=options)
         contacts = contact_steps = episodes = 0
+        beyond = 0.0  # largest reported excursion beyond a joint limit (rad)
         verdicts: dict[str, int] = {}
         t0 = time.perf_counter()
         for _ in range(steps):
             _, _, term, trunc, info = env.step(env.action_space.sample())
-            contacts += info["contacts"]
+            q = env.unwrapped.q
+            beyond = max(beyond, float(np.max(np.maximum(limits.lower - q, q - limits.upper))))
+            contacts += max(info["contacts"], 0)
             contact_steps += info["contacts"] > 0
             verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
             if term or trunc:
                 episodes += 1
-                env.reset()
+                env.reset(options=options)
         rate = steps / (time.perf_counter() - t0)
     finally:
         env.close()
-    return {"env_id": env_id, "shield": shield, "steps": steps, "episodes": episodes, "contacts": contacts,
-            "steps_with_contact": contact_steps, "steps_per_s": round(rate, 1), "verdicts": verdicts}
+    return {
+        "env_id": env_id,
+        "world": world or "",
+        "control": control or "",
+        "start": start or "",
+        "shield": shield,
+        "steps": steps,
+        "episodes": episodes,
+        "contacts": contacts,
+        "steps_with_contact": contact_steps,
+        "beyond_limit_mrad": round(1000 * max(beyond, 0.0), 2),
+        "steps_per_s": round(rate, 1),
+        "verdicts": verdicts,
+    }
 
 
 def main(argv=None) -> int:
@@ -58,37 +101,95 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=10000)
     p.add_argument("--ids", nargs="+", default=list(moverl_gym.ENV_IDS))
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--shield", choices=["on", "off", "both"], default="both")
+    p.add_argument(
+        "--control",
+        choices=["kinematic", "dynamic"],
+        default=None,
+        help="the simulator's control mode (default: config/sim.yaml's)",
+    )
+    p.add_argument("--world", default=None, help="run every id in this world instead of its own")
+    p.add_argument(
+        "--start",
+        type=float,
+        nargs="+",
+        default=None,
+        help="every episode's start configuration (default: sampled as the id's task says)",
+    )
     p.add_argument("--out", type=Path, default=DOCS)
     p.add_argument("--worker", nargs=2, metavar=("ENV_ID", "on|off"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
-        print(json.dumps(worker(args.worker[0], args.worker[1] == "on", args.steps, args.seed)))
+        print(
+            json.dumps(
+                worker(
+                    args.worker[0], args.worker[1] == "on", args.steps, args.seed, args.control, args.world, args.start
+                )
+            )
+        )
         return 0
 
     rows = []
+    extra = (
+        (["--control", args.control] if args.control else [])
+        + (["--world", args.world] if args.world else [])
+        + (["--start", *args.start] if args.start else [])
+    )
     for env_id in args.ids:
-        for shield in ("on", "off"):
+        for shield in ("on", "off") if args.shield == "both" else (args.shield,):
             print(f"{env_id} shield {shield}: {args.steps} random steps ...", flush=True)
-            rows.append(run_json_worker(__file__, ["--worker", env_id, shield, "--steps", args.steps, "--seed",
-                                                   args.seed], f"worker {env_id} shield {shield}"))
+            rows.append(
+                run_json_worker(
+                    __file__,
+                    ["--worker", env_id, shield, "--steps", args.steps, "--seed", args.seed, *extra],
+                    f"worker {env_id} shield {shield}",
+                )
+            )
             r = rows[-1]
-            print(f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}")
+            print(
+                f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
+                f"beyond limit {r['beyond_limit_mrad']} mrad; {r['steps_per_s']} steps/s",
+                flush=True,
+            )
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "audit.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
             w.writerow({**r, "verdicts": json.dumps(r["verdicts"])})
-    lines = ["# Random-policy contact audit", "", "Command:", "",
-             f"    python src/moverl_gym/scripts/random_policy_audit.py --steps {args.steps} --seed {args.seed}", "",
-             "Uniformly random actions, episodes reset as usual; contacts = distinct robot contact pairs the physics "
-             "engine saw during each step's motion, summed over the steps.", "",
-             "| env id | shield | steps | episodes | contacts | steps with contact | verdicts | steps/s |",
-             "|---|---|---:|---:|---:|---:|---|---:|"]
+    cmd = f"python src/moverl_gym/scripts/random_policy_audit.py --steps {args.steps} --seed {args.seed}"
+    if args.ids != p.get_default("ids"):
+        cmd += " --ids " + " ".join(args.ids)
+    for name in ("shield", "control", "world"):
+        if getattr(args, name) != p.get_default(name):
+            cmd += f" --{name} {getattr(args, name)}"
+    if args.start:
+        cmd += " --start " + " ".join(f"{v:g}" for v in args.start)
+    if args.out != DOCS:
+        cmd += f" --out {args.out}"
+    lines = [
+        "# Random-policy contact audit",
+        "",
+        "Command:",
+        "",
+        f"    {cmd}",
+        "",
+        "Uniformly random actions, episodes reset as usual; contacts = distinct robot contact pairs the physics "
+        "engine saw during each step's motion, summed over the steps. beyond limit = the largest excursion of a "
+        "reported joint position beyond its URDF limit during the run (the env must not raise for it).",
+        "",
+        "| env id | world | control | shield | steps | episodes | contacts | steps with contact | "
+        "beyond limit (mrad) | verdicts | steps/s |",
+        "|---|---|---|---|---:|---:|---:|---:|---:|---|---:|",
+    ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
-        lines.append(f"| `{r['env_id']}` | {'on' if r['shield'] else 'off'} | {r['steps']} | {r['episodes']} | "
-                     f"**{r['contacts']}** | {r['steps_with_contact']} | {v} | {r['steps_per_s']} |")
+        lines.append(
+            f"| `{r['env_id']}` | {Path(r['world']).stem if r['world'] else 'its own'} | "
+            f"{r['control'] or 'sim.yaml'} | "
+            f"{'on' if r['shield'] else 'off'} | {r['steps']} | {r['episodes']} | **{r['contacts']}** | "
+            f"{r['steps_with_contact']} | {r['beyond_limit_mrad']} | {v} | {r['steps_per_s']} |"
+        )
     (args.out / "audit.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out / 'audit.md'}")
     bad = [r for r in rows if r["shield"] and r["contacts"] > 0]

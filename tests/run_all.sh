@@ -24,6 +24,8 @@ suite() {
 # prints the failing tests' tracebacks.
 live_rostest() { rostest --results-base-dir "$RESULTS" moverl_gym "$@"; }
 
+# Style first (clang-format, ruff, catkin_lint): tests/lint.sh, also ./run.sh lint.
+suite "lint (clang-format, ruff check, ruff format, catkin_lint)" bash tests/lint.sh
 # Tier 1: C++ cores (gtest binaries built by catkin_ws_setup.sh).
 for bin in devel/lib/*/test_* devel/lib/*/*_test; do
   [ -x "$bin" ] && suite "gtest $(basename "$bin")" "$bin"

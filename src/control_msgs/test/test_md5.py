@@ -3,6 +3,7 @@
 A mismatch means a driver refuses our goals ("md5sum mismatch") at connection time."""
 
 import pytest
+
 from control_msgs import msg
 
 # From the control_msgs 1.5 release (ROS Noetic), as published drivers see them.
@@ -25,5 +26,11 @@ def test_md5_equals_control_msgs_1_5(name):
 
 def test_result_codes():
     r = msg.FollowJointTrajectoryResult
-    assert (r.SUCCESSFUL, r.INVALID_GOAL, r.INVALID_JOINTS, r.OLD_HEADER_TIMESTAMP, r.PATH_TOLERANCE_VIOLATED,
-            r.GOAL_TOLERANCE_VIOLATED) == (0, -1, -2, -3, -4, -5)
+    assert (
+        r.SUCCESSFUL,
+        r.INVALID_GOAL,
+        r.INVALID_JOINTS,
+        r.OLD_HEADER_TIMESTAMP,
+        r.PATH_TOLERANCE_VIOLATED,
+        r.GOAL_TOLERANCE_VIOLATED,
+    ) == (0, -1, -2, -3, -4, -5)

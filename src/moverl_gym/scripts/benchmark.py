@@ -37,8 +37,11 @@ def _percentiles(xs):
     xs = np.asarray(xs, dtype=float)
     if xs.size == 0:
         return {"p50_ms": float("nan"), "p99_ms": float("nan"), "n": 0}
-    return {"p50_ms": float(np.percentile(xs, 50) * 1e3), "p99_ms": float(np.percentile(xs, 99) * 1e3),
-            "n": int(xs.size)}
+    return {
+        "p50_ms": float(np.percentile(xs, 50) * 1e3),
+        "p99_ms": float(np.percentile(xs, 99) * 1e3),
+        "n": int(xs.size),
+    }
 
 
 TICK = os.sysconf("SC_CLK_TCK")
@@ -80,22 +83,37 @@ def _rollout(env, steps, seed):
     return steps / wall, (_cpu_seconds(pids) - cpu0) / steps, infos
 
 
-def worker_graph(shield: bool, steps: int, seed: int, plans: int, obstacles: str = "objects",
-                 driver: str = "sim_service", env_id: str = "MoveRL/PandaReachTable-v0",
-                 scene_process: str = "shield") -> dict:
+def worker_graph(
+    shield: bool,
+    steps: int,
+    seed: int,
+    plans: int,
+    obstacles: str = "objects",
+    driver: str = "sim_service",
+    env_id: str = "MoveRL/PandaReachTable-v0",
+    scene_process: str = "shield",
+) -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
 
-    env = gym.make(env_id, shield=shield, graph="launch",
-                   launch_args={"obstacles": obstacles, "driver": driver, "scene_process": scene_process})
+    env = gym.make(
+        env_id,
+        shield=shield,
+        graph="launch",
+        launch_args={"obstacles": obstacles, "driver": driver, "scene_process": scene_process},
+    )
     try:
         _rollout(env, 200 if driver == "sim_service" else 20, seed)  # warm-up: connections, caches
         rate, cpu, infos = _rollout(env, steps, seed)
-        out = {"steps_per_s": rate, "cpu_ms_per_step": cpu * 1e3, "steps": steps,
-               "verdicts": _count(i["verdict"] for i, _ in infos),
-               "contacts": int(sum(max(i["contacts"], 0) for i, _ in infos)),
-               "round_trip": _percentiles([t["round_trip"] for _, t in infos])}
+        out = {
+            "steps_per_s": rate,
+            "cpu_ms_per_step": cpu * 1e3,
+            "steps": steps,
+            "verdicts": _count(i["verdict"] for i, _ in infos),
+            "contacts": int(sum(max(i["contacts"], 0) for i, _ in infos)),
+            "round_trip": _percentiles([t["round_trip"] for _, t in infos]),
+        }
         if shield:
             out["state_check"] = _percentiles([t["state_check"] for _, t in infos])
             out["path_check"] = _percentiles([t["path_check"] for i, t in infos if t["path_check"] > 0])
@@ -109,6 +127,7 @@ def _plan_latency(env, n: int, seed: int) -> dict:
     """Time the scene's ~plan service on problems the shield really plans for: both ends collision-free, the
     straight segment between them colliding (free straight segments are returned without planning)."""
     import rospy
+
     from moverl_msgs.srv import CheckPath, CheckPathResponse, PlanPath, PlanPathResponse
 
     plan = rospy.ServiceProxy("/planning_scene/plan", PlanPath, persistent=True)
@@ -144,8 +163,12 @@ def worker_bullet(steps: int, seed: int) -> dict:
     env = gym.make("MoveRL/PandaReachTable-v0", backend="bullet", shield=False)
     try:
         rate, cpu, infos = _rollout(env, steps, seed)
-        return {"steps_per_s": rate, "cpu_ms_per_step": cpu * 1e3, "steps": steps,
-                "contacts": int(sum(i["contacts"] for i, _ in infos))}
+        return {
+            "steps_per_s": rate,
+            "cpu_ms_per_step": cpu * 1e3,
+            "steps": steps,
+            "contacts": int(sum(i["contacts"] for i, _ in infos)),
+        }
     finally:
         env.close()
 
@@ -170,8 +193,12 @@ def _count(items):
 
 
 def run_worker(name: str, args) -> dict:
-    return run_json_worker(__file__, ["--worker", name, "--steps", args.steps, "--seed", args.seed, "--plans", args.plans],
-                           f"benchmark worker {name}", timeout=1800)
+    return run_json_worker(
+        __file__,
+        ["--worker", name, "--steps", args.steps, "--seed", args.seed, "--plans", args.plans],
+        f"benchmark worker {name}",
+        timeout=1800,
+    )
 
 
 def _median(runs, key):
@@ -191,16 +218,19 @@ def main(argv=None) -> int:
 
     if args.worker:
         human = "MoveRL/PandaReachHuman-v0"
-        fn = {"shield_on": lambda: worker_graph(True, args.steps, args.seed, args.plans),
-              "shield_on_human": lambda: worker_graph(True, args.steps, args.seed, 0, env_id=human),
-              "shield_off": lambda: worker_graph(False, args.steps, args.seed, 0),
-              "shield_scene_own": lambda: worker_graph(True, args.steps, args.seed, 0, scene_process="own"),
-              "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
-              # real time: a step lasts at least dt of wall time, so fewer steps say as much
-              "shield_standard": lambda: worker_graph(True, min(args.steps, 500), args.seed, 0,
-                                                      driver="follow_joint_trajectory"),
-              "bullet": lambda: worker_bullet(args.steps, args.seed),
-              "pandagym": lambda: worker_pandagym(args.steps, args.seed)}[args.worker]
+        fn = {
+            "shield_on": lambda: worker_graph(True, args.steps, args.seed, args.plans),
+            "shield_on_human": lambda: worker_graph(True, args.steps, args.seed, 0, env_id=human),
+            "shield_off": lambda: worker_graph(False, args.steps, args.seed, 0),
+            "shield_scene_own": lambda: worker_graph(True, args.steps, args.seed, 0, scene_process="own"),
+            "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
+            # real time: a step lasts at least dt of wall time, so fewer steps say as much
+            "shield_standard": lambda: worker_graph(
+                True, min(args.steps, 500), args.seed, 0, driver="follow_joint_trajectory"
+            ),
+            "bullet": lambda: worker_bullet(args.steps, args.seed),
+            "pandagym": lambda: worker_pandagym(args.steps, args.seed),
+        }[args.worker]
         print(json.dumps(fn()))
         return 0
 
@@ -210,8 +240,9 @@ def main(argv=None) -> int:
             print(f"measuring {name} ({args.steps} steps), repetition {rep + 1} of {args.reps} ...", flush=True)
             reps[name].append(run_worker(name, args))
     results = {"repetitions": reps}
-    others = () if args.only_ratios else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off",
-                                          "bullet")
+    others = (
+        () if args.only_ratios else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off", "bullet")
+    )
     for name in others:
         print(f"measuring {name} ({args.steps} steps) ...", flush=True)
         results[name] = run_worker(name, args)
@@ -219,25 +250,37 @@ def main(argv=None) -> int:
     ratios = {}
     for label, runs in (("table", on), ("human", human)):
         ratios[label] = {
-            "steps_per_s": _median(runs, "steps_per_s"), "cpu_ms_per_step": _median(runs, "cpu_ms_per_step"),
+            "steps_per_s": _median(runs, "steps_per_s"),
+            "cpu_ms_per_step": _median(runs, "cpu_ms_per_step"),
             # per repetition: each shield-on run against the panda-gym run next to it
             "speed_ratio": float(np.median([r["steps_per_s"] / g["steps_per_s"] for r, g in zip(runs, pg)])),
-            "cpu_ratio": float(np.median([r["cpu_ms_per_step"] / g["cpu_ms_per_step"] for r, g in zip(runs, pg)]))}
+            "cpu_ratio": float(np.median([r["cpu_ms_per_step"] / g["cpu_ms_per_step"] for r, g in zip(runs, pg)])),
+        }
     results["ratios"] = ratios
-    print("\n== MoveRL benchmark (random actions, seed %d, %d steps each, %d cores, %d interleaved repetitions) ==" %
-          (args.seed, args.steps, os.cpu_count(), args.reps))
+    print(
+        "\n== MoveRL benchmark (random actions, seed %d, %d steps each, %d cores, %d interleaved repetitions) =="
+        % (args.seed, args.steps, os.cpu_count(), args.reps)
+    )
     print(f"{'configuration':56s} {'env steps/s':>12s} {'CPU ms/step':>12s}")
-    print(f"{'MoveRL, full ROS graph, shield ON, table (median)':56s} {ratios['table']['steps_per_s']:12.0f} "
-          f"{ratios['table']['cpu_ms_per_step']:12.2f}")
-    print(f"{'MoveRL, full ROS graph, shield ON, human walking (median)':56s} {ratios['human']['steps_per_s']:12.0f} "
-          f"{ratios['human']['cpu_ms_per_step']:12.2f}")
-    print(f"{'panda-gym PandaReachJoints-v3 (reference, median)':56s} {_median(pg, 'steps_per_s'):12.0f} "
-          f"{_median(pg, 'cpu_ms_per_step'):12.2f}")
-    for name, label in (("shield_scene_own", "  shield ON, planning scene in its own process (table)"),
-                        ("shield_standard", "  shield ON, standard driver, simulator in real time"),
-                        ("shield_octomap", "  shield ON, obstacles sensed (depth cameras + OctoMap)"),
-                        ("shield_off", "MoveRL, full ROS graph, shield OFF"),
-                        ("bullet", "same task in PyBullet, no ROS, no shield")):
+    print(
+        f"{'MoveRL, full ROS graph, shield ON, table (median)':56s} {ratios['table']['steps_per_s']:12.0f} "
+        f"{ratios['table']['cpu_ms_per_step']:12.2f}"
+    )
+    print(
+        f"{'MoveRL, full ROS graph, shield ON, human walking (median)':56s} {ratios['human']['steps_per_s']:12.0f} "
+        f"{ratios['human']['cpu_ms_per_step']:12.2f}"
+    )
+    print(
+        f"{'panda-gym PandaReachJoints-v3 (reference, median)':56s} {_median(pg, 'steps_per_s'):12.0f} "
+        f"{_median(pg, 'cpu_ms_per_step'):12.2f}"
+    )
+    for name, label in (
+        ("shield_scene_own", "  shield ON, planning scene in its own process (table)"),
+        ("shield_standard", "  shield ON, standard driver, simulator in real time"),
+        ("shield_octomap", "  shield ON, obstacles sensed (depth cameras + OctoMap)"),
+        ("shield_off", "MoveRL, full ROS graph, shield OFF"),
+        ("bullet", "same task in PyBullet, no ROS, no shield"),
+    ):
         if name in results:
             r = results[name]
             print(f"{label:56s} {r['steps_per_s']:12.1f} {r['cpu_ms_per_step']:12.2f}")
@@ -245,32 +288,46 @@ def main(argv=None) -> int:
     print("\nratios to panda-gym (median over the repetitions, each run against the panda-gym run next to it):")
     for label in ("table", "human"):
         r = ratios[label]
-        print(f"  {label:6s} steps/s {r['speed_ratio']:.2f}x (target >= 0.8x)   CPU per step {r['cpu_ratio']:.2f}x "
-              f"(target <= 1.5x)")
+        print(
+            f"  {label:6s} steps/s {r['speed_ratio']:.2f}x (target >= 0.8x)   CPU per step {r['cpu_ratio']:.2f}x "
+            f"(target <= 1.5x)"
+        )
     first = on[0]
     print("\nlatency (shield on, table, first repetition)   p50 ms    p99 ms      n")
-    for key, label in (("round_trip", "env step round trip"), ("state_check", "state check (self + world)"),
-                       ("path_check", "path check (straight segment)"),
-                       ("planning", "OMPL planning, straight path colliding")):
+    for key, label in (
+        ("round_trip", "env step round trip"),
+        ("state_check", "state check (self + world)"),
+        ("path_check", "path check (straight segment)"),
+        ("planning", "OMPL planning, straight path colliding"),
+    ):
         v = first[key]
         print(f"{label:44s} {v['p50_ms']:9.3f} {v['p99_ms']:9.3f} {v['n']:6d}")
     if "shield_standard" in results:
         std = results["shield_standard"]
-        print(f"standard driver, real time: round trip p50 {std['round_trip']['p50_ms']:.1f} ms ({std['steps']} steps; "
-              "a step lasts >= dt = 0.05 s: at most 20 steps/s)")
+        print(
+            f"standard driver, real time: round trip p50 {std['round_trip']['p50_ms']:.1f} ms ({std['steps']} steps; "
+            "a step lasts >= dt = 0.05 s: at most 20 steps/s)"
+        )
     if "shield_octomap" in results:
         octo = results["shield_octomap"]
-        print(f"OctoMap mode: state check p50 {octo['state_check']['p50_ms']:.3f} ms, path check p50 "
-              f"{octo['path_check']['p50_ms']:.3f} ms, contacts {octo['contacts']}")
-    print(f"\nplanning solved {first['planning']['solved']}/{first['planning']['n']} (planner and time limit: "
-          "config/planning_scene.yaml; the time includes path simplification)")
+        print(
+            f"OctoMap mode: state check p50 {octo['state_check']['p50_ms']:.3f} ms, path check p50 "
+            f"{octo['path_check']['p50_ms']:.3f} ms, contacts {octo['contacts']}"
+        )
+    print(
+        f"\nplanning solved {first['planning']['solved']}/{first['planning']['n']} (planner and time limit: "
+        "config/planning_scene.yaml; the time includes path simplification)"
+    )
     print(f"verdicts shield on (table, first repetition): {first['verdicts']}")
     contacts = {"shield on (all repetitions)": sum(r["contacts"] for r in on + human)}
     for name in ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off", "bullet"):
         if name in results:
             contacts[name] = results[name]["contacts"]
-    print("ground-truth contacts: " + ", ".join(f"{k} {v}" for k, v in contacts.items()) +
-          " (the standard driver has no ground truth: -1 per step, counted as 0)")
+    print(
+        "ground-truth contacts: "
+        + ", ".join(f"{k} {v}" for k, v in contacts.items())
+        + " (the standard driver has no ground truth: -1 per step, counted as 0)"
+    )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(results, f, indent=2)

@@ -66,31 +66,57 @@ KIND_NOTES = {
     "states": "configurations from --states",
 }
 
-FIELDS = ["world", "kind", "samples", "invalid_requests",
-          "physics_collide", "scene_collide",
-          "missed", "false_alarm", "agree_collide", "agree_free", "false_alarm_rate_of_free",
-          "self_physics", "self_scene", "self_missed", "self_false_alarm",
-          "world_checked", "world_physics", "world_scene", "world_missed", "world_false_alarm",
-          "self_pairs_unnamed", "fa_self_gap_mm_p50", "fa_self_gap_mm_max", "fa_world_gap_mm_p50",
-          "fa_world_gap_mm_max", "check_ms_p50", "seed"]
+FIELDS = [
+    "world",
+    "kind",
+    "samples",
+    "invalid_requests",
+    "physics_collide",
+    "scene_collide",
+    "missed",
+    "false_alarm",
+    "agree_collide",
+    "agree_free",
+    "false_alarm_rate_of_free",
+    "self_physics",
+    "self_scene",
+    "self_missed",
+    "self_false_alarm",
+    "world_checked",
+    "world_physics",
+    "world_scene",
+    "world_missed",
+    "world_false_alarm",
+    "self_pairs_unnamed",
+    "fa_self_gap_mm_p50",
+    "fa_self_gap_mm_max",
+    "fa_world_gap_mm_p50",
+    "fa_world_gap_mm_max",
+    "check_ms_p50",
+    "seed",
+]
 
 MODE_NOTES = {
     "objects": "obstacles: objects (the scene checks the world file's shapes, padded).",
-    "octomap": ("obstacles: octomap (the scene knows no object: only the occupied cells of the OctoMap built from "
-                "the world's depth cameras at start-up, robot at home, self-filtered; robot links padded against "
-                "the cells). Unknown (never seen) cells count as free."),
+    "octomap": (
+        "obstacles: octomap (the scene knows no object: only the occupied cells of the OctoMap built from "
+        "the world's depth cameras at start-up, robot at home, self-filtered; robot links padded against "
+        "the cells). Unknown (never seen) cells count as free."
+    ),
     "both": "obstacles: both (the world file's shapes plus the OctoMap from the depth cameras).",
 }
 
 
 # ----------------------------------------------------------------------------- pure functions (tested)
 def new_counts() -> dict:
-    return {k: 0 for k in FIELDS if k not in ("world", "kind", "false_alarm_rate_of_free", "check_ms_p50", "seed")
-            and not k.startswith("fa_")}
+    return {
+        k: 0
+        for k in FIELDS
+        if k not in ("world", "kind", "false_alarm_rate_of_free", "check_ms_p50", "seed") and not k.startswith("fa_")
+    }
 
 
-def classify(counts: dict, phys_self: bool, phys_world: bool, outcome: int,
-             phys_self_pairs=(), scene_pairs=()) -> str:
+def classify(counts: dict, phys_self: bool, phys_world: bool, outcome: int, phys_self_pairs=(), scene_pairs=()) -> str:
     """Add one sample to counts; returns its class: 'invalid', 'missed', 'false_alarm', 'agree_collide'
     or 'agree_free'. phys_self_pairs / scene_pairs: iterables of (a, b) name pairs (any order)."""
     counts["samples"] += 1
@@ -137,8 +163,9 @@ def gap_stats(gaps) -> tuple:
     return round(1e3 * p50, 2), round(1e3 * s[-1], 2)
 
 
-def finish_row(world: str, counts: dict, check_ms_p50: float, seed: int, self_gaps=(), world_gaps=(),
-               kind: str = "random") -> dict:
+def finish_row(
+    world: str, counts: dict, check_ms_p50: float, seed: int, self_gaps=(), world_gaps=(), kind: str = "random"
+) -> dict:
     row = {"world": world, "kind": kind, **counts}
     row["fa_self_gap_mm_p50"], row["fa_self_gap_mm_max"] = gap_stats(list(self_gaps))
     row["fa_world_gap_mm_p50"], row["fa_world_gap_mm_max"] = gap_stats(list(world_gaps))
@@ -153,8 +180,10 @@ def fa_pairs_note(world: str, top, false_alarms: int) -> str:
     """One line: the pairs (closest flagged pair per false alarm) behind most false alarms of a world."""
     if not top:
         return f"{world}: no false alarms"
-    parts = [f"{pair} {cnt} ({cnt / max(false_alarms, 1):.0%}, physics gap p50 {p50:.1f} mm, max {mx:.1f} mm)"
-             for pair, cnt, p50, mx in top]
+    parts = [
+        f"{pair} {cnt} ({cnt / max(false_alarms, 1):.0%}, physics gap p50 {p50:.1f} mm, max {mx:.1f} mm)"
+        for pair, cnt, p50, mx in top
+    ]
     return f"{world}: false alarms (random states) mostly from " + "; ".join(parts)
 
 
@@ -165,43 +194,59 @@ def _rate(r: dict) -> str:
 
 def format_table(rows) -> str:
     """Plain-text table for the terminal."""
-    head = (f"{'world':10s} {'kind':16s} {'samples':>8s} {'phys coll':>9s} {'scene coll':>10s} {'MISSED':>7s} "
-            f"{'false al.':>9s} {'% of free':>9s} {'self miss':>9s} {'world miss':>10s} {'invalid':>7s}")
+    head = (
+        f"{'world':10s} {'kind':16s} {'samples':>8s} {'phys coll':>9s} {'scene coll':>10s} {'MISSED':>7s} "
+        f"{'false al.':>9s} {'% of free':>9s} {'self miss':>9s} {'world miss':>10s} {'invalid':>7s}"
+    )
     lines = [head, "-" * len(head)]
     for r in rows:
-        lines.append(f"{r['world']:10s} {r.get('kind', 'random'):16s} {r['samples']:8d} {r['physics_collide']:9d} "
-                     f"{r['scene_collide']:10d} {r['missed']:7d} {r['false_alarm']:9d} {_rate(r):>9s} "
-                     f"{r['self_missed']:9d} {r['world_missed']:10d} {r['invalid_requests']:7d}")
+        lines.append(
+            f"{r['world']:10s} {r.get('kind', 'random'):16s} {r['samples']:8d} {r['physics_collide']:9d} "
+            f"{r['scene_collide']:10d} {r['missed']:7d} {r['false_alarm']:9d} {_rate(r):>9s} "
+            f"{r['self_missed']:9d} {r['world_missed']:10d} {r['invalid_requests']:7d}"
+        )
     return "\n".join(lines)
 
 
-def format_markdown(rows, command: str, skipped=(), extra_notes=(), obstacles: str = "objects",
-                    robot: str = "") -> str:
+def format_markdown(rows, command: str, skipped=(), extra_notes=(), obstacles: str = "objects", robot: str = "") -> str:
     title = "" if obstacles == "objects" else f" ({obstacles} mode)"
     who = f" ({robot})" if robot else ""
-    out = [f"# Collision audit{title}{who}: planning scene vs physics ground truth", "",
-           "Command:", "", f"    {command}", "",
-           "Per world and kind of sample (see the script's header): the scene's verdict "
-           "(`/planning_scene/check_state`, or `check_path` for paths, as configured in config/planning_scene.yaml) against the simulator's contacts "
-           "(`moverl_sim.Simulator.contacts_now()`: penetrating contacts, adjacent links excluded; paths sampled "
-           "densely) with the same robot config and world file.", "",
-           "| world | kind | samples | physics collide | scene collide | **missed** | false alarms | false alarms, % "
-           "of physics-free | self missed | self false alarms | world missed | world false alarms | invalid |",
-           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    out = [
+        f"# Collision audit{title}{who}: planning scene vs physics ground truth",
+        "",
+        "Command:",
+        "",
+        f"    {command}",
+        "",
+        "Per world and kind of sample (see the script's header): the scene's verdict "
+        "(`/planning_scene/check_state`, or `check_path` for paths, as configured in config/planning_scene.yaml) "
+        "against the simulator's contacts "
+        "(`moverl_sim.Simulator.contacts_now()`: penetrating contacts, adjacent links excluded; paths sampled "
+        "densely) with the same robot config and world file.",
+        "",
+        "| world | kind | samples | physics collide | scene collide | **missed** | false alarms | false alarms, % "
+        "of physics-free | self missed | self false alarms | world missed | world false alarms | invalid |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         rate = _rate(r).replace("%", " %")
-        out.append(f"| {r['world']} | {r.get('kind', 'random')} | {r['samples']} | {r['physics_collide']} | "
-                   f"{r['scene_collide']} | **{r['missed']}** | {r['false_alarm']} | {rate} | "
-                   f"{r['self_missed']} | {r['self_false_alarm']} | {r['world_missed']} | "
-                   f"{r['world_false_alarm']} | {r['invalid_requests']} |")
-    out += ["", "- **missed**: physics collides, scene says free (a contact the shield would allow; must be 0).",
-            "- **false alarm**: physics free, scene says collision (conservatism: world padding, self padding, "
-            "convex hulls); the rate is over the physics-free samples.",
-            "- kinds: " + "; ".join(f"{k}: {v}" for k, v in KIND_NOTES.items()) + ".",
-            "- self split over all samples; world split only over samples the scene found self-free (the scene "
-            "checks self first and stops). A self-split miss on a sample the scene rejects for the world is not "
-            "a safety miss.",
-            f"- {MODE_NOTES[obstacles]}"]
+        out.append(
+            f"| {r['world']} | {r.get('kind', 'random')} | {r['samples']} | {r['physics_collide']} | "
+            f"{r['scene_collide']} | **{r['missed']}** | {r['false_alarm']} | {rate} | "
+            f"{r['self_missed']} | {r['self_false_alarm']} | {r['world_missed']} | "
+            f"{r['world_false_alarm']} | {r['invalid_requests']} |"
+        )
+    out += [
+        "",
+        "- **missed**: physics collides, scene says free (a contact the shield would allow; must be 0).",
+        "- **false alarm**: physics free, scene says collision (conservatism: world padding, self padding, "
+        "convex hulls); the rate is over the physics-free samples.",
+        "- kinds: " + "; ".join(f"{k}: {v}" for k, v in KIND_NOTES.items()) + ".",
+        "- self split over all samples; world split only over samples the scene found self-free (the scene "
+        "checks self first and stops). A self-split miss on a sample the scene rejects for the world is not "
+        "a safety miss.",
+        f"- {MODE_NOTES[obstacles]}",
+    ]
     for w, why in skipped:
         out.append(f"- world `{w}` skipped: {why}")
     out += [f"- {n}" for n in extra_notes]
@@ -234,8 +279,17 @@ def segment_states(q0, q1, step: float):
     return q0 + np.linspace(0.0, 1.0, n + 1)[:, None] * (q1 - q0)
 
 
-def crossing_through(collides, scene_free, q_contact, direction, lower, upper, step: float = 2e-3,
-                     max_span: float = 1.0, max_beyond: float = 0.2):
+def crossing_through(
+    collides,
+    scene_free,
+    q_contact,
+    direction,
+    lower,
+    upper,
+    step: float = 2e-3,
+    max_span: float = 1.0,
+    max_beyond: float = 0.2,
+):
     """A straight path through a contact whose two ends are free, for the scene to check.
 
     From q_contact (colliding in physics; from a near-boundary bisection it penetrates by a hair, so most lines
@@ -296,11 +350,17 @@ def make_simulator(config_path, world_path: str):
     from moverl_sim.world import load_world
 
     rc = load_robot_config(config_path)
-    return Simulator(resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"),
-                     load_world(world_path), **sim_settings())
+    return Simulator(
+        resolve_uri(rc["urdf"]),
+        rc["joints"],
+        rc["base_link"],
+        rc.get("fixed_joint_positions"),
+        load_world(world_path),
+        **sim_settings(),
+    )
 
 
-SENSED = "octomap"   # the scene's name for the sensed map in colliding pairs
+SENSED = "octomap"  # the scene's name for the sensed map in colliding pairs
 
 
 def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
@@ -319,9 +379,13 @@ def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
         targets = [(body, -1) for body in sim._object_bodies.values()]
     else:
         targets = [(sim._object_bodies[b], -1)]
-    gaps = [pt[8] for body, lb in targets
-            for pt in pybullet.getClosestPoints(sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb,
-                                                physicsClientId=sim._cid)]
+    gaps = [
+        pt[8]
+        for body, lb in targets
+        for pt in pybullet.getClosestPoints(
+            sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb, physicsClientId=sim._cid
+        )
+    ]
     return min(gaps, default=horizon)
 
 
@@ -349,12 +413,22 @@ class _Audit:
 
     def record(self, kind, q, st, res, q1=None, extra=None) -> str:
         self.times[kind].append(res.check_time)
-        c = classify(self.counts[kind], bool(st.self_pairs), bool(st.world_pairs), res.outcome,
-                     st.self_pairs.keys(), [(p.a, p.b) for p in res.pairs])
+        c = classify(
+            self.counts[kind],
+            bool(st.self_pairs),
+            bool(st.world_pairs),
+            res.outcome,
+            st.self_pairs.keys(),
+            [(p.a, p.b) for p in res.pairs],
+        )
         if c == "missed" and len(self.misses) < self.show:
-            m = {"kind": kind, "q": [round(float(x), 6) for x in q], "scene": int(res.outcome),
-                 "physics_self": {" / ".join(k): round(v, 5) for k, v in st.self_pairs.items()},
-                 "physics_world": {" / ".join(k): round(v, 5) for k, v in st.world_pairs.items()}}
+            m = {
+                "kind": kind,
+                "q": [round(float(x), 6) for x in q],
+                "scene": int(res.outcome),
+                "physics_self": {" / ".join(k): round(v, 5) for k, v in st.self_pairs.items()},
+                "physics_world": {" / ".join(k): round(v, 5) for k, v in st.world_pairs.items()},
+            }
             if q1 is not None:
                 m["q1"] = [round(float(x), 6) for x in q1]
             m.update(extra or {})
@@ -380,30 +454,43 @@ class _Audit:
         return total, first
 
 
-def worker(world_path: str, n: int, seed: int, robot_config: str, show: int, obstacles: str = "objects",
-           boundary: int = 0, boundary_tol: float = 1e-5, paths: int = 0, path_length: float = 0.25,
-           path_step: float = 2.5e-4, crossings: int = 0, states: list | None = None) -> dict:
+def worker(
+    world_path: str,
+    n: int,
+    seed: int,
+    robot_config: str,
+    show: int,
+    obstacles: str = "objects",
+    boundary: int = 0,
+    boundary_tol: float = 1e-5,
+    paths: int = 0,
+    path_length: float = 0.25,
+    path_step: float = 2.5e-4,
+    crossings: int = 0,
+    states: list | None = None,
+) -> dict:
     import numpy as np
     import rospy
-    from moverl_msgs.srv import CheckPath, CheckState
-
-    from moverl_sim.world import load_world
 
     from moverl_gym import ros_backend as ros
     from moverl_gym.graph import LaunchedGraph
+    from moverl_msgs.srv import CheckPath, CheckState
+    from moverl_sim.world import load_world
 
     sim = make_simulator(robot_config, world_path)
     lower, upper = np.array(sim.lower), np.array(sim.upper)
     rng = np.random.default_rng(seed)
     Q = rng.uniform(lower, upper, size=(n, lower.size))
     # octomap/both: the scene offers its services only after integrating the cameras' first views (fail closed).
-    g = LaunchedGraph({"world_file": world_path, "robot_config": robot_config, "obstacles": obstacles},
-                      wait_for=ros.REQUIRED_SERVICES)
+    g = LaunchedGraph(
+        {"world_file": world_path, "robot_config": robot_config, "obstacles": obstacles}, wait_for=ros.REQUIRED_SERVICES
+    )
     try:
         ros.init_node(g.uri)
         map_info = None
         if obstacles != "objects":
             from moverl_msgs.msg import OctomapStatus
+
             # one view from every camera of the world file (the scene starts after startup_clouds of them)
             cameras = len(load_world(world_path).cameras)
             deadline = time.monotonic() + 30.0
@@ -454,8 +541,14 @@ def worker(world_path: str, n: int, seed: int, robot_config: str, show: int, obs
             q0 = scene_free_q[rng.integers(len(scene_free_q))]
             q1 = np.clip(q0 + rng.uniform(-path_length, path_length, size=q0.size), lower, upper)
             st, first = a.path_physics(q0, q1, path_step)
-            a.record("paths", q0, st, check_path(start=q0.tolist(), goal=q1.tolist()), q1,
-                     None if first is None else {"first_contact": [round(float(x), 6) for x in first]})
+            a.record(
+                "paths",
+                q0,
+                st,
+                check_path(start=q0.tolist(), goal=q1.tolist()),
+                q1,
+                None if first is None else {"first_contact": [round(float(x), 6) for x in first]},
+            )
         seconds["paths"], t1 = time.perf_counter() - t1, time.perf_counter()
         # paths through a contact (grazing passes, thin walls, link edges) with free ends
         spans, attempts, found = [], 0, 0
@@ -473,8 +566,14 @@ def worker(world_path: str, n: int, seed: int, robot_config: str, show: int, obs
             q0, q1, span = hit
             found += 1
             spans.append(span)
-            a.record("crossings", q0, st, check_path(start=q0.tolist(), goal=q1.tolist()), q1,
-                     {"contact": [round(float(x), 6) for x in contact], "span_rad": span})
+            a.record(
+                "crossings",
+                q0,
+                st,
+                check_path(start=q0.tolist(), goal=q1.tolist()),
+                q1,
+                {"contact": [round(float(x), 6) for x in contact], "span_rad": span},
+            )
         seconds["crossings"] = time.perf_counter() - t1
         # given states
         for q in states or []:
@@ -493,27 +592,69 @@ def worker(world_path: str, n: int, seed: int, robot_config: str, show: int, obs
         if c["samples"] == 0:
             continue
         t = a.times[kind]
-        rows.append(finish_row(world, c, float(np.median(t) * 1e3) if t else float("nan"), seed,
-                               self_gaps if kind == "random" else (), world_gaps if kind == "random" else (), kind))
+        rows.append(
+            finish_row(
+                world,
+                c,
+                float(np.median(t) * 1e3) if t else float("nan"),
+                seed,
+                self_gaps if kind == "random" else (),
+                world_gaps if kind == "random" else (),
+                kind,
+            )
+        )
     top = sorted(fa_pairs.items(), key=lambda kv: -len(kv[1]))[:5]
-    crossing_info = {"found": found, "attempts": attempts,
-                     "span_rad_p50": float(np.median(spans)) if spans else float("nan"),
-                     "span_rad_min": float(np.min(spans)) if spans else float("nan")}
-    return {"rows": rows, "misses": a.misses, "wall_s": wall, "map": map_info, "crossings": crossing_info,
-            "physics_evaluations": a.physics_evaluations, "seconds": {k: round(v, 1) for k, v in seconds.items()},
-            "fa_pairs": [[k, len(v), *gap_stats(v)] for k, v in top]}
+    crossing_info = {
+        "found": found,
+        "attempts": attempts,
+        "span_rad_p50": float(np.median(spans)) if spans else float("nan"),
+        "span_rad_min": float(np.min(spans)) if spans else float("nan"),
+    }
+    return {
+        "rows": rows,
+        "misses": a.misses,
+        "wall_s": wall,
+        "map": map_info,
+        "crossings": crossing_info,
+        "physics_evaluations": a.physics_evaluations,
+        "seconds": {k: round(v, 1) for k, v in seconds.items()},
+        "fa_pairs": [[k, len(v), *gap_stats(v)] for k, v in top],
+    }
 
 
 # ----------------------------------------------------------------------------- main
 def run_world(world_path: str, args) -> dict:
-    return run_json_worker(__file__, ["--worker", world_path, "-n", args.n, "--seed", args.seed,
-                                      "--robot-config", str(robot_config_path(args.robot, args.robot_config)),
-                                      "--show", args.show, "--obstacles", args.obstacles,
-                                      "--boundary", args.boundary, "--boundary-tol", args.boundary_tol,
-                                      "--paths", args.paths, "--path-length", args.path_length,
-                                      "--path-step", args.path_step, "--crossings", args.crossings,
-                                      *(["--states", args.states] if args.states else [])],
-                           f"audit worker for {world_path}")
+    return run_json_worker(
+        __file__,
+        [
+            "--worker",
+            world_path,
+            "-n",
+            args.n,
+            "--seed",
+            args.seed,
+            "--robot-config",
+            str(robot_config_path(args.robot, args.robot_config)),
+            "--show",
+            args.show,
+            "--obstacles",
+            args.obstacles,
+            "--boundary",
+            args.boundary,
+            "--boundary-tol",
+            args.boundary_tol,
+            "--paths",
+            args.paths,
+            "--path-length",
+            args.path_length,
+            "--path-step",
+            args.path_step,
+            "--crossings",
+            args.crossings,
+            *(["--states", args.states] if args.states else []),
+        ],
+        f"audit worker for {world_path}",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -524,8 +665,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--boundary-tol", type=float, default=1e-5, help="bisection stops at this joint distance (rad)")
     p.add_argument("--paths", type=int, default=500, help="short random paths per world")
     p.add_argument("--path-length", type=float, default=0.25, help="each joint moves up to this much (rad) per path")
-    p.add_argument("--path-step", type=float, default=2.5e-4,
-                   help="physics samples along paths and crossings every this many rad of the largest joint motion")
+    p.add_argument(
+        "--path-step",
+        type=float,
+        default=2.5e-4,
+        help="physics samples along paths and crossings every this many rad of the largest joint motion",
+    )
     p.add_argument("--crossings", type=int, default=200, help="paths through a contact with free ends per world")
     p.add_argument("--states", help="YAML file: a list of configurations to check as well")
     p.add_argument("--seed", type=int, default=0)
@@ -533,9 +678,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot-config", help="a robot config file (format of config/robots/*.yaml); overrides --robot")
     p.add_argument("--show", type=int, default=5, help="print the first this many misses per world")
     p.add_argument("--out", default=None, help="output folder (default: <repo>/docs/audit)")
-    p.add_argument("--obstacles", choices=sorted(MODE_NOTES), default="objects",
-                   help="where the scene's obstacles come from (launch arg obstacles): the world file's objects, "
-                        "the OctoMap built from the world's depth cameras, or both")
+    p.add_argument(
+        "--obstacles",
+        choices=sorted(MODE_NOTES),
+        default="objects",
+        help="where the scene's obstacles come from (launch arg obstacles): the world file's objects, "
+        "the OctoMap built from the world's depth cameras, or both",
+    )
     p.add_argument("--worker", help=argparse.SUPPRESS)
     return p
 
@@ -549,8 +698,17 @@ def command_line(args, defaults) -> str:
         parts.append(f"--robot {args.robot}")
     parts.append("--worlds " + " ".join(args.worlds))
     parts.append(f"-n {args.n}")
-    for name in ("boundary", "boundary_tol", "paths", "path_length", "path_step", "crossings", "states", "seed",
-                 "obstacles"):
+    for name in (
+        "boundary",
+        "boundary_tol",
+        "paths",
+        "path_length",
+        "path_step",
+        "crossings",
+        "states",
+        "seed",
+        "obstacles",
+    ):
         if getattr(args, name) != getattr(defaults, name):
             parts.append(f"--{name.replace('_', '-')} {getattr(args, name)}")
     return " ".join(parts)
@@ -568,15 +726,30 @@ def main(argv=None) -> int:
 
             with open(args.states) as f:
                 states = yaml.safe_load(f)
-        print(json.dumps(worker(args.worker, args.n, args.seed, args.robot_config, args.show, args.obstacles,
-                                args.boundary, args.boundary_tol, args.paths, args.path_length, args.path_step,
-                                args.crossings, states)))
+        print(
+            json.dumps(
+                worker(
+                    args.worker,
+                    args.n,
+                    args.seed,
+                    args.robot_config,
+                    args.show,
+                    args.obstacles,
+                    args.boundary,
+                    args.boundary_tol,
+                    args.paths,
+                    args.path_length,
+                    args.path_step,
+                    args.crossings,
+                    states,
+                )
+            )
+        )
         return 0
-
-    from moverl_sim.urdf import resolve_uri
 
     from moverl_gym.geometry_parity import compare, format_report
     from moverl_gym.paths import repo_root, world_file
+    from moverl_sim.urdf import resolve_uri
 
     config = robot_config_path(args.robot, args.robot_config)
     robot_name = load_robot_config(config).get("name", config.stem)
@@ -585,19 +758,28 @@ def main(argv=None) -> int:
     rows, skipped, all_misses, notes = [], [], {}, []
     rc = load_robot_config(config)
     print(f"comparing the link shapes of {robot_name} (scene vs PyBullet) ...", flush=True)
-    geometry = compare(resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"),
-                       seed=args.seed)
+    geometry = compare(
+        resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), seed=args.seed
+    )
     print(format_report(geometry), flush=True)
 
     for w in args.worlds:
         path = world_file(w)
         if not path.is_file():
             print(f"note: world '{w}' skipped: {path} does not exist (yet)")
-            skipped.append((w, f"{path.relative_to(repo_root()) if path.is_relative_to(repo_root()) else path} "
-                               "did not exist at audit time"))
+            skipped.append(
+                (
+                    w,
+                    f"{path.relative_to(repo_root()) if path.is_relative_to(repo_root()) else path} "
+                    "did not exist at audit time",
+                )
+            )
             continue
-        print(f"auditing {robot_name} in {w}: {args.n} random states, {args.boundary} bisections, {args.paths} paths, "
-              f"{args.crossings} crossings ...", flush=True)
+        print(
+            f"auditing {robot_name} in {w}: {args.n} random states, {args.boundary} bisections, {args.paths} paths, "
+            f"{args.crossings} crossings ...",
+            flush=True,
+        )
         r = run_world(str(path), args)
         for row in r["rows"]:
             row["world"] = w
@@ -607,22 +789,30 @@ def main(argv=None) -> int:
         notes.append(fa_pairs_note(w, r["fa_pairs"], random_row["false_alarm"] if random_row else 0))
         c = r["crossings"]
         if args.crossings:
-            notes.append(f"{w}: {c['found']} crossings found in {c['attempts']} attempts; contact span p50 "
-                         f"{c['span_rad_p50']:.4f} rad, min {c['span_rad_min']:.4f} rad (largest joint motion "
-                         "through the contact)")
+            notes.append(
+                f"{w}: {c['found']} crossings found in {c['attempts']} attempts; contact span p50 "
+                f"{c['span_rad_p50']:.4f} rad, min {c['span_rad_min']:.4f} rad (largest joint motion "
+                "through the contact)"
+            )
         if r.get("map"):
             m = r["map"]
-            notes.append(f"{w}: OctoMap of {m['clouds']} clouds, {m['occupied_leaves']} occupied cells of "
-                         f"{m['resolution']:.3f} m")
-        print(f"  done in {r['wall_s']:.1f} s ({r['physics_evaluations']} physics states; seconds {r['seconds']})",
-              flush=True)
+            notes.append(
+                f"{w}: OctoMap of {m['clouds']} clouds, {m['occupied_leaves']} occupied cells of "
+                f"{m['resolution']:.3f} m"
+            )
+        print(
+            f"  done in {r['wall_s']:.1f} s ({r['physics_evaluations']} physics states; seconds {r['seconds']})",
+            flush=True,
+        )
 
     print(f"\n== Collision audit of {robot_name}: planning scene vs PyBullet ground truth (seed {args.seed}) ==")
     if not geometry["contained"]:
         print("LINK SHAPES: some of PyBullet's link shape lies outside the scene's (table above)")
     print(format_table(rows))
-    print("(false al. % of free: false alarms / physics-free samples; self split over all samples, world split over "
-          "scene-self-free samples)")
+    print(
+        "(false al. % of free: false alarms / physics-free samples; self split over all samples, world split over "
+        "scene-self-free samples)"
+    )
     print(f"note: {MODE_NOTES[args.obstacles]}")
     for w, why in skipped:
         print(f"note: world '{w}' skipped: {why}")
@@ -633,22 +823,30 @@ def main(argv=None) -> int:
             print(f"MISS in {w}: {json.dumps(m)}")
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    stem = "audit" + ("" if default_robot else f"_{robot_name}") + \
-        ("" if args.obstacles == "objects" else f"_{args.obstacles}")
+    stem = (
+        "audit"
+        + ("" if default_robot else f"_{robot_name}")
+        + ("" if args.obstacles == "objects" else f"_{args.obstacles}")
+    )
     with open(out_dir / f"{stem}.csv", "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=FIELDS)
         wr.writeheader()
         wr.writerows(rows)
     md = format_markdown(rows, command_line(args, defaults), skipped, notes, args.obstacles, robot_name)
-    md += ("\nLink shapes (moverl_gym.geometry_parity, scene vs PyBullet at 3 configurations):\n\n```\n"
-           + format_report(geometry) + "\n```\n")
+    md += (
+        "\nLink shapes (moverl_gym.geometry_parity, scene vs PyBullet at 3 configurations):\n\n```\n"
+        + format_report(geometry)
+        + "\n```\n"
+    )
     (out_dir / f"{stem}.md").write_text(md)
     print(f"\nwrote {out_dir / (stem + '.csv')} and {out_dir / (stem + '.md')}")
     missed = sum(r["missed"] for r in rows)
     total = sum(r["samples"] for r in rows)
     ok = missed == 0 and geometry["contained"]
-    print(f"{'OK' if ok else 'FAIL'}: {missed} missed collision(s) in {total} samples; link shapes contained: "
-          f"{geometry['contained']}")
+    print(
+        f"{'OK' if ok else 'FAIL'}: {missed} missed collision(s) in {total} samples; link shapes contained: "
+        f"{geometry['contained']}"
+    )
     return 0 if ok else 1
 
 

@@ -28,8 +28,12 @@ import moverl_gym  # noqa: F401  (registers the env ids)
 
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", type=Path, help="a run folder (with model.zip or an RLlib checkpoint/, and config.yaml), a "
-                                           "model .zip or an RLlib checkpoint folder")
+    p.add_argument(
+        "model",
+        type=Path,
+        help="a run folder (with model.zip or an RLlib checkpoint/, and config.yaml), a "
+        "model .zip or an RLlib checkpoint folder",
+    )
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--deterministic", action="store_true", help="mean action instead of sampling")
     p.add_argument("--seed", type=int, default=1000, help="env seed (start configurations); not a training seed")
@@ -107,41 +111,62 @@ def main(argv=None) -> int:
         return np.array([e.get(k, 0) for e in episodes], dtype=float)
 
     result = {
-        "model": str(model_path), "framework": config.get("framework", "sb3"), "env": config["env"], "algo": algo,
+        "model": str(model_path),
+        "framework": config.get("framework", "sb3"),
+        "env": config["env"],
+        "algo": algo,
         "shield": bool(shield),
-        "trained_with_shield": bool(config["shield"]), "deterministic": args.deterministic,
-        "episodes": len(episodes), "seed": args.seed,
-        "success_rate": float(col("success").mean()), "mean_return": float(col("return").mean()),
-        "std_return": float(col("return").std()), "mean_length": float(col("length").mean()),
-        "contacts_total": int(col("contacts").sum()), "contacts_per_episode": float(col("contacts").mean()),
+        "trained_with_shield": bool(config["shield"]),
+        "deterministic": args.deterministic,
+        "episodes": len(episodes),
+        "seed": args.seed,
+        "success_rate": float(col("success").mean()),
+        "mean_return": float(col("return").mean()),
+        "std_return": float(col("return").std()),
+        "mean_length": float(col("length").mean()),
+        "contacts_total": int(col("contacts").sum()),
+        "contacts_per_episode": float(col("contacts").mean()),
         "episodes_with_contacts": int((col("contacts") > 0).sum()),
         "interventions_total": int(col("interventions").sum()),
         "interventions_per_episode": float(col("interventions").mean()),
-        "replanned_total": int(col("replanned").sum()), "truncated_total": int(col("truncated").sum()),
-        "wall_time": wall, "steps_per_second": float(col("length").sum() / wall) if wall > 0 else float("nan"),
+        "replanned_total": int(col("replanned").sum()),
+        "truncated_total": int(col("truncated").sum()),
+        "wall_time": wall,
+        "steps_per_second": float(col("length").sum() / wall) if wall > 0 else float("nan"),
         "per_episode": episodes,
     }
     if args.out:
         out = args.out
-    elif config.get("framework") == "rllib":   # <run>/checkpoint or <run>/checkpoints/iter_<n>
-        out = (model_path.parent / "eval.json" if model_path.name == "checkpoint"
-               else model_path.parent.parent / f"eval_{model_path.name}.json")
+    elif config.get("framework") == "rllib":  # <run>/checkpoint or <run>/checkpoints/iter_<n>
+        out = (
+            model_path.parent / "eval.json"
+            if model_path.name == "checkpoint"
+            else model_path.parent.parent / f"eval_{model_path.name}.json"
+        )
     else:
         out = model_path.parent / "eval.json"
         if out.parent.name == "checkpoints":
             out = out.parent.parent / f"eval_{model_path.stem}.json"
     out.write_text(json.dumps(result, indent=2))
     rllib = "RLlib " if config.get("framework") == "rllib" else ""
-    print(f"== {rllib}{algo.upper()} {config['env']} (trained shield {'on' if config['shield'] else 'off'}), evaluated "
-          f"shield {'on' if shield else 'off'}, {'deterministic' if args.deterministic else 'stochastic'} policy, "
-          f"{len(episodes)} episodes")
-    print(f"success rate {result['success_rate']:.1%}   mean return {result['mean_return']:.2f} "
-          f"± {result['std_return']:.2f}   mean length {result['mean_length']:.1f}")
-    print(f"ground-truth contacts: {result['contacts_total']} total, {result['contacts_per_episode']:.2f} per "
-          f"episode ({result['episodes_with_contacts']} episodes with contacts)")
-    print(f"shield interventions (discarded): {result['interventions_total']} "
-          f"({result['interventions_per_episode']:.2f} per episode), replanned {result['replanned_total']}, "
-          f"truncated {result['truncated_total']}")
+    print(
+        f"== {rllib}{algo.upper()} {config['env']} (trained shield {'on' if config['shield'] else 'off'}), evaluated "
+        f"shield {'on' if shield else 'off'}, {'deterministic' if args.deterministic else 'stochastic'} policy, "
+        f"{len(episodes)} episodes"
+    )
+    print(
+        f"success rate {result['success_rate']:.1%}   mean return {result['mean_return']:.2f} "
+        f"± {result['std_return']:.2f}   mean length {result['mean_length']:.1f}"
+    )
+    print(
+        f"ground-truth contacts: {result['contacts_total']} total, {result['contacts_per_episode']:.2f} per "
+        f"episode ({result['episodes_with_contacts']} episodes with contacts)"
+    )
+    print(
+        f"shield interventions (discarded): {result['interventions_total']} "
+        f"({result['interventions_per_episode']:.2f} per episode), replanned {result['replanned_total']}, "
+        f"truncated {result['truncated_total']}"
+    )
     print(f"wrote {out}")
     return 0
 

@@ -35,8 +35,8 @@ import uuid
 import xmlrpc.client
 from pathlib import Path
 
-from moverl_gym import ros_backend as ros
 from moverl_gym import graph, reaper
+from moverl_gym import ros_backend as ros
 from moverl_gym.paths import launch_file, repo_root, world_file
 from moverl_gym.workers import run_json_worker
 
@@ -86,14 +86,19 @@ def sockets_by_component(g) -> dict:
 
 
 def measure_sockets(expose_host: str | None) -> dict:
-    modes = {"shim (default)": lambda: graph.LaunchedGraph(table_args(), wait_for=ros.REQUIRED_SERVICES),
-             "no shim, ROS_HOSTNAME=127.0.0.1": lambda: graph.LaunchedGraph(
-                 table_args(), wait_for=ros.REQUIRED_SERVICES, expose="127.0.0.1"),
-             "no shim, ROS_IP=127.0.0.1": lambda: RosIpGraph(table_args(), wait_for=ros.REQUIRED_SERVICES,
-                                                             expose="127.0.0.1")}
+    modes = {
+        "shim (default)": lambda: graph.LaunchedGraph(table_args(), wait_for=ros.REQUIRED_SERVICES),
+        "no shim, ROS_HOSTNAME=127.0.0.1": lambda: graph.LaunchedGraph(
+            table_args(), wait_for=ros.REQUIRED_SERVICES, expose="127.0.0.1"
+        ),
+        "no shim, ROS_IP=127.0.0.1": lambda: RosIpGraph(
+            table_args(), wait_for=ros.REQUIRED_SERVICES, expose="127.0.0.1"
+        ),
+    }
     if expose_host:
-        modes[f"exposed ({expose_host})"] = lambda: graph.LaunchedGraph(table_args(), wait_for=ros.REQUIRED_SERVICES,
-                                                                        expose=expose_host)
+        modes[f"exposed ({expose_host})"] = lambda: graph.LaunchedGraph(
+            table_args(), wait_for=ros.REQUIRED_SERVICES, expose=expose_host
+        )
     out = {}
     for name, make in modes.items():
         g = make()
@@ -114,8 +119,14 @@ def measure_close(stop: str | None) -> dict:
             os.kill(node_pid(g.uri, stop), signal.SIGSTOP)
     finally:
         g.close()
-    return dict(seconds=g.last_close["seconds"], startup_s=startup, before=len(procs), after=len(alive(procs)),
-                marked_after=len(reaper.graph_processes(g.graph_id, None)), sigkilled=g.last_close["sigkilled"])
+    return dict(
+        seconds=g.last_close["seconds"],
+        startup_s=startup,
+        before=len(procs),
+        after=len(alive(procs)),
+        marked_after=len(reaper.graph_processes(g.graph_id, None)),
+        sigkilled=g.last_close["sigkilled"],
+    )
 
 
 def measure_old_close(stop: str | None) -> dict:
@@ -127,8 +138,14 @@ def measure_old_close(stop: str | None) -> dict:
     uri = f"http://127.0.0.1:{port}"
     log_dir = Path(os.environ.get("TMPDIR", "/tmp")) / f"moverl_old_close_{graph_id}"
     log_dir.mkdir()
-    env = dict(os.environ, ROS_MASTER_URI=uri, ROS_HOSTNAME="127.0.0.1", ROS_LOG_DIR=str(log_dir),
-               MOVERL_ROOT=str(repo_root()), **{reaper.MARKER: graph_id})
+    env = dict(
+        os.environ,
+        ROS_MASTER_URI=uri,
+        ROS_HOSTNAME="127.0.0.1",
+        ROS_LOG_DIR=str(log_dir),
+        MOVERL_ROOT=str(repo_root()),
+        **{reaper.MARKER: graph_id},
+    )
 
     def own_session_dies_with_parent():
         os.setsid()
@@ -137,8 +154,14 @@ def measure_old_close(stop: str | None) -> dict:
     t0 = time.monotonic()
     with open(log_dir / "roslaunch.log", "wb") as log:
         cmd = ["roslaunch", "-p", str(port), str(launch_file()), f"world_file:={world_file('table')}"]
-        proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                preexec_fn=own_session_dies_with_parent)
+        proc = subprocess.Popen(
+            cmd,
+            env=env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            preexec_fn=own_session_dies_with_parent,
+        )
     deadline = time.monotonic() + 60
     while not all(graph.service_exists(uri, s) for s in ros.REQUIRED_SERVICES):
         if time.monotonic() > deadline or proc.poll() is not None:
@@ -162,8 +185,9 @@ def measure_old_close(stop: str | None) -> dict:
     time.sleep(1.0)  # what is still there a second later stays
     left = alive(procs)
     reaper.stop_processes(graph_id, None, None, 0.0, 5.0)  # clean up what it left
-    return dict(seconds=seconds, startup_s=startup, before=len(procs), after=len(left),
-                left=sorted(p.name for p in left))
+    return dict(
+        seconds=seconds, startup_s=startup, before=len(procs), after=len(left), left=sorted(p.name for p in left)
+    )
 
 
 OWNER = """
@@ -214,8 +238,12 @@ def worker_steps(shim: bool, steps: int, seed: int) -> dict:
         preloaded = "LD_PRELOAD" in open(f"/proc/{graph_node_pid(env)}/environ", "rb").read().decode(errors="replace")
     finally:
         env.close()
-    return dict(startup_s=startup, steps_per_s=rate, round_trip_p50_ms=1e3 * statistics.median(round_trips),
-                shim_in_shield=preloaded)
+    return dict(
+        startup_s=startup,
+        steps_per_s=rate,
+        round_trip_p50_ms=1e3 * statistics.median(round_trips),
+        shim_in_shield=preloaded,
+    )
 
 
 def graph_node_pid(env) -> int:
@@ -241,8 +269,9 @@ def measure_bind_rate(shim: bool) -> float:
     if shim:
         env["LD_PRELOAD"] = str(graph.loopback_shim())
     address = "0.0.0.0" if shim else "127.0.0.1"
-    out = subprocess.run([sys.executable, "-c", BIND_LOOP, address], env=env, capture_output=True, text=True,
-                         check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", BIND_LOOP, address], env=env, capture_output=True, text=True, check=True
+    )
     return float(out.stdout)
 
 
@@ -260,8 +289,11 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--reps", type=int, default=3, help="repetitions of each close() measurement")
     p.add_argument("--steps", type=int, default=1000, help="env steps per steps/s measurement")
-    p.add_argument("--expose-host", default=host_address(), help="address for the exposed mode (default: this "
-                   "host's address on its default route)")
+    p.add_argument(
+        "--expose-host",
+        default=host_address(),
+        help="address for the exposed mode (default: this host's address on its default route)",
+    )
     p.add_argument("--json", help="also write all figures to this file")
     p.add_argument("--sections", default="1,2,3,4,5", help="which of the measurements above to run")
     p.add_argument("--worker", choices=["shim", "noshim"], help=argparse.SUPPRESS)
@@ -304,9 +336,11 @@ def report_close(args, out: dict) -> None:
         out["close"][stop or "clean"] = runs
         secs = ", ".join(f"{r['seconds']:.2f}" for r in runs)
         startup = ", ".join(f"{r['startup_s']:.2f}" for r in runs)
-        print(f"  {'stopped ' + stop if stop else 'clean':24s} {secs} s; processes {runs[0]['before']} -> "
-              f"{max(r['after'] + r['marked_after'] for r in runs)}; SIGKILLed {runs[0]['sigkilled']}; "
-              f"(start-up {startup} s)")
+        print(
+            f"  {'stopped ' + stop if stop else 'clean':24s} {secs} s; processes {runs[0]['before']} -> "
+            f"{max(r['after'] + r['marked_after'] for r in runs)}; SIGKILLed {runs[0]['sigkilled']}; "
+            f"(start-up {startup} s)"
+        )
 
 
 def report_old_close(args, out: dict) -> None:
@@ -317,8 +351,10 @@ def report_old_close(args, out: dict) -> None:
         out["old_close"][stop or "clean"] = runs
         secs = ", ".join(f"{r['seconds']:.2f}" for r in runs)
         startup = ", ".join(f"{r['startup_s']:.2f}" for r in runs)
-        print(f"  {'stopped ' + stop if stop else 'clean':24s} {secs} s; processes {runs[0]['before']} -> "
-              f"{max(r['after'] for r in runs)} {runs[-1]['left']} (start-up {startup} s)")
+        print(
+            f"  {'stopped ' + stop if stop else 'clean':24s} {secs} s; processes {runs[0]['before']} -> "
+            f"{max(r['after'] for r in runs)} {runs[-1]['left']} (start-up {startup} s)"
+        )
 
 
 def report_owner_sigkill(args, out: dict) -> None:
@@ -335,8 +371,11 @@ def report_cost(args, out: dict) -> None:
     out["cost"] = {"shim": [], "noshim": []}
     for _ in range(args.reps):
         for mode in ("noshim", "shim"):
-            out["cost"][mode].append(run_json_worker(__file__, ["--worker", mode, "--steps", args.steps,
-                                                                "--seed", args.seed], f"steps ({mode})"))
+            out["cost"][mode].append(
+                run_json_worker(
+                    __file__, ["--worker", mode, "--steps", args.steps, "--seed", args.seed], f"steps ({mode})"
+                )
+            )
     for mode, runs in out["cost"].items():
         assert all(r["shim_in_shield"] == (mode == "shim") for r in runs)
         startup = ", ".join(f"{r['startup_s']:.2f}" for r in runs)
@@ -348,8 +387,10 @@ def report_cost(args, out: dict) -> None:
         for mode in ("noshim", "shim"):
             out["bind_per_s"][mode].append(measure_bind_rate(mode == "shim"))
     for mode, rates in out["bind_per_s"].items():
-        print(f"  {mode:7s} socket()+bind()+close() per s, {len(rates)} runs of 50,000: median "
-              f"{statistics.median(rates):.0f} (min {min(rates):.0f}, max {max(rates):.0f})")
+        print(
+            f"  {mode:7s} socket()+bind()+close() per s, {len(rates)} runs of 50,000: median "
+            f"{statistics.median(rates):.0f} (min {min(rates):.0f}, max {max(rates):.0f})"
+        )
 
 
 if __name__ == "__main__":

@@ -40,23 +40,41 @@ def parse_args(argv=None):
     p.add_argument("-n", "--n-timesteps", type=int, default=None, help="env steps over all runners (default: file)")
     p.add_argument("--num-env-runners", type=int, default=None, help="default: from the hyper-parameter file")
     p.add_argument("--shield", default="on", choices=("on", "off"))
-    p.add_argument("--recover", default="auto", choices=("auto", "on", "off"),
-                   help="the env's own recovery from a failed graph (see train.py; auto: on with the launched "
-                        "simulator)")
-    p.add_argument("--address", default=None,
-                   help="an existing Ray cluster (<host>:<port> of its head, as `ray start --head` prints); default: "
-                        "start a cluster of our own on this machine (127.0.0.1, free ports, own temp dir)")
-    p.add_argument("--local-nodes", type=int, default=1,
-                   help="nodes of the local cluster: 1 (default), or N > 1 for a multi-node cluster on this host (a "
-                        "head without CPUs plus N nodes sharing the runners, so runners run on different nodes)")
+    p.add_argument(
+        "--recover",
+        default="auto",
+        choices=("auto", "on", "off"),
+        help="the env's own recovery from a failed graph (see train.py; auto: on with the launched simulator)",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        help="an existing Ray cluster (<host>:<port> of its head, as `ray start --head` prints); default: "
+        "start a cluster of our own on this machine (127.0.0.1, free ports, own temp dir)",
+    )
+    p.add_argument(
+        "--local-nodes",
+        type=int,
+        default=1,
+        help="nodes of the local cluster: 1 (default), or N > 1 for a multi-node cluster on this host (a "
+        "head without CPUs plus N nodes sharing the runners, so runners run on different nodes)",
+    )
     p.add_argument("--log-folder", default="runs")
     p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: rllib_ppo.yml)")
     p.add_argument("--checkpoint-freq", type=int, default=10, help="iterations between checkpoints (0: final only)")
     p.add_argument("--resume", type=Path, default=None, help="a checkpoint folder of an earlier run to continue")
-    p.add_argument("--runner-restart-delay", type=float, default=5.0,
-                   help="seconds before RLlib brings a restarted env runner back (RLlib's default is 60)")
-    p.add_argument("--sample-timeout", type=float, default=120.0,
-                   help="seconds a runner may take for one sample() before RLlib gives up on it")
+    p.add_argument(
+        "--runner-restart-delay",
+        type=float,
+        default=5.0,
+        help="seconds before RLlib brings a restarted env runner back (RLlib's default is 60)",
+    )
+    p.add_argument(
+        "--sample-timeout",
+        type=float,
+        default=120.0,
+        help="seconds a runner may take for one sample() before RLlib gives up on it",
+    )
     return p.parse_args(argv)
 
 
@@ -70,17 +88,32 @@ def build_config(args, hp: dict, num_env_runners: int):
     training = {k: v for k, v in hp.items() if k not in RUN_KEYS}
     return (
         PPOConfig()
-        .environment(rllib.ENV_NAME, env_config={"env_id": args.env, "shield": args.shield == "on",
-                                                 "graph": "launch", "recover": recover})
-        .env_runners(num_env_runners=num_env_runners, num_envs_per_env_runner=1, gym_env_vectorize_mode="sync",
-                     num_cpus_per_env_runner=1, sample_timeout_s=args.sample_timeout)
-        .learners(num_learners=0)   # the learner runs in this process
+        .environment(
+            rllib.ENV_NAME,
+            env_config={"env_id": args.env, "shield": args.shield == "on", "graph": "launch", "recover": recover},
+        )
+        .env_runners(
+            num_env_runners=num_env_runners,
+            num_envs_per_env_runner=1,
+            gym_env_vectorize_mode="sync",
+            num_cpus_per_env_runner=1,
+            sample_timeout_s=args.sample_timeout,
+        )
+        .learners(num_learners=0)  # the learner runs in this process
         .training(**training)
-        .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=list(hp.get("fcnet_hiddens", [64, 64])),
-                                                   fcnet_activation=hp.get("fcnet_activation", "tanh")))
-        .fault_tolerance(restart_failed_env_runners=True, max_num_env_runner_restarts=100,
-                         delay_between_env_runner_restarts_s=args.runner_restart_delay,
-                         num_consecutive_env_runner_failures_tolerance=3, restart_failed_sub_environments=False)
+        .rl_module(
+            model_config=DefaultModelConfig(
+                fcnet_hiddens=list(hp.get("fcnet_hiddens", [64, 64])),
+                fcnet_activation=hp.get("fcnet_activation", "tanh"),
+            )
+        )
+        .fault_tolerance(
+            restart_failed_env_runners=True,
+            max_num_env_runner_restarts=100,
+            delay_between_env_runner_restarts_s=args.runner_restart_delay,
+            num_consecutive_env_runner_failures_tolerance=3,
+            restart_failed_sub_environments=False,
+        )
         .callbacks(rllib.metrics_callback())
         .debugging(seed=args.seed)
     )
@@ -108,10 +141,24 @@ def summarize(result: dict, wall: float) -> dict:
         "episodes": int(runners.get("num_episodes_lifetime", 0)),
         "episode_return_mean": runners.get("episode_return_mean"),
         "success_rate": m.get("success_rate"),
-        **{k: int(m.get(k, 0)) for k in ("contacts", "contact_substeps", "interventions", "discarded_self",
-                                          "discarded_pose", "discarded_path", "discarded_start", "replanned",
-                                          "truncated", "graph_failures", "graph_restarts", "envs_created",
-                                          "steps_without_ground_truth")},
+        **{
+            k: int(m.get(k, 0))
+            for k in (
+                "contacts",
+                "contact_substeps",
+                "interventions",
+                "discarded_self",
+                "discarded_pose",
+                "discarded_path",
+                "discarded_start",
+                "replanned",
+                "truncated",
+                "graph_failures",
+                "graph_restarts",
+                "envs_created",
+                "steps_without_ground_truth",
+            )
+        },
         "cost": float(m.get("cost", 0.0)),
         "env_runner_restarts": int(result.get("moverl", {}).get("env_runner_restarts", 0)),
         "healthy_env_runners": int(result.get("moverl", {}).get("healthy_env_runners", 0)),
@@ -127,11 +174,16 @@ def runner_nodes(algo) -> list[dict]:
 
         import ray
 
-        return {"worker_index": runner.worker_index, "node_id": ray.get_runtime_context().get_node_id(),
-                "host": socket.gethostname(), "pid": os.getpid()}
+        return {
+            "worker_index": runner.worker_index,
+            "node_id": ray.get_runtime_context().get_node_id(),
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+        }
 
-    return sorted(algo.env_runner_group.foreach_env_runner(where, local_env_runner=False),
-                  key=lambda r: r["worker_index"])
+    return sorted(
+        algo.env_runner_group.foreach_env_runner(where, local_env_runner=False), key=lambda r: r["worker_index"]
+    )
 
 
 def main(argv=None) -> int:
@@ -171,11 +223,25 @@ def main(argv=None) -> int:
         if args.resume:
             algo.restore_from_path(str(Path(args.resume).resolve()))
         nodes = runner_nodes(algo)
-        (run / "config.yaml").write_text(yaml.safe_dump({
-            "framework": "rllib", "algo": "ppo", "env": args.env, "seed": args.seed, "n_timesteps": n_timesteps,
-            "shield": args.shield == "on", "recover": args.recover, "num_env_runners": num_env_runners,
-            "hyperparams": hp, "address": args.address or f"local cluster, {args.local_nodes} node(s)",
-            "resumed_from": str(args.resume) if args.resume else None, "runners": nodes}, sort_keys=False))
+        (run / "config.yaml").write_text(
+            yaml.safe_dump(
+                {
+                    "framework": "rllib",
+                    "algo": "ppo",
+                    "env": args.env,
+                    "seed": args.seed,
+                    "n_timesteps": n_timesteps,
+                    "shield": args.shield == "on",
+                    "recover": args.recover,
+                    "num_env_runners": num_env_runners,
+                    "hyperparams": hp,
+                    "address": args.address or f"local cluster, {args.local_nodes} node(s)",
+                    "resumed_from": str(args.resume) if args.resume else None,
+                    "runners": nodes,
+                },
+                sort_keys=False,
+            )
+        )
         print(f"runners: {nodes}", flush=True)
         from torch.utils.tensorboard import SummaryWriter
 
@@ -195,9 +261,12 @@ def main(argv=None) -> int:
             for key, value in flatten(result).items():
                 writer.add_scalar(key, value, row["env_steps"])
             writer.flush()
-            print(f"iter {row['iteration']}: {row['env_steps']} steps, return {row['episode_return_mean']}, success "
-                  f"{row['success_rate']}, contacts {row['contacts']}, interventions {row['interventions']}, graph "
-                  f"restarts {row['graph_restarts']}, runner restarts {row['env_runner_restarts']}", flush=True)
+            print(
+                f"iter {row['iteration']}: {row['env_steps']} steps, return {row['episode_return_mean']}, success "
+                f"{row['success_rate']}, contacts {row['contacts']}, interventions {row['interventions']}, graph "
+                f"restarts {row['graph_restarts']}, runner restarts {row['env_runner_restarts']}",
+                flush=True,
+            )
             if args.checkpoint_freq and row["iteration"] % args.checkpoint_freq == 0:
                 algo.save_to_path(str((run / "checkpoints" / f"iter_{row['iteration']:05d}").resolve()))
             if row["env_steps"] >= n_timesteps:
@@ -209,26 +278,37 @@ def main(argv=None) -> int:
     finally:
         try:
             if algo is not None:
-                algo.stop()   # the runners close their envs: every graph stops
+                algo.stop()  # the runners close their envs: every graph stops
         finally:
             if cluster is not None:
                 cluster.shutdown()
 
-    steps = row["env_steps"] - steps0   # this run's steps (a resumed run started at steps0)
-    summary = dict(row, wall_time=wall, steps_this_run=steps,
-                   steps_per_second=steps / wall if wall > 0 else float("nan"), run=str(run),
-                   checkpoint=str(run / "checkpoint"))
+    steps = row["env_steps"] - steps0  # this run's steps (a resumed run started at steps0)
+    summary = dict(
+        row,
+        wall_time=wall,
+        steps_this_run=steps,
+        steps_per_second=steps / wall if wall > 0 else float("nan"),
+        run=str(run),
+        checkpoint=str(run / "checkpoint"),
+    )
     (run / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"\n== RLlib PPO on {args.env}, shield {args.shield}, seed {args.seed}, {num_env_runners} env runners: "
-          f"{steps} steps in {wall:.1f} s ({summary['steps_per_second']:.0f} steps/s, training included)"
-          + (f", resumed at {steps0} steps" if steps0 else ""))
+    print(
+        f"\n== RLlib PPO on {args.env}, shield {args.shield}, seed {args.seed}, {num_env_runners} env runners: "
+        f"{steps} steps in {wall:.1f} s ({summary['steps_per_second']:.0f} steps/s, training included)"
+        + (f", resumed at {steps0} steps" if steps0 else "")
+    )
     print(f"episodes: {row['episodes']}   success rate (last 100 episodes): {row['success_rate']}")
-    print(f"shield interventions (discarded actions): {row['interventions']}  " + str(
-        {k: row[k] for k in ("discarded_self", "discarded_pose", "discarded_path", "discarded_start")})
-          + f"   replanned paths: {row['replanned']}   truncated moves: {row['truncated']}")
+    print(
+        f"shield interventions (discarded actions): {row['interventions']}  "
+        + str({k: row[k] for k in ("discarded_self", "discarded_pose", "discarded_path", "discarded_start")})
+        + f"   replanned paths: {row['replanned']}   truncated moves: {row['truncated']}"
+    )
     print(f"ground-truth contacts (physics): {row['contacts']} contact pairs, {row['contact_substeps']} substeps")
-    print(f"graph failures: {row['graph_failures']}, graph relaunches (env recovery): {row['graph_restarts']}, "
-          f"env runner restarts (RLlib): {row['env_runner_restarts']}")
+    print(
+        f"graph failures: {row['graph_failures']}, graph relaunches (env recovery): {row['graph_restarts']}, "
+        f"env runner restarts (RLlib): {row['env_runner_restarts']}"
+    )
     print(f"outputs: {run}/progress.jsonl, TensorBoard in {run}, checkpoint {run}/checkpoint")
     return 0
 

@@ -35,8 +35,11 @@ from moverl_gym.workers import run_json_worker
 ENV_ID = "MoveRL/PandaReachTable-v0"
 PANDA_GYM_ID = "PandaReachJoints-v3"
 SYSTEMS = ("subproc", "rllib", "pandagym")
-LABELS = {"subproc": "MoveRL, SB3 SubprocVecEnv", "rllib": "MoveRL, RLlib env runners",
-          "pandagym": "panda-gym PandaReachJoints-v3, SubprocVecEnv"}
+LABELS = {
+    "subproc": "MoveRL, SB3 SubprocVecEnv",
+    "rllib": "MoveRL, RLlib env runners",
+    "pandagym": "panda-gym PandaReachJoints-v3, SubprocVecEnv",
+}
 
 
 def _per_env_costs(env_pids: list[int], steps: list[int], run) -> dict:
@@ -53,14 +56,19 @@ def _per_env_costs(env_pids: list[int], steps: list[int], run) -> dict:
     cpu = []
     for b, a, n in zip(before, after, made):
         cpu.append(sum(a[k] - b[k] for k in b if k in a) / max(n, 1))
-    graphs = [memory_bytes(t[1:]) for t in trees]      # the env process's descendants: its graph
+    graphs = [memory_bytes(t[1:]) for t in trees]  # the env process's descendants: its graph
     envs = [memory_bytes(t[:1]) for t in trees]
-    return {"wall": wall, "steps_per_env": list(map(int, made)), "cpu_per_step": cpu,
-            "graph_processes": [len(t) - 1 for t in trees],
-            "graph_rss": float(np.mean([g["rss"] for g in graphs])),
-            "graph_pss": float(np.mean([g["pss"] for g in graphs])),
-            "env_rss": float(np.mean([e["rss"] for e in envs])), "env_pss": float(np.mean([e["pss"] for e in envs])),
-            "result": out}
+    return {
+        "wall": wall,
+        "steps_per_env": list(map(int, made)),
+        "cpu_per_step": cpu,
+        "graph_processes": [len(t) - 1 for t in trees],
+        "graph_rss": float(np.mean([g["rss"] for g in graphs])),
+        "graph_pss": float(np.mean([g["pss"] for g in graphs])),
+        "env_rss": float(np.mean([e["rss"] for e in envs])),
+        "env_pss": float(np.mean([e["pss"] for e in envs])),
+        "result": out,
+    }
 
 
 def _own_cpu(pids) -> float:
@@ -81,8 +89,10 @@ def worker_subproc(env_id: str, n: int, steps: int, seed: int) -> dict:
 
         if env_id.startswith("MoveRL/"):
             import moverl_gym  # noqa: F401
+
             return gym.make(env_id, graph="launch")
         import panda_gym  # noqa: F401
+
         return gym.make(env_id)
 
     vec = SubprocVecEnv([factory] * n)
@@ -96,7 +106,7 @@ def worker_subproc(env_id: str, n: int, steps: int, seed: int) -> dict:
             for _ in range(k):
                 vec.step(np.stack([space.sample() for _ in range(n)]))
 
-        run(200)   # warm-up: connections, caches
+        run(200)  # warm-up: connections, caches
         pids = [p.pid for p in vec.processes]
         me = os.getpid()
         c0 = _own_cpu([me])
@@ -120,12 +130,14 @@ def worker_rllib(n: int, steps: int, seed: int) -> dict:
     algo = None
     try:
         rllib.register()
-        config = (PPOConfig()
-                  .environment(rllib.ENV_NAME, env_config={"env_id": ENV_ID, "graph": "launch"})
-                  .env_runners(num_env_runners=n, num_envs_per_env_runner=1, gym_env_vectorize_mode="sync")
-                  .learners(num_learners=0)
-                  .callbacks(rllib.metrics_callback())   # as in training
-                  .debugging(seed=seed))
+        config = (
+            PPOConfig()
+            .environment(rllib.ENV_NAME, env_config={"env_id": ENV_ID, "graph": "launch"})
+            .env_runners(num_env_runners=n, num_envs_per_env_runner=1, gym_env_vectorize_mode="sync")
+            .learners(num_learners=0)
+            .callbacks(rllib.metrics_callback())  # as in training
+            .debugging(seed=seed)
+        )
         algo = config.build_algo()
         group = algo.env_runner_group
 
@@ -135,7 +147,7 @@ def worker_rllib(n: int, steps: int, seed: int) -> dict:
 
             return group.foreach_env_runner(fn, local_env_runner=False, timeout_seconds=900)
 
-        sample(200)   # warm-up
+        sample(200)  # warm-up
         pids = group.foreach_env_runner(lambda r: os.getpid(), local_env_runner=False)
         runner_trees = set()
         from moverl_gym.proctree import tree
@@ -193,19 +205,25 @@ def plot(results: dict, path: Path) -> None:
 
 def table(results: dict) -> str:
     meta = results["meta"]
-    lines = [f"== scaling ({meta['steps']} random-action steps per env after a 200-step warm-up, seed {meta['seed']}, "
-             f"{meta['cores']} cores, load average before {meta['load_before']}, after {meta['load_after']}) ==",
-             f"{'system':46s} {'envs':>4s} {'steps/s':>8s} {'CPU ms/step':>12s} {'stepper ms/step':>16s} "
-             f"{'graph RSS MB':>13s} {'graph PSS MB':>13s} {'env RSS MB':>11s}"]
+    lines = [
+        f"== scaling ({meta['steps']} random-action steps per env after a 200-step warm-up, seed {meta['seed']}, "
+        f"{meta['cores']} cores, load average before {meta['load_before']}, after {meta['load_after']}) ==",
+        f"{'system':46s} {'envs':>4s} {'steps/s':>8s} {'CPU ms/step':>12s} {'stepper ms/step':>16s} "
+        f"{'graph RSS MB':>13s} {'graph PSS MB':>13s} {'env RSS MB':>11s}",
+    ]
     for system in SYSTEMS:
         for n, r in sorted(results.get(system, {}).items(), key=lambda kv: int(kv[0])):
             graph = r["graph_rss"] / 2**20 if r["graph_processes"][0] else float("nan")
             gpss = r["graph_pss"] / 2**20 if r["graph_processes"][0] else float("nan")
-            lines.append(f"{LABELS[system]:46s} {int(n):4d} {r['steps_per_s']:8.0f} "
-                         f"{1e3 * np.mean(r['cpu_per_step']):12.3f} {1e3 * r['stepper_cpu_per_step']:16.3f} "
-                         f"{graph:13.0f} {gpss:13.0f} {r['env_rss'] / 2**20:11.0f}")
-    lines.append("CPU ms/step: the env's process + its graph, per step of that env (mean over envs); stepper: "
-                 "SubprocVecEnv's parent, or the Ray cluster (GCS, raylets, agents, driver), per env step")
+            lines.append(
+                f"{LABELS[system]:46s} {int(n):4d} {r['steps_per_s']:8.0f} "
+                f"{1e3 * np.mean(r['cpu_per_step']):12.3f} {1e3 * r['stepper_cpu_per_step']:16.3f} "
+                f"{graph:13.0f} {gpss:13.0f} {r['env_rss'] / 2**20:11.0f}"
+            )
+    lines.append(
+        "CPU ms/step: the env's process + its graph, per step of that env (mean over envs); stepper: "
+        "SubprocVecEnv's parent, or the Ray cluster (GCS, raylets, agents, driver), per env step"
+    )
     return "\n".join(lines)
 
 
@@ -228,15 +246,25 @@ def main(argv=None) -> int:
         print(json.dumps(out))
         return 0
 
-    results = {"meta": {"steps": args.steps, "seed": args.seed, "cores": os.cpu_count(),
-                        "load_before": round(os.getloadavg()[0], 2), "command": " ".join(sys.argv)}}
+    results = {
+        "meta": {
+            "steps": args.steps,
+            "seed": args.seed,
+            "cores": os.cpu_count(),
+            "load_before": round(os.getloadavg()[0], 2),
+            "command": " ".join(sys.argv),
+        }
+    }
     for system in args.systems:
         results[system] = {}
         for n in args.envs:
             print(f"measuring {LABELS[system]} with {n} env(s) ...", flush=True)
             results[system][str(n)] = run_json_worker(
-                __file__, ["--worker", system, n, "--steps", args.steps, "--seed", args.seed],
-                f"scaling worker {system} x{n}", timeout=1800)
+                __file__,
+                ["--worker", system, n, "--steps", args.steps, "--seed", args.seed],
+                f"scaling worker {system} x{n}",
+                timeout=1800,
+            )
     results["meta"]["load_after"] = round(os.getloadavg()[0], 2)
     text = table(results)
     print("\n" + text)

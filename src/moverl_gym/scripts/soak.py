@@ -60,8 +60,14 @@ def sample(step: int, latencies: list[float], contacts: int) -> dict:
         if s is not None:
             procs[s["name"]] = {"rss_mib": s["rss_mib"], "fds": s["fds"]}
     lat = np.asarray(latencies) * 1e3
-    return {"step": step, "processes": procs, "graph_processes": len(tree(os.getpid())),
-            "p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)), "contacts": contacts}
+    return {
+        "step": step,
+        "processes": procs,
+        "graph_processes": len(tree(os.getpid())),
+        "p50_ms": float(np.percentile(lat, 50)),
+        "p99_ms": float(np.percentile(lat, 99)),
+        "contacts": contacts,
+    }
 
 
 def proc_sample_self() -> dict:
@@ -75,8 +81,11 @@ def worker(world: str, steps: int, every: int, obstacles: str, seed: int) -> dic
 
     import moverl_gym  # noqa: F401
 
-    env_id = {"table": "MoveRL/PandaReachTable-v0", "human": "MoveRL/PandaReachHuman-v0",
-              "case": "MoveRL/PandaReachCase-v0"}[world]
+    env_id = {
+        "table": "MoveRL/PandaReachTable-v0",
+        "human": "MoveRL/PandaReachHuman-v0",
+        "case": "MoveRL/PandaReachCase-v0",
+    }[world]
     env = gym.make(env_id, launch_args={"obstacles": obstacles})
     try:
         env.action_space.seed(seed)
@@ -91,8 +100,13 @@ def worker(world: str, steps: int, every: int, obstacles: str, seed: int) -> dic
             if k % every == 0:
                 samples.append(sample(k, latencies, contacts))
                 latencies = []
-        return {"world": world, "obstacles": obstacles, "steps": steps, "seconds": time.monotonic() - t0,
-                "samples": samples}
+        return {
+            "world": world,
+            "obstacles": obstacles,
+            "steps": steps,
+            "seconds": time.monotonic() - t0,
+            "samples": samples,
+        }
     finally:
         env.close()
 
@@ -134,10 +148,15 @@ def plot(runs: list[dict], path: Path) -> None:
         steps = [s["step"] for s in run["samples"]]
         label = f"{run['world']} ({run['obstacles']})"
         for name in run["samples"][0]["processes"]:
-            row[0].plot(steps, [s["processes"].get(name, {}).get("rss_mib", np.nan) for s in run["samples"]],
-                        marker=".", label=name)
-            row[1].plot(steps, [s["processes"].get(name, {}).get("fds", np.nan) for s in run["samples"]],
-                        marker=".", label=name)
+            row[0].plot(
+                steps,
+                [s["processes"].get(name, {}).get("rss_mib", np.nan) for s in run["samples"]],
+                marker=".",
+                label=name,
+            )
+            row[1].plot(
+                steps, [s["processes"].get(name, {}).get("fds", np.nan) for s in run["samples"]], marker=".", label=name
+            )
         row[2].plot(steps, [s["p50_ms"] for s in run["samples"]], marker=".", label="p50")
         row[2].plot(steps, [s["p99_ms"] for s in run["samples"]], marker=".", label="p99")
         row[0].set_ylabel(f"{label}\nRSS (MiB)")
@@ -171,20 +190,31 @@ def main(argv=None) -> int:
     runs = []
     for world, steps, obstacles in plan:
         print(f"soak: {world} ({obstacles}), {steps} steps ...", flush=True)
-        runs.append(run_json_worker(__file__, ["--worker", world, steps, obstacles, "--every", args.every,
-                                               "--seed", args.seed], f"soak {world} {obstacles}", timeout=14400))
-    lines = ["| world | mode | steps | steps/s | process | RSS first -> last (MiB) | growth | fds first -> last | "
-             "p50 / p99 first (ms) | p50 / p99 last (ms) | contacts |", "|---|---|---:|---:|---|---|---:|---|---|---|---:|"]
+        runs.append(
+            run_json_worker(
+                __file__,
+                ["--worker", world, steps, obstacles, "--every", args.every, "--seed", args.seed],
+                f"soak {world} {obstacles}",
+                timeout=14400,
+            )
+        )
+    lines = [
+        "| world | mode | steps | steps/s | process | RSS first -> last (MiB) | growth | fds first -> last | "
+        "p50 / p99 first (ms) | p50 / p99 last (ms) | contacts |",
+        "|---|---|---:|---:|---|---|---:|---|---|---|---:|",
+    ]
     failed = []
     for run in runs:
         s0, s1 = run["samples"][0], run["samples"][-1]
         for name, p0 in s0["processes"].items():
             p1 = s1["processes"].get(name, {"rss_mib": float("nan"), "fds": -1})
-            lines.append(f"| {run['world']} | {run['obstacles']} | {run['steps']} | {run['steps'] / run['seconds']:.0f} "
-                         f"| {name} | {p0['rss_mib']:.1f} -> {p1['rss_mib']:.1f} | "
-                         f"{p1['rss_mib'] / p0['rss_mib'] - 1:+.1%} | {p0['fds']} -> {p1['fds']} | "
-                         f"{s0['p50_ms']:.2f} / {s0['p99_ms']:.2f} | {s1['p50_ms']:.2f} / {s1['p99_ms']:.2f} | "
-                         f"{s1['contacts']} |")
+            lines.append(
+                f"| {run['world']} | {run['obstacles']} | {run['steps']} | {run['steps'] / run['seconds']:.0f} "
+                f"| {name} | {p0['rss_mib']:.1f} -> {p1['rss_mib']:.1f} | "
+                f"{p1['rss_mib'] / p0['rss_mib'] - 1:+.1%} | {p0['fds']} -> {p1['fds']} | "
+                f"{s0['p50_ms']:.2f} / {s0['p99_ms']:.2f} | {s1['p50_ms']:.2f} / {s1['p99_ms']:.2f} | "
+                f"{s1['contacts']} |"
+            )
         failed += [f"{run['world']} ({run['obstacles']}): {b}" for b in checks(run)]
     table = "\n".join(lines)
     print("\n" + table)
@@ -195,10 +225,12 @@ def main(argv=None) -> int:
         (out / "soak.json").write_text(json.dumps(runs, indent=2))
         plot(runs, out / "soak.png")
         cmd = "python src/moverl_gym/scripts/soak.py " + " ".join(argv if argv is not None else sys.argv[1:])
-        (out / "soak.md").write_text(f"# Soak\n\nCommand: `{cmd}` (see its docstring). First sample after "
-                                     f"{args.every} steps (warm-up), last at the end of each run.\n\n{table}\n\n"
-                                     f"Checks: {'all held' if not failed else '; '.join(failed)}\n\n"
-                                     "![soak](soak.png)\n")
+        (out / "soak.md").write_text(
+            f"# Soak\n\nCommand: `{cmd}` (see its docstring). First sample after "
+            f"{args.every} steps (warm-up), last at the end of each run.\n\n{table}\n\n"
+            f"Checks: {'all held' if not failed else '; '.join(failed)}\n\n"
+            "![soak](soak.png)\n"
+        )
     return 1 if failed else 0
 
 

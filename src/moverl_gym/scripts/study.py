@@ -43,8 +43,11 @@ def parse_args(argv=None):
     p.add_argument("--jobs", type=int, default=2, help="trainings at once (one per core)")
     p.add_argument("--out", type=Path, default=None, help="run folders (default runs/study)")
     p.add_argument("--docs", type=Path, default=None, help="figures and tables (default docs/study)")
-    p.add_argument("--quick", action="store_true",
-                   help="CI size: table only, seed 0, 1,000 steps, out and docs in a temporary folder by default")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="CI size: table only, seed 0, 1,000 steps, out and docs in a temporary folder by default",
+    )
     p.add_argument("--plot-only", action="store_true", help="no training: aggregate what is in --out")
     p.add_argument("--last", type=int, default=200, help="success rate over the last N episodes")
     p.add_argument("--timeout", type=float, default=3600, help="seconds before a run is killed")
@@ -55,6 +58,7 @@ def parse_args(argv=None):
         args.n_timesteps = args.n_timesteps or 1000
         if args.out is None:
             import tempfile
+
             args.out = Path(tempfile.mkdtemp(prefix="moverl_study_quick_"))
         args.docs = args.docs or args.out
     args.scenarios = args.scenarios or list(study.SCENARIOS)
@@ -100,8 +104,23 @@ def run_all(args, argv) -> int:
 
     def one(item):
         sc, sh, sd, name = item
-        cmd = [sys.executable, str(TRAIN), "--env", study.env_id(sc), "--algo", args.algo, "--seed", str(sd),
-               "-n", str(args.n_timesteps), "--shield", sh, "--log-folder", str(out), "--no-progress"]
+        cmd = [
+            sys.executable,
+            str(TRAIN),
+            "--env",
+            study.env_id(sc),
+            "--algo",
+            args.algo,
+            "--seed",
+            str(sd),
+            "-n",
+            str(args.n_timesteps),
+            "--shield",
+            sh,
+            "--log-folder",
+            str(out),
+            "--no-progress",
+        ]
         log = out / "logs" / f"{name}.log"
         t0 = time.perf_counter()
         with lock:
@@ -110,8 +129,13 @@ def run_all(args, argv) -> int:
             f.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
             f.flush()
             try:
-                rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=args.timeout,
-                                    env=dict(os.environ, PYTHONUNBUFFERED="1", **THREADS)).returncode
+                rc = subprocess.run(
+                    cmd,
+                    stdout=f,
+                    stderr=subprocess.STDOUT,
+                    timeout=args.timeout,
+                    env=dict(os.environ, PYTHONUNBUFFERED="1", **THREADS),
+                ).returncode
             except subprocess.TimeoutExpired:
                 rc = "timeout"
         dt = time.perf_counter() - t0
@@ -121,17 +145,21 @@ def run_all(args, argv) -> int:
                 left = len(todo) - len(done) - len(failed)
                 per = sum(done) / len(done)
                 eta = per * left / max(args.jobs, 1)
-                print(f"[{time.strftime('%H:%M:%S')}] done  {name} in {dt:.0f} s; {left} left, "
-                      f"estimate {eta / 60:.0f} min more ({per:.0f} s per run, {args.jobs} at once)", flush=True)
+                print(
+                    f"[{time.strftime('%H:%M:%S')}] done  {name} in {dt:.0f} s; {left} left, "
+                    f"estimate {eta / 60:.0f} min more ({per:.0f} s per run, {args.jobs} at once)",
+                    flush=True,
+                )
             else:
                 failed.append(name)
-                print(f"[{time.strftime('%H:%M:%S')}] FAILED {name} (rc {rc}) after {dt:.0f} s; see {log}",
-                      flush=True)
+                print(f"[{time.strftime('%H:%M:%S')}] FAILED {name} (rc {rc}) after {dt:.0f} s; see {log}", flush=True)
 
     with ThreadPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
         list(pool.map(one, todo))
-    print(f"trained {len(done)} runs in {(time.perf_counter() - t_start) / 60:.1f} min; failed: {failed or 'none'}",
-          flush=True)
+    print(
+        f"trained {len(done)} runs in {(time.perf_counter() - t_start) / 60:.1f} min; failed: {failed or 'none'}",
+        flush=True,
+    )
     return 1 if failed else 0
 
 
@@ -157,8 +185,11 @@ def report(args, argv) -> int:
         "```",
         trained_with or command_line(argv),
         "```",
-        *([] if not trained_with or not args.plot_only else ["", "This report redrawn with:", "", "```",
-                                                             command_line(argv), "```"]),
+        *(
+            []
+            if not trained_with or not args.plot_only
+            else ["", "This report redrawn with:", "", "```", command_line(argv), "```"]
+        ),
         "",
         f"{args.algo.upper()} (config/hyperparams/{args.algo}.yml), {args.n_timesteps} env steps per run, "
         f"scenarios {', '.join(args.scenarios)}, seeds {' '.join(map(str, args.seeds))}, shield on and off; "
@@ -168,8 +199,7 @@ def report(args, argv) -> int:
         "Shield interventions = actions the shield found unsafe and discarded (robot held still) or truncated; "
         "replanned = colliding straight paths replaced by a collision-free plan.",
         "",
-        f"Finished runs: {len(finished)} of {len(wanted)}."
-        + (f" Missing: {', '.join(missing)}." if missing else ""),
+        f"Finished runs: {len(finished)} of {len(wanted)}." + (f" Missing: {', '.join(missing)}." if missing else ""),
         "",
         study.markdown_table(rows, last=args.last),
         f"![Fig. 6]({fig6.name})",
@@ -178,8 +208,12 @@ def report(args, argv) -> int:
         "",
     ]
     if partial:
-        lines.insert(-5, "Unfinished (not in the table or figures): "
-                     + ", ".join(f"{r.path.name} ({r.n_episodes} episodes so far)" for r in partial) + "\n")
+        lines.insert(
+            -5,
+            "Unfinished (not in the table or figures): "
+            + ", ".join(f"{r.path.name} ({r.n_episodes} episodes so far)" for r in partial)
+            + "\n",
+        )
     groups = study.settings_groups(finished)
     if len(groups) == 1:
         lines += ["## Settings (every finished run, from its config.yaml)", "", "```", next(iter(groups)), "```", ""]

@@ -34,21 +34,37 @@ def parse_args(argv=None):
     p.add_argument("--algo", default="ppo", choices=ALGOS)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-n", "--n-timesteps", type=int, default=None, help="default: from the hyper-parameter file")
-    p.add_argument("--n-envs", type=int, default=None,
-                   help="parallel envs, one process and one ROS graph each (default: n_envs of the hyper-parameter "
-                        "file, else 1); env i is seeded with seed + i")
+    p.add_argument(
+        "--n-envs",
+        type=int,
+        default=None,
+        help="parallel envs, one process and one ROS graph each (default: n_envs of the hyper-parameter "
+        "file, else 1); env i is seeded with seed + i",
+    )
     p.add_argument("--shield", default="on", choices=("on", "off"))
-    p.add_argument("--obstacles", default="objects", choices=("objects", "octomap", "both"),
-                   help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
-                        "from the world's depth cameras, or both")
+    p.add_argument(
+        "--obstacles",
+        default="objects",
+        choices=("objects", "octomap", "both"),
+        help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
+        "from the world's depth cameras, or both",
+    )
     p.add_argument("--log-folder", default="runs")
     p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: config/hyperparams)")
-    p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"),
-                   help="attach to $ROS_MASTER_URI's graph or launch one on a free port")
-    p.add_argument("--recover", default="auto", choices=("auto", "on", "off"),
-                   help="when a component of the graph fails, end the episode and relaunch the graph at the next reset "
-                        "instead of stopping (auto: on when the env launches its graph with the simulator, never with "
-                        "a real robot); every relaunch is logged (episodes.csv graph_failure, graph_restarts)")
+    p.add_argument(
+        "--graph",
+        default="auto",
+        choices=("auto", "launch", "attach"),
+        help="attach to $ROS_MASTER_URI's graph or launch one on a free port",
+    )
+    p.add_argument(
+        "--recover",
+        default="auto",
+        choices=("auto", "on", "off"),
+        help="when a component of the graph fails, end the episode and relaunch the graph at the next reset "
+        "instead of stopping (auto: on when the env launches its graph with the simulator, never with "
+        "a real robot); every relaunch is logged (episodes.csv graph_failure, graph_restarts)",
+    )
     p.add_argument("--checkpoint-freq", type=int, default=10000, help="steps between checkpoints (0: none)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--device", default="cpu")
@@ -81,21 +97,35 @@ def main(argv=None) -> int:
     launch_args = {} if args.obstacles == "objects" else {"obstacles": args.obstacles}
     recover = {"auto": "auto", "on": True, "off": False}[args.recover]
     if n_envs > 1 and args.graph == "attach":
-        print("--n-envs > 1 needs one graph per env: use --graph launch (or auto without a graph at ROS_MASTER_URI)",
-              file=sys.stderr)
+        print(
+            "--n-envs > 1 needs one graph per env: use --graph launch (or auto without a graph at ROS_MASTER_URI)",
+            file=sys.stderr,
+        )
         return 2
-    make = [_env_factory(args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, recover=recover))
-            for _ in range(n_envs)]
+    make = [
+        _env_factory(args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, recover=recover))
+        for _ in range(n_envs)
+    ]
     # One env: in this process, as before. More: one process each (rospy allows one ROS master per process).
     env = DummyVecEnv(make) if n_envs == 1 else SubprocVecEnv(make)
     try:
-        env.seed(args.seed)           # env i: seed + i, applied at the first reset
+        env.seed(args.seed)  # env i: seed + i, applied at the first reset
         env.action_space.seed(args.seed)
-        config = {"env": args.env, "algo": args.algo, "seed": args.seed, "n_envs": n_envs,
-                  "env_seeds": [args.seed + i for i in range(n_envs)], "n_timesteps": n_timesteps,
-                  "shield": shield, "obstacles": args.obstacles, "policy": policy, "hyperparams": hp,
-                  "task": vars(env.get_attr("config", [0])[0]), "world": env.get_attr("world_name", [0])[0],
-                  "recover": env.get_attr("recover", [0])[0]}
+        config = {
+            "env": args.env,
+            "algo": args.algo,
+            "seed": args.seed,
+            "n_envs": n_envs,
+            "env_seeds": [args.seed + i for i in range(n_envs)],
+            "n_timesteps": n_timesteps,
+            "shield": shield,
+            "obstacles": args.obstacles,
+            "policy": policy,
+            "hyperparams": hp,
+            "task": vars(env.get_attr("config", [0])[0]),
+            "world": env.get_attr("world_name", [0])[0],
+            "recover": env.get_attr("recover", [0])[0],
+        }
         (run / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         algo_cls = {"ppo": PPO, "sac": SAC, "td3": TD3}[args.algo]
         model = algo_cls(policy, env, seed=args.seed, device=args.device, verbose=0, **hp)
@@ -115,15 +145,21 @@ def main(argv=None) -> int:
     s.update(wall_time=wall, steps_per_second=n_timesteps / wall, run=str(run), shield=shield)
     (run / "summary.json").write_text(json.dumps(s, indent=2))
     envs = f", {n_envs} envs" if n_envs > 1 else ""
-    print(f"\n== {args.algo.upper()} on {args.env}, shield {args.shield}, seed {args.seed}{envs}: {n_timesteps} steps "
-          f"in {wall:.1f} s ({s['steps_per_second']:.0f} steps/s, training included)")
+    print(
+        f"\n== {args.algo.upper()} on {args.env}, shield {args.shield}, seed {args.seed}{envs}: {n_timesteps} steps "
+        f"in {wall:.1f} s ({s['steps_per_second']:.0f} steps/s, training included)"
+    )
     print(f"episodes: {s['episodes']}   success rate (last {s['last_n']} episodes): {s['success_rate_last']:.1%}")
-    print(f"shield interventions (discarded actions): {s['interventions']}  {s['by_type']}   "
-          f"replanned paths: {s['replanned']}   truncated moves: {s['truncated']}")
+    print(
+        f"shield interventions (discarded actions): {s['interventions']}  {s['by_type']}   "
+        f"replanned paths: {s['replanned']}   truncated moves: {s['truncated']}"
+    )
     print(f"ground-truth contacts (physics): {s['contacts']} contact pairs, {s['contact_substeps']} substeps")
     if s["graph_failures"]:
-        print(f"graph failures: {s['graph_failures']} (each ended its episode; {s['graph_restarts']} relaunches): "
-              + "; ".join(s["failures"]))
+        print(
+            f"graph failures: {s['graph_failures']} (each ended its episode; {s['graph_restarts']} relaunches): "
+            + "; ".join(s["failures"])
+        )
     print(f"outputs: {run}/episodes.csv, TensorBoard in {run}, model {run}/model.zip")
     return 0
 

@@ -9,10 +9,11 @@ class GroundTruthContacts:
 
     def __init__(self, topic="/sim/contacts"):
         import rospy
+
         from moverl_msgs.msg import ContactReport
 
         self._lock = threading.Lock()
-        self.pairs = {}            # (a, b) -> deepest penetration (m)
+        self.pairs = {}  # (a, b) -> deepest penetration (m)
         self.substeps_in_contact = 0
         self.reports = 0
         self._sub = rospy.Subscriber(topic, ContactReport, self._on_report, queue_size=100)
@@ -42,11 +43,17 @@ class LiveAssertions:
         (cls.step, cls.reset, cls.step_off, cls.reset_off, persistent) and to the scene's check_state, after waiting
         for them and for the extra services named."""
         import rospy
+
         from moverl_msgs.srv import CheckState, ResetRobot, ShieldStep
 
         rospy.init_node(node_name, anonymous=True, disable_signals=True)
-        for name in ("/shield/step", "/shield/reset", "/shield_off/step", "/shield_off/reset",
-                     "/planning_scene/check_state") + services:
+        for name in (
+            "/shield/step",
+            "/shield/reset",
+            "/shield_off/step",
+            "/shield_off/reset",
+            "/planning_scene/check_state",
+        ) + services:
             rospy.wait_for_service(name, timeout=60)
         cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
         cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)

@@ -19,9 +19,10 @@ import time
 
 import rospy
 from actionlib import ActionServer
-from control_msgs.msg import FollowJointTrajectoryAction, FollowJointTrajectoryResult
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+
+from control_msgs.msg import FollowJointTrajectoryAction, FollowJointTrajectoryResult
 
 RATE = 200.0
 
@@ -39,8 +40,9 @@ class MinimalDriver:
         self.active = None  # (goal handle, start wall time, [(t, {joint: q})])
         self.pub = rospy.Publisher("~joint_states", JointState, queue_size=10)
         rospy.Subscriber("~fault", String, self.on_fault)
-        self.server = ActionServer("~follow_joint_trajectory", FollowJointTrajectoryAction, self.on_goal,
-                                   self.on_cancel, auto_start=False)
+        self.server = ActionServer(
+            "~follow_joint_trajectory", FollowJointTrajectoryAction, self.on_goal, self.on_cancel, auto_start=False
+        )
         self.server.start()
 
     def on_fault(self, msg):
@@ -54,9 +56,12 @@ class MinimalDriver:
         with self.lock:
             fault = self.fault
         if fault == "reject_joints" or sorted(traj.joint_names) != sorted(self.joints):
-            gh.set_rejected(FollowJointTrajectoryResult(
-                error_code=FollowJointTrajectoryResult.INVALID_JOINTS,
-                error_string="this controller drives %s" % self.joints))
+            gh.set_rejected(
+                FollowJointTrajectoryResult(
+                    error_code=FollowJointTrajectoryResult.INVALID_JOINTS,
+                    error_string="this controller drives %s" % self.joints,
+                )
+            )
             return
         if not traj.points:
             gh.set_accepted()
@@ -91,9 +96,14 @@ class MinimalDriver:
                     pass  # accepted, never moves, never answers
                 elif fault == "abort_path" and t >= end / 2:
                     self.active = None
-                    done = (gh, FollowJointTrajectoryResult(
-                        error_code=FollowJointTrajectoryResult.PATH_TOLERANCE_VIOLATED,
-                        error_string="%s path error 0.05 (blocked)" % self.joints[1]), False)
+                    done = (
+                        gh,
+                        FollowJointTrajectoryResult(
+                            error_code=FollowJointTrajectoryResult.PATH_TOLERANCE_VIOLATED,
+                            error_string="%s path error 0.05 (blocked)" % self.joints[1],
+                        ),
+                        False,
+                    )
                 elif t >= 0.0:
                     k = 0
                     while k + 1 < len(points) and points[k + 1][0] <= t:

@@ -10,10 +10,10 @@ import re
 from pathlib import Path
 
 import pytest
-from control_msgs.msg import FollowJointTrajectoryResult
-from moverl_msgs.srv import ShieldStepResponse
 
+from control_msgs.msg import FollowJointTrajectoryResult
 from moverl_gym import env
+from moverl_msgs.srv import ShieldStepResponse
 from moverl_sim import follow
 
 REPO = Path(__file__).resolve().parents[3]
@@ -25,8 +25,9 @@ def srv_constants(name: str) -> dict:
     return {m.group(1): int(m.group(2)) for m in re.finditer(r"^\s*u?int\d+\s+([A-Z_]+)\s*=\s*(-?\d+)", text, re.M)}
 
 
-@pytest.mark.parametrize("name", ["ShieldStep", "ValidateMotion", "CheckState", "CheckPath", "PlanPath",
-                                  "ExecuteTrajectory"])
+@pytest.mark.parametrize(
+    "name", ["ShieldStep", "ValidateMotion", "CheckState", "CheckPath", "PlanPath", "ExecuteTrajectory"]
+)
 def test_generated_classes_match_the_srv_files(name):
     import moverl_msgs.srv as srv
 
@@ -40,19 +41,28 @@ def test_env_verdict_table_is_the_message():
     assert env.VERDICTS == {v: k.lower() for k, v in srv_constants("ShieldStep").items()}
     assert env.ABORTED == ShieldStepResponse.ABORTED
     assert set(env.FAILURES) | env.DISCARDED | {env.ABORTED} <= set(env.VERDICTS)
-    assert env.DRIVER_ERRORS == {getattr(FollowJointTrajectoryResult, n): n for n in dir(FollowJointTrajectoryResult)
-                                 if n.isupper() and getattr(FollowJointTrajectoryResult, n) != 0}
+    assert env.DRIVER_ERRORS == {
+        getattr(FollowJointTrajectoryResult, n): n
+        for n in dir(FollowJointTrajectoryResult)
+        if n.isupper() and getattr(FollowJointTrajectoryResult, n) != 0
+    }
 
 
 def test_follow_codes_are_control_msgs():
-    for name in ("SUCCESSFUL", "INVALID_GOAL", "INVALID_JOINTS", "OLD_HEADER_TIMESTAMP", "PATH_TOLERANCE_VIOLATED",
-                 "GOAL_TOLERANCE_VIOLATED"):
+    for name in (
+        "SUCCESSFUL",
+        "INVALID_GOAL",
+        "INVALID_JOINTS",
+        "OLD_HEADER_TIMESTAMP",
+        "PATH_TOLERANCE_VIOLATED",
+        "GOAL_TOLERANCE_VIOLATED",
+    ):
         assert getattr(follow, name) == getattr(FollowJointTrajectoryResult, name), name
 
 
 def test_the_shields_verdict_names_are_the_message_constants():
     """shield_core.cpp's verdictName() (published as ShieldEvent.verdict_name) names each verdict as the env does."""
     source = (REPO / "src" / "moverl_shield" / "src" / "shield_core.cpp").read_text()
-    body = source[source.index("std::string verdictName"):source.index("bool isDiscarded")]
+    body = source[source.index("std::string verdictName") : source.index("bool isDiscarded")]
     cpp = dict(re.findall(r"case Verdict::k(\w+):\s*return \"(\w+)\";", body))
     assert sorted(cpp.values()) == sorted(k.lower() for k in srv_constants("ShieldStep"))

@@ -23,7 +23,7 @@ import moverl_gym  # noqa: F401
 
 TEST_WORLDS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "worlds")
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
-NEAR_WALL = [-0.65] + HOME[1:]          # clear of the moving wall's swing; joint 1 towards +0.8 crosses it
+NEAR_WALL = [-0.65] + HOME[1:]  # clear of the moving wall's swing; joint 1 towards +0.8 crosses it
 LEFT, RIGHT = [-0.8] + HOME[1:], [0.8] + HOME[1:]
 # Pushing directions (normalised joint actions): reach down and forward into the case; turn into the wall.
 INTO_CASE = np.array([0.0, 1.0, 0.0, 1.0, 0.0, -0.5, 0.0])
@@ -45,16 +45,21 @@ def push(env, direction, steps, seed, start=None, truth=None):
     return counts, contacts
 
 
-@pytest.mark.parametrize("env_id, world, direction, start, steps", [
-    ("MoveRL/PandaReachCase-v0", "case", INTO_CASE, None, 600),
-    ("MoveRL/PandaReachTable-v0", os.path.join(TEST_WORLDS, "moving_wall.yaml"), INTO_WALL, NEAR_WALL, 400),
-])
+@pytest.mark.parametrize(
+    "env_id, world, direction, start, steps",
+    [
+        ("MoveRL/PandaReachCase-v0", "case", INTO_CASE, None, 600),
+        ("MoveRL/PandaReachTable-v0", os.path.join(TEST_WORLDS, "moving_wall.yaml"), INTO_WALL, NEAR_WALL, 400),
+    ],
+)
 def test_dynamic_control_pushing_makes_no_contact(env_id, world, direction, start, steps):
     env = gym.make(env_id, world=world, launch_args={"control": "dynamic"})
     try:
         counts, contacts = push(env, direction, steps, seed=0, start=start)
-        print("\ndynamic control, %s, pushing: %d steps, verdicts %s, %d contact pairs" % (
-            os.path.basename(world), steps, counts, contacts))
+        print(
+            "\ndynamic control, %s, pushing: %d steps, verdicts %s, %d contact pairs"
+            % (os.path.basename(world), steps, counts, contacts)
+        )
         assert contacts == 0, counts
         assert sum(v for k, v in counts.items() if k.startswith("discarded")) > steps // 10, counts  # it pushed
     finally:
@@ -64,9 +69,11 @@ def test_dynamic_control_pushing_makes_no_contact(env_id, world, direction, star
 def test_standard_driver_real_time_moving_wall():
     from moverl_msgs.srv import ShieldStep, ShieldStepResponse
 
-    env = gym.make("MoveRL/PandaReachTable-v0", world=os.path.join(TEST_WORLDS, "moving_wall.yaml"),
-                   launch_args={"driver": "follow_joint_trajectory", "control": "dynamic",
-                                "initial_positions": str(LEFT)})   # home is inside the wall's swing
+    env = gym.make(
+        "MoveRL/PandaReachTable-v0",
+        world=os.path.join(TEST_WORLDS, "moving_wall.yaml"),
+        launch_args={"driver": "follow_joint_trajectory", "control": "dynamic", "initial_positions": str(LEFT)},
+    )  # home is inside the wall's swing
     try:
         truth = GroundTruthContacts()
         env.reset(seed=0, options={"start": LEFT})
@@ -77,10 +84,12 @@ def test_standard_driver_real_time_moving_wall():
             assert res.verdict != ShieldStepResponse.SAFE, res.message
             env.reset(options={"start": LEFT})
         counts, _ = push(env, INTO_WALL, 150, seed=1, start=NEAR_WALL)
-        rospy.sleep(0.3)   # the last contact reports arrive
+        rospy.sleep(0.3)  # the last contact reports arrive
         pairs, substeps, reports = truth.snapshot()
-        print("\nstandard driver, real time, dynamic control, moving wall: verdicts %s, %d ground-truth contact pairs"
-              " (%d reports)" % (counts, pairs, reports))
+        print(
+            "\nstandard driver, real time, dynamic control, moving wall: verdicts %s, %d ground-truth contact pairs"
+            " (%d reports)" % (counts, pairs, reports)
+        )
         assert reports > 0
         assert (pairs, substeps) == (0, 0), truth.pairs
         assert counts.get("safe", 0) > 0

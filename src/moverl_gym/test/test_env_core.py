@@ -59,14 +59,14 @@ def test_reward_success_and_truncation():
         u = env.unwrapped
         env.reset(seed=0)
         d0 = u.distance
-        _, r, term, trunc, info = env.step(np.zeros(7, dtype=np.float32))   # stand still: only the step penalty
+        _, r, term, trunc, info = env.step(np.zeros(7, dtype=np.float32))  # stand still: only the step penalty
         assert r == pytest.approx(u.config.step_penalty) and not term and not trunc
         assert info["verdict"] == VERDICTS[6] == "unchecked" and info["distance"] == pytest.approx(d0)
         for _ in range(3):
             _, _, _, trunc, _ = env.step(np.zeros(7, dtype=np.float32))
             assert not trunc
         _, _, _, trunc, _ = env.step(np.zeros(7, dtype=np.float32))
-        assert trunc   # the 5th step: task={"max_episode_steps": 5} is honoured
+        assert trunc  # the 5th step: task={"max_episode_steps": 5} is honoured
         # At the goal: an episode that starts at home with the goal 5 cm from its end effector succeeds at once.
         home = u._backend.home
         goal = u._backend.ee_pose(np.array(home))[:3] + [0.05, 0.0, 0.0]
@@ -90,7 +90,7 @@ def test_observed_moving_obstacles_are_where_the_simulator_has_them():
         positions = sim.obstacle_positions()
         observed = [o for o in u._backend.world.obstacles if o.observed]
         n = u.limits.size
-        tail = obs[n + 7 + 3:].reshape(len(observed), 7)
+        tail = obs[n + 7 + 3 :].reshape(len(observed), 7)
         for o, pose in zip(observed, tail):
             np.testing.assert_allclose(pose[:3], positions[o.id], atol=1e-6, err_msg=o.id)
     finally:
@@ -99,7 +99,7 @@ def test_observed_moving_obstacles_are_where_the_simulator_has_them():
 
 def test_the_bullet_backend_has_no_shield():
     with pytest.raises(ValueError, match="no shield"):
-        gym.make("MoveRL/PandaReachTable-v0", backend="bullet")   # shield=True by default
+        gym.make("MoveRL/PandaReachTable-v0", backend="bullet")  # shield=True by default
 
 
 class _FailsOnce(moverl_gym.bullet_backend.BulletBackend):
@@ -141,7 +141,7 @@ def test_recovery_counts_a_failure_found_at_a_step_or_at_a_reset(where):
             assert info["verdict"] == "graph_failed" and trunc and not term
             assert info["graph_failures"] == 1 and backend.restarts == 0
             _, info = env.reset()
-            assert "graph_failure" not in info   # counted by the step that ended the episode
+            assert "graph_failure" not in info  # counted by the step that ended the episode
         else:
             assert "injected" in info["graph_failure"]
         assert info["graph_restart"] and info["graph_failures"] == 1 and info["graph_restarts"] == 1

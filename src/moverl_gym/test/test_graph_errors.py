@@ -39,8 +39,9 @@ def test_urdf_that_does_not_parse(tmp_path):
     urdf = tmp_path / "broken.urdf"
     urdf.write_text('<robot name="x"><link name="a"/><joint name="j" type="revolute"><parent link="a"/></robot')
     robot = tmp_path / "robot.yaml"
-    robot.write_text(config_file("robots/panda.yaml").read_text().replace(
-        "pybullet_data://franka_panda/panda.urdf", str(urdf)))
+    robot.write_text(
+        config_file("robots/panda.yaml").read_text().replace("pybullet_data://franka_panda/panda.urdf", str(urdf))
+    )
     msg = start(tmp_path, robot_config=str(robot))
     assert "broken.urdf" in msg and "not valid" in msg
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 import moverl_gym  # noqa: F401
-from moverl_gym import ros_backend as ros
 from moverl_gym import graph, reaper
+from moverl_gym import ros_backend as ros
 from moverl_gym.paths import world_file
 
 #: A clean close() takes ~1-2 s (scripts/graph_lifecycle.py). A stopped node is SIGKILLed at once, not after the

@@ -28,11 +28,14 @@ def test_limits_come_from_the_urdf():
     np.testing.assert_array_equal(lim.velocity, [1.0, 2.0])
 
 
-@pytest.mark.parametrize("urdf,joints,match", [
-    ("<robot", ["j1"], "not valid XML"),
-    (URDF, ["nope"], "'nope' is not in the URDF"),
-    (URDF.replace('velocity="1.0"', 'velocity="0"'), ["j2"], "unusable limits"),
-])
+@pytest.mark.parametrize(
+    "urdf,joints,match",
+    [
+        ("<robot", ["j1"], "not valid XML"),
+        (URDF, ["nope"], "'nope' is not in the URDF"),
+        (URDF.replace('velocity="1.0"', 'velocity="0"'), ["j2"], "unusable limits"),
+    ],
+)
 def test_bad_urdf_gives_clear_errors(urdf, joints, match):
     with pytest.raises(ValueError, match=match):
         JointLimits.from_urdf(urdf, joints)
@@ -48,8 +51,9 @@ def test_action_scaling_bounds_delta_and_clips_to_limits():
     np.testing.assert_allclose(s.command(np.array([1.99, -0.01]), [5.0, 1.0]), [2.0, 0.0])
 
 
-@pytest.mark.parametrize("action,match", [([0.0], "shape"), ([np.nan, 0.0], "NaN"), ([np.inf, 0.0], "NaN or inf"),
-                                          ([[0.0, 0.0]], "shape")])
+@pytest.mark.parametrize(
+    "action,match", [([0.0], "shape"), ([np.nan, 0.0], "NaN"), ([np.inf, 0.0], "NaN or inf"), ([[0.0, 0.0]], "shape")]
+)
 def test_bad_actions_are_rejected(action, match):
     s = ActionScaler(JointLimits.from_urdf(URDF, ["j1", "j2"]), dt=0.05)
     with pytest.raises(ValueError, match=match):
@@ -57,8 +61,14 @@ def test_bad_actions_are_rejected(action, match):
 
 
 def test_reward_follows_the_paper():
-    cfg = TaskConfig.from_yaml(config_file("env.yaml"), kappa=10.0, goal_reward=10.0, step_penalty=-0.2,
-                               safety_penalty=-1.0, goal_tolerance=0.1)
+    cfg = TaskConfig.from_yaml(
+        config_file("env.yaml"),
+        kappa=10.0,
+        goal_reward=10.0,
+        step_penalty=-0.2,
+        safety_penalty=-1.0,
+        goal_tolerance=0.1,
+    )
     task = ReachTask(cfg, [0.4, 0.2, 0.2])
     assert task.distance([0.4, 0.2, 0.5]) == pytest.approx(0.3)
     assert task.reward(0.5, 0.4, discarded=False) == pytest.approx(10 * 0.1 - 0.2)
@@ -77,7 +87,7 @@ def test_task_config_reads_the_yaml_and_rejects_unknown_keys(tmp_path: Path):
     bad.write_text("dt: 0.05\nkapa: 10\n")
     with pytest.raises(ValueError, match="kapa"):
         TaskConfig.from_yaml(bad)
-    bad.write_text("dt: 0.05\nkappa: 10\n")   # a key left out has no default elsewhere
+    bad.write_text("dt: 0.05\nkappa: 10\n")  # a key left out has no default elsewhere
     with pytest.raises(ValueError, match="missing task settings.*goal_reward"):
         TaskConfig.from_yaml(bad)
 
@@ -88,7 +98,7 @@ def test_env_ids_are_registered():
     assert "MoveRL/PandaReachTable-v0" in ENV_IDS and "MoveRL/PandaReachTableEE-v0" in ENV_IDS
     for env_id in ENV_IDS:
         spec = gym.spec(env_id)
-        assert spec.max_episode_steps is None   # the env truncates after config.max_episode_steps itself
+        assert spec.max_episode_steps is None  # the env truncates after config.max_episode_steps itself
         assert world_file(spec.kwargs["world"]).exists()
 
 

@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
 """rostest (minimal_driver.test): the env drives a robot through a FollowJointTrajectory driver that is not ours.
 
-  (a) the env, unchanged, passes Gymnasium's and SB3's check_env and steps; resets are planned moves; contacts are
-      unknown (-1) since this driver has no ground truth;
-  (b) driver faults each give a clear error and nothing moves unchecked:
-      a goal rejected (INVALID_JOINTS): MoveRLError naming the code, the robot did not move;
-      a goal aborted mid-way (PATH_TOLERANCE_VIOLATED, an arm blocked): the episode ends (truncated), info says why;
-      a driver that never answers: the goal is cancelled and the env raises within 5 s;
-      joint states that stop: the shield fails closed and the env raises within 5 s.
+(a) the env, unchanged, passes Gymnasium's and SB3's check_env and steps; resets are planned moves; contacts are
+    unknown (-1) since this driver has no ground truth;
+(b) driver faults each give a clear error and nothing moves unchecked:
+    a goal rejected (INVALID_JOINTS): MoveRLError naming the code, the robot did not move;
+    a goal aborted mid-way (PATH_TOLERANCE_VIOLATED, an arm blocked): the episode ends (truncated), info says why;
+    a driver that never answers: the goal is cancelled and the env raises within 5 s;
+    joint states that stop: the shield fails closed and the env raises within 5 s.
 """
 
 import time
@@ -24,7 +24,7 @@ import moverl_gym  # noqa: F401
 from moverl_gym.env import MoveRLError
 
 WORLD = "thin_wall"
-FREE = [-0.6, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]   # hand right of the test wall
+FREE = [-0.6, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]  # hand right of the test wall
 STEP_TOWARDS = np.array([0.5, 0.5, 0.0, 0.5, 0.0, 0.0, 0.0], dtype=np.float32)
 
 
@@ -68,7 +68,7 @@ class MinimalDriverLive(unittest.TestCase):
         verdicts = {}
         for _ in range(60):
             _, _, term, trunc, info = self.env.step(self.env.action_space.sample())
-            self.assertEqual(info["contacts"], -1)   # no ground truth from a real driver
+            self.assertEqual(info["contacts"], -1)  # no ground truth from a real driver
             verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
             if term or trunc:
                 self.env.reset()
@@ -122,7 +122,7 @@ class MinimalDriverLive(unittest.TestCase):
         self.assertLess(took, 5.0)
         self.assertIn("joint states", str(err.exception))
         self.fault("none")
-        np.testing.assert_allclose(self.joint_state(), FREE, atol=1e-3)   # it never moved
+        np.testing.assert_allclose(self.joint_state(), FREE, atol=1e-3)  # it never moved
 
 
 if __name__ == "__main__":

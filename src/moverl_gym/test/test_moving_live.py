@@ -21,21 +21,24 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
+
+import moverl_gym  # noqa: F401
 from moverl_msgs.msg import ObstacleMotion
 from moverl_msgs.srv import CheckStateResponse, GetWorld, ShieldStepResponse, ValidateMotion
 
-import moverl_gym  # noqa: F401
-
-SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH, UNCHECKED = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
-                                                             ShieldStepResponse.DISCARDED_POSE,
-                                                             ShieldStepResponse.DISCARDED_PATH,
-                                                             ShieldStepResponse.UNCHECKED)
+SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH, UNCHECKED = (
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_POSE,
+    ShieldStepResponse.DISCARDED_PATH,
+    ShieldStepResponse.UNCHECKED,
+)
 VALID = CheckStateResponse.VALID
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
-LEFT = [-0.8] + HOME[1:]     # hand well to the right (-y) of the wall's plane
+LEFT = [-0.8] + HOME[1:]  # hand well to the right (-y) of the wall's plane
 RIGHT = [0.8] + HOME[1:]
 AWAY = [-1.2] + HOME[1:]
-NEAR = [-0.65] + HOME[1:]    # the closest home-like posture clear of the wall's swing: random actions cross it
+NEAR = [-0.65] + HOME[1:]  # the closest home-like posture clear of the wall's swing: random actions cross it
 RANDOM_STEPS = 1000
 OFF_STEPS = 400
 DT = 0.05
@@ -61,25 +64,26 @@ class MovingObstacleLive(LiveAssertions, unittest.TestCase):
         wall = {o.id: o for o in self.world.objects}["wall"]
         self.assertEqual(wall.motion.type, ObstacleMotion.OSCILLATE)
         self.assertEqual(list(wall.motion.axis), [0.0, 0.0, 1.0])
-        self.assertAlmostEqual(wall.pose.position.z, 1.95)   # pose at motion time 0: top of the swing
+        self.assertAlmostEqual(wall.pose.position.z, 1.95)  # pose at motion time 0: top of the swing
         for q in (LEFT, RIGHT, AWAY, NEAR):
             self.assertEqual(self.check_state(positions=q).outcome, VALID, q)
-        self.assertNotEqual(self.check_state(positions=HOME).outcome, VALID)   # home is in the wall's swing
+        self.assertNotEqual(self.check_state(positions=HOME).outcome, VALID)  # home is in the wall's swing
 
     # (b) ------------------------------------------------------------------------------------------------
     def test_b_a_crossing_wall_is_caught(self):
         for attempt in range(3):
-            self.place(LEFT)   # motion time 0: the wall is at its top
+            self.place(LEFT)  # motion time 0: the wall is at its top
             # A check against the wall's pose when the step begins (an instant) passes:
-            instant = self.validate(start=LEFT, goal=RIGHT, plan_on_path_collision=False, find_last_free=False,
-                                    start_time=0.0, duration=0.0)
+            instant = self.validate(
+                start=LEFT, goal=RIGHT, plan_on_path_collision=False, find_last_free=False, start_time=0.0, duration=0.0
+            )
             self.assertEqual(instant.outcome, VALID, instant.message)
             self.assertTrue(instant.moving_obstacles)
             # ... but the move takes 0.74 s (joint 1 at its velocity limit) and the wall comes down meanwhile.
             res = self.step(target=RIGHT, duration=DT)
             self.assertIn(res.verdict, (REPLANNED, DISCARDED_PATH), res.message)
             self.assert_no_contacts(res)
-            self.assertGreater(res.contacts.substeps, 0)   # executed (a plan or a hold): time went on
+            self.assertGreater(res.contacts.substeps, 0)  # executed (a plan or a hold): time went on
             if res.verdict == REPLANNED:
                 np.testing.assert_allclose(res.state.position[:7], RIGHT, atol=1e-6)
                 break
@@ -99,7 +103,7 @@ class MovingObstacleLive(LiveAssertions, unittest.TestCase):
         self.assert_no_contacts(res)
         np.testing.assert_allclose(res.state.position[:7], AWAY, atol=1e-6)
         t0 = res.state.header.stamp
-        res = self.step(target=HOME, duration=DT)   # home is in the wall's swing: discarded, held still
+        res = self.step(target=HOME, duration=DT)  # home is in the wall's swing: discarded, held still
         self.assertEqual(res.verdict, DISCARDED_POSE, res.message)
         self.assert_no_contacts(res)
         np.testing.assert_allclose(res.state.position[:7], AWAY, atol=1e-9)
@@ -115,8 +119,8 @@ class MovingObstacleLive(LiveAssertions, unittest.TestCase):
             msg = "shield on: %d random steps, verdicts %s, zero contacts" % (RANDOM_STEPS, counts)
             rospy.loginfo(msg)
             print(msg)
-            self.assertGreater(sum(v for k, v in counts.items() if k != "safe"), 0)   # the shield had work
-            scaler = env.unwrapped.scaler   # the env's action scaling, reused for the unchecked run
+            self.assertGreater(sum(v for k, v in counts.items() if k != "safe"), 0)  # the shield had work
+            scaler = env.unwrapped.scaler  # the env's action scaling, reused for the unchecked run
         finally:
             env.close()
         # The same kind of policy through the unchecked shield: it runs into the moving wall.

@@ -22,22 +22,37 @@ REPO = Path(__file__).resolve().parents[3]
 SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
 TEST_ROBOTS = REPO / "src" / "moverl_gym" / "test" / "robots"
 CONFIGS = sorted((REPO / "config" / "robots").glob("*.yaml")) + sorted(
-    p for p in TEST_ROBOTS.glob("*.yaml") if isinstance(yaml.safe_load(p.read_text()), dict))
+    p for p in TEST_ROBOTS.glob("*.yaml") if isinstance(yaml.safe_load(p.read_text()), dict)
+)
 WORLDS = sorted(p.stem for p in (REPO / "worlds").glob("*.yaml"))
 DEADLINE = 600  # s per script run
 
 
 def _run(args, cwd):
-    proc = subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=DEADLINE,
-                          cwd=cwd)
+    proc = subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, timeout=DEADLINE, cwd=cwd)
     return proc, proc.stdout + proc.stderr
 
 
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_collision_parity_short(config, tmp_path):
     states = TEST_ROBOTS / f"{config.stem}_states.yaml"
-    args = [SCRIPTS / "collision_audit.py", "--robot-config", config, "--worlds", *WORLDS, "-n", 500,
-            "--boundary", 100, "--paths", 10, "--crossings", 10, "--out", tmp_path]
+    args = [
+        SCRIPTS / "collision_audit.py",
+        "--robot-config",
+        config,
+        "--worlds",
+        *WORLDS,
+        "-n",
+        500,
+        "--boundary",
+        100,
+        "--paths",
+        10,
+        "--crossings",
+        10,
+        "--out",
+        tmp_path,
+    ]
     if states.is_file():
         args += ["--states", states]
     proc, out = _run(args, tmp_path)
@@ -58,11 +73,39 @@ def test_collision_parity_short(config, tmp_path):
 
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_pushing_policy_short(config, tmp_path):
-    on, out_on = _run([SCRIPTS / "pushing_policy_audit.py", "--robot-config", config, "--worlds", "case",
-                       "--shield", "on", "--steps", 300, "--out", tmp_path / "on"], tmp_path)
+    on, out_on = _run(
+        [
+            SCRIPTS / "pushing_policy_audit.py",
+            "--robot-config",
+            config,
+            "--worlds",
+            "case",
+            "--shield",
+            "on",
+            "--steps",
+            300,
+            "--out",
+            tmp_path / "on",
+        ],
+        tmp_path,
+    )
     assert on.returncode == 0, out_on[-5000:]
-    off, out_off = _run([SCRIPTS / "pushing_policy_audit.py", "--robot-config", config, "--worlds", "case",
-                         "--shield", "off", "--steps", 100, "--out", tmp_path / "off"], tmp_path)
+    off, out_off = _run(
+        [
+            SCRIPTS / "pushing_policy_audit.py",
+            "--robot-config",
+            config,
+            "--worlds",
+            "case",
+            "--shield",
+            "off",
+            "--steps",
+            100,
+            "--out",
+            tmp_path / "off",
+        ],
+        tmp_path,
+    )
     assert off.returncode == 0, out_off[-5000:]
     (r_on,) = csv.DictReader(open(tmp_path / "on" / "audit.csv"))
     (r_off,) = csv.DictReader(open(tmp_path / "off" / "audit.csv"))

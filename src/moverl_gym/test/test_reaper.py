@@ -32,8 +32,15 @@ GRACE = 1.0
 
 def start_reaper(tmp_path, grace=GRACE):
     graph_id = uuid.uuid4().hex
-    spec = dict(owner=os.getpid(), log=str(tmp_path / "log"), grace=grace, kill_timeout=5.0, master=None, extra=[],
-                launch=[sys.executable, "-I", "-S", "-c", FAKE_LAUNCH])
+    spec = dict(
+        owner=os.getpid(),
+        log=str(tmp_path / "log"),
+        grace=grace,
+        kill_timeout=5.0,
+        master=None,
+        extra=[],
+        launch=[sys.executable, "-I", "-S", "-c", FAKE_LAUNCH],
+    )
     with open(tmp_path / "log", "ab") as log:
         handle = reaper.Handle(spec, dict(os.environ, **{reaper.MARKER: graph_id}), log)
     assert handle.wait_for(("launch",), time.monotonic() + 10)
@@ -96,7 +103,11 @@ def test_close_leaves_nothing_stopped_and_sigint_deaf_processes_included(reapers
 
 
 def test_owner_killed_by_sigkill_leaves_nothing(tmp_path):
-    owner = subprocess.Popen([sys.executable, "-c", f"""
+    owner = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            f"""
 import json, os, sys, time
 sys.path[:0] = {sys.path!r}
 import test_reaper
@@ -105,7 +116,12 @@ handle, graph_id = test_reaper.start_reaper(Path({str(tmp_path)!r}))
 procs = test_reaper.tree(handle, graph_id, 5)
 print(json.dumps([handle.proc.pid, graph_id, [list(p) for p in procs]]), flush=True)
 time.sleep(600)
-"""], stdout=subprocess.PIPE, text=True, cwd=os.path.dirname(__file__))
+""",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=os.path.dirname(__file__),
+    )
     try:
         reaper_pid, graph_id, procs = json.loads(owner.stdout.readline())
     finally:

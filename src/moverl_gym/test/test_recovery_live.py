@@ -20,14 +20,29 @@ STEPS = 1000
 
 
 def train_and_kill_the_simulator(tmp_path, recover: str):
-    cmd = [sys.executable, str(TRAIN), "--algo", "ppo", "-n", str(STEPS), "--seed", "2", "--log-folder",
-           str(tmp_path), "--no-progress", "--checkpoint-freq", "0", "--recover", recover]
+    cmd = [
+        sys.executable,
+        str(TRAIN),
+        "--algo",
+        "ppo",
+        "-n",
+        str(STEPS),
+        "--seed",
+        "2",
+        "--log-folder",
+        str(tmp_path),
+        "--no-progress",
+        "--checkpoint-freq",
+        "0",
+        "--recover",
+        recover,
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     episodes = tmp_path / "ppo_PandaReachTable-v0_on_s2" / "episodes.csv"
     deadline = time.monotonic() + 120
     killed = None
     while time.monotonic() < deadline and proc.poll() is None:
-        if episodes.exists() and len(episodes.read_text().splitlines()) > 3:   # training is under way
+        if episodes.exists() and len(episodes.read_text().splitlines()) > 3:  # training is under way
             sims = [p.pid for p in proctree.tree(proc.pid) if "sim_node" in proctree.cmdline(p.pid)]
             assert len(sims) == 1, sims
             os.kill(sims[0], signal.SIGKILL)

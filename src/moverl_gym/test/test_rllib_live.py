@@ -23,16 +23,31 @@ from moverl_gym.reaper import is_loopback, listening_sockets
 
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 RUN = "rllib_ppo_PandaReachTable-v0_on_s4"
-STEPS = 800            # 2 iterations of 400 steps (rllib_ppo.yml: train_batch_size_per_learner)
-MORE = 2000            # the resumed run's steps
-DEADLINE = 420         # s for one run on a busy 2-core machine (a clean run takes about a minute)
+STEPS = 800  # 2 iterations of 400 steps (rllib_ppo.yml: train_batch_size_per_learner)
+MORE = 2000  # the resumed run's steps
+DEADLINE = 420  # s for one run on a busy 2-core machine (a clean run takes about a minute)
 
 
 def train(folder: Path, steps: int, *extra, during=None):
     """rllib_train.py on a local cluster of a CPU-less head and 2 nodes, watched; returns (proc, out, err, watch).
     `during(proc, watch)` runs while training is under way (it returns when it is done)."""
-    cmd = [sys.executable, str(SCRIPTS / "rllib_train.py"), "--seed", "4", "-n", str(steps), "--num-env-runners",
-           "2", "--local-nodes", "2", "--log-folder", str(folder), "--checkpoint-freq", "1", *extra]
+    cmd = [
+        sys.executable,
+        str(SCRIPTS / "rllib_train.py"),
+        "--seed",
+        "4",
+        "-n",
+        str(steps),
+        "--num-env-runners",
+        "2",
+        "--local-nodes",
+        "2",
+        "--log-folder",
+        str(folder),
+        "--checkpoint-freq",
+        "1",
+        *extra,
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     with TreeWatch(proc.pid) as watch:
         try:
@@ -40,7 +55,7 @@ def train(folder: Path, steps: int, *extra, during=None):
                 during(proc, watch)
             out, err = proc.communicate(timeout=DEADLINE)
         finally:
-            if proc.poll() is None:   # past the deadline: SIGTERM stops runners, graphs and cluster, then SIGKILL
+            if proc.poll() is None:  # past the deadline: SIGTERM stops runners, graphs and cluster, then SIGKILL
                 proc.terminate()
                 try:
                     proc.communicate(timeout=60)
@@ -116,8 +131,12 @@ def test_evaluate_reads_the_rllib_checkpoint(clean_run):
     folder, proc, *_ = clean_run
     assert proc.returncode == 0
     with TreeWatch(os.getpid()) as watch:
-        ev = subprocess.run([sys.executable, str(SCRIPTS / "evaluate.py"), str(folder / RUN), "--episodes", "1",
-                             "--deterministic"], capture_output=True, text=True, timeout=180)
+        ev = subprocess.run(
+            [sys.executable, str(SCRIPTS / "evaluate.py"), str(folder / RUN), "--episodes", "1", "--deterministic"],
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
     assert ev.returncode == 0, ev.stderr[-3000:]
     result = json.loads((folder / RUN / "eval.json").read_text())
     assert result["framework"] == "rllib" and result["episodes"] == 1 and result["contacts_total"] == 0
@@ -211,8 +230,13 @@ def test_local_cluster_goes_with_its_driver_killed():
 
 
 def _kill_driver_with_cluster(tmp: str):
-    proc = subprocess.Popen([sys.executable, "-c", CLUSTER_DRIVER], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=dict(os.environ, TMPDIR=tmp))
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CLUSTER_DRIVER],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ, TMPDIR=tmp),
+    )
     with TreeWatch(proc.pid) as watch:
         try:
             line = readline_within(proc, 240)

@@ -19,28 +19,39 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
-from moverl_msgs.srv import (CheckPath, CheckState, CheckStateResponse, GetWorld, ResetRobot, ShieldStep,
-                             ShieldStepResponse)
 
 import moverl_gym  # noqa: F401
 from moverl_gym.registration import OBSERVATIONS, ROBOT, SCENARIOS, VERSION
+from moverl_msgs.srv import (
+    CheckPath,
+    CheckState,
+    CheckStateResponse,
+    GetWorld,
+    ResetRobot,
+    ShieldStep,
+    ShieldStepResponse,
+)
 
-SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
-                                                  ShieldStepResponse.DISCARDED_POSE, ShieldStepResponse.DISCARDED_PATH)
+SAFE, REPLANNED, DISCARDED_POSE, DISCARDED_PATH = (
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_POSE,
+    ShieldStepResponse.DISCARDED_PATH,
+)
 VALID, WORLD_COLLISION = CheckStateResponse.VALID, CheckStateResponse.WORLD_COLLISION
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 
 # Configurations (found with PyBullet IK, checked with the planning scene; see the world file headers).
-HUMAN_GOAL = [-0.022, 0.052, 0.023, -2.379, -0.002, 2.431, 0.003]        # flange at the goal, 5.6 cm to the torso
-HUMAN_NEAR = [0.35] + HUMAN_GOAL[1:]                                     # hand 0.17 m to the left of the goal
+HUMAN_GOAL = [-0.022, 0.052, 0.023, -2.379, -0.002, 2.431, 0.003]  # flange at the goal, 5.6 cm to the torso
+HUMAN_NEAR = [0.35] + HUMAN_GOAL[1:]  # hand 0.17 m to the left of the goal
 HUMAN_INTO_TORSO = [-0.091, 0.591, 0.112, -1.568, -0.075, 2.155, 0.043]  # flange at (0.7, 0, 0.3): in the torso
-CASE_GOAL = [-0.06, 0.077, 0.059, -2.724, -0.016, 2.801, 0.013]          # flange at the goal inside the case
-CASE_ABOVE = [-0.04, -0.411, 0.039, -2.584, 0.019, 2.173, -0.015]       # flange 0.2 m above the goal
-CASE_OUTSIDE = [1.0] + CASE_GOAL[1:]    # joint 1 turned: the hand is outside the left (+y) wall, same height
-CASE_IN_WALL = [0.6] + CASE_GOAL[1:]    # halfway: wrist and hand in the left wall
+CASE_GOAL = [-0.06, 0.077, 0.059, -2.724, -0.016, 2.801, 0.013]  # flange at the goal inside the case
+CASE_ABOVE = [-0.04, -0.411, 0.039, -2.584, 0.019, 2.173, -0.015]  # flange 0.2 m above the goal
+CASE_OUTSIDE = [1.0] + CASE_GOAL[1:]  # joint 1 turned: the hand is outside the left (+y) wall, same height
+CASE_IN_WALL = [0.6] + CASE_GOAL[1:]  # halfway: wrist and hand in the left wall
 
 RANDOM_STEPS = 300
-REPLAN_ATTEMPTS = 5   # the planner has a wall-clock budget (0.1 s): on a busy machine one attempt can time out
+REPLAN_ATTEMPTS = 5  # the planner has a wall-clock budget (0.1 s): on a busy machine one attempt can time out
 
 
 class ScenarioLive(LiveAssertions, unittest.TestCase):
@@ -48,8 +59,13 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
     def setUpClass(cls):
         rospy.init_node("scenario_live_test", anonymous=True, disable_signals=True)
         cls.world = rospy.get_param("~world")
-        for name in ("/shield/step", "/shield/reset", "/planning_scene/check_state", "/planning_scene/check_path",
-                     "/sim/get_world"):
+        for name in (
+            "/shield/step",
+            "/shield/reset",
+            "/planning_scene/check_state",
+            "/planning_scene/check_path",
+            "/sim/get_world",
+        ):
             rospy.wait_for_service(name, timeout=60)
         cls.step = rospy.ServiceProxy("/shield/step", ShieldStep, persistent=True)
         cls.reset = rospy.ServiceProxy("/shield/reset", ResetRobot, persistent=True)
@@ -151,7 +167,7 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
                         traces.append(trace)
                     for a, b in zip(*traces):
                         np.testing.assert_array_equal(a, b)
-                    if self.world == "human":   # observed: torso, head, arms (7 each, last); torso y walks
+                    if self.world == "human":  # observed: torso, head, arms (7 each, last); torso y walks
                         torso_y = [o[-28 + 1] for o in traces[0]]
                         self.assertGreater(max(torso_y) - min(torso_y), 0.05, torso_y)
                     t0 = time.monotonic()
@@ -169,10 +185,18 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
                     t0 = time.monotonic()
                     env.reset(seed=100 + len(suffix), options={"start": near})
                     counts = self.random_rollout_without_contact(env, RANDOM_STEPS, near)
-                    rospy.loginfo("%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts",
-                                  env_id, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts)
-                    print("%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts"
-                          % (env_id, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts))
+                    rospy.loginfo(
+                        "%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts",
+                        env_id,
+                        t_reset,
+                        RANDOM_STEPS,
+                        time.monotonic() - t0,
+                        counts,
+                    )
+                    print(
+                        "%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts"
+                        % (env_id, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts)
+                    )
                 finally:
                     env.close()
 

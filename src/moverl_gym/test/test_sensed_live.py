@@ -25,19 +25,23 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
+
+import moverl_gym  # noqa: F401
 from moverl_msgs.msg import OctomapStatus
 from moverl_msgs.srv import CheckPath, CheckStateResponse, ShieldStepResponse
 
-import moverl_gym  # noqa: F401
-
-SAFE, REPLANNED, DISCARDED_POSE, UNCHECKED = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
-                                              ShieldStepResponse.DISCARDED_POSE, ShieldStepResponse.UNCHECKED)
+SAFE, REPLANNED, DISCARDED_POSE, UNCHECKED = (
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_POSE,
+    ShieldStepResponse.UNCHECKED,
+)
 VALID, WORLD = CheckStateResponse.VALID, CheckStateResponse.WORLD_COLLISION
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 # The hand at (0.50, 0.01, 0.22): inside the box at motion time 0, clear of the table and of itself.
 Q_BOX = [-0.265, 0.294, 0.335, -2.261, -0.714, 2.151, -0.309]
 DT = 0.05
-WAIT = 30.0   # s (wall) for the map to take in new views
+WAIT = 30.0  # s (wall) for the map to take in new views
 ENV_STEPS = 300
 
 
@@ -63,8 +67,11 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
         start = self.status.clouds
         self.assert_no_contacts(self.step(target=self.current, duration=0.25))
         while self.status.clouds < start + n:
-            self.assertLess(time.monotonic(), deadline, "the map integrated %d of %d clouds in %.0f s"
-                            % (self.status.clouds - start, n, WAIT))
+            self.assertLess(
+                time.monotonic(),
+                deadline,
+                "the map integrated %d of %d clouds in %.0f s" % (self.status.clouds - start, n, WAIT),
+            )
             time.sleep(0.02)
 
     def test_sensed_box(self):
@@ -91,13 +98,16 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             hold = self.step(target=HOME, duration=1.0)
             self.assertEqual(hold.verdict, SAFE, hold.message)
             self.assert_no_contacts(hold)
+
         # Forgotten: the target and the straight way there from home are free again (the state alone can be free
         # while cells of the box's trace on the approach are still occupied).
         def forgotten():
-            return (self.check_state(positions=Q_BOX).outcome == VALID and
-                    self.check_path(start=HOME, goal=Q_BOX).outcome == VALID)
+            return (
+                self.check_state(positions=Q_BOX).outcome == VALID
+                and self.check_path(start=HOME, goal=Q_BOX).outcome == VALID
+            )
 
-        for _ in range(60):   # at most 15 s of motion time: the box stays > 0.3 m away
+        for _ in range(60):  # at most 15 s of motion time: the box stays > 0.3 m away
             if forgotten():
                 break
             self.wait_for_clouds(2)
@@ -114,8 +124,7 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
         self.assertGreater(self.status.hit_cells, 0)
         # The env's random episodes (short ones: many resets, each sampling a collision-free start through the
         # scene, which fails if the robot left itself behind in the map).
-        env = gym.make("MoveRL/PandaReachTable-v0", graph="attach", world="sensed_box",
-                       task={"max_episode_steps": 10})
+        env = gym.make("MoveRL/PandaReachTable-v0", graph="attach", world="sensed_box", task={"max_episode_steps": 10})
         starts = []
         try:
             env.action_space.seed(4)
@@ -131,8 +140,12 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             env.close()
         self.assertGreaterEqual(len(starts), ENV_STEPS // 10)
         self.wait_for_clouds(4)
-        blocked = [(q, [(p.a, p.b) for p in r.pairs]) for q in [HOME] + starts
-                   for r in [self.check_state(positions=q)] if r.outcome != VALID]
+        blocked = [
+            (q, [(p.a, p.b) for p in r.pairs])
+            for q in [HOME] + starts
+            for r in [self.check_state(positions=q)]
+            if r.outcome != VALID
+        ]
         self.assertEqual(blocked, [], "home or episode starts are now in collision with the map")
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
+
 from moverl_msgs.srv import CheckPath, CheckState, ResetRobot, ShieldStep, ShieldStepResponse
 
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
@@ -23,8 +24,12 @@ WALL_LEFT = [-0.6] + HOME[1:]  # hand right of the wall
 WALL_RIGHT = [0.6] + HOME[1:]  # hand left of the wall; turning joint 1 sweeps the hand through it
 FREE = WALL_LEFT  # (the home posture itself has the hand in the wall of this test world)
 
-SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
-                                                  ShieldStepResponse.DISCARDED_SELF, ShieldStepResponse.DISCARDED_POSE)
+SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = (
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_SELF,
+    ShieldStepResponse.DISCARDED_POSE,
+)
 INVALID_REQUEST, SCENE_UNAVAILABLE = 10, 11
 
 

@@ -14,11 +14,30 @@ GRAPH = {"env", "rosmaster", "rosout", "sim_node", "shield_node"}  # the shield 
 
 
 def test_soak_short(tmp_path):
-    proc = subprocess.run([sys.executable, str(SOAK), "--steps", "1800", "--octomap-steps", "400", "--every", "200",
-                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(SOAK),
+            "--steps",
+            "1800",
+            "--octomap-steps",
+            "400",
+            "--every",
+            "200",
+            "--out",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     runs = json.loads((tmp_path / "soak.json").read_text())
-    assert [(r["world"], r["obstacles"]) for r in runs] == [("table", "objects"), ("human", "objects"),
-                                                             ("case", "objects"), ("table", "octomap")], proc.stderr
+    assert [(r["world"], r["obstacles"]) for r in runs] == [
+        ("table", "objects"),
+        ("human", "objects"),
+        ("case", "objects"),
+        ("table", "octomap"),
+    ], proc.stderr
     for run in runs:
         first, last = run["samples"][0], run["samples"][-1]
         assert GRAPH <= set(first["processes"]), first["processes"]

@@ -69,8 +69,8 @@ def test_a_stalled_component(node, graph_args, driver):
         assert named in str(err.value)
         os.kill(pid, signal.SIGCONT)
         pid = None
-        time.sleep(1.5)   # the resumed node serves what it had received (and refuses it as too late)
-        np.testing.assert_allclose(robot_state(joints), before, atol=1e-6)   # nothing moved after the stall
+        time.sleep(1.5)  # the resumed node serves what it had received (and refuses it as too late)
+        np.testing.assert_allclose(robot_state(joints), before, atol=1e-6)  # nothing moved after the stall
         # The next step gets its own answer: the state it reports is where this step's target took the robot.
         target = env.unwrapped.scaler.command(before, -ACTION)
         _, _, _, _, info = env.step(-ACTION)

@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
 """rostest (standard_driver.test): the shield drives the simulator through the standard interface only, in real time.
 
-  (a) the simulator offers only what a real robot offers: no ExecuteTrajectory, ResetRobot or world services; the
-      graph runs on the simulator's clock;
-  (b) Gymnasium's and SB3's check_env pass on the unchanged env (its resets are planned moves);
-  (c) self, pose and path collisions are classified; the path collision is replaced by a plan that executes with zero
-      contacts (the simulator's ground truth, read here: the env reports -1 with this driver);
-  (d) 1,000 random steps make zero contacts (ground truth).
+(a) the simulator offers only what a real robot offers: no ExecuteTrajectory, ResetRobot or world services; the
+    graph runs on the simulator's clock;
+(b) Gymnasium's and SB3's check_env pass on the unchanged env (its resets are planned moves);
+(c) self, pose and path collisions are classified; the path collision is replaced by a plan that executes with zero
+    contacts (the simulator's ground truth, read here: the env reports -1 with this driver);
+(d) 1,000 random steps make zero contacts (ground truth).
 """
 
 import unittest
@@ -17,17 +17,21 @@ import rosgraph
 import rospy
 import rostest
 from live_helpers import GroundTruthContacts, LiveAssertions
-from moverl_msgs.srv import ResetRobot, ShieldStep, ShieldStepResponse
 
 import moverl_gym  # noqa: F401
+from moverl_msgs.srv import ResetRobot, ShieldStep, ShieldStepResponse
 
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 SELF_COLLIDING = [0.0, 0.3, 0.0, -3.0, 0.0, 0.0, 0.0]
 TABLE_COLLIDING = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]
 WALL_LEFT = [-0.6] + HOME[1:]
 WALL_RIGHT = [0.6] + HOME[1:]
-SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = (ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED,
-                                                  ShieldStepResponse.DISCARDED_SELF, ShieldStepResponse.DISCARDED_POSE)
+SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE = (
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_SELF,
+    ShieldStepResponse.DISCARDED_POSE,
+)
 RANDOM_STEPS = 1000
 
 
@@ -43,7 +47,7 @@ class StandardDriverLive(LiveAssertions, unittest.TestCase):
 
     def place(self, q):
         res = super().place(q)
-        np.testing.assert_allclose(res.state.position, q, atol=1e-6)   # kinematic control: exactly there
+        np.testing.assert_allclose(res.state.position, q, atol=1e-6)  # kinematic control: exactly there
         return res
 
     def assert_no_new_contacts(self, before):
@@ -57,8 +61,9 @@ class StandardDriverLive(LiveAssertions, unittest.TestCase):
         for extra in ("/sim/execute", "/sim/reset_robot", "/sim/get_world"):
             self.assertNotIn(extra, services)
         topics = dict(master.getTopicTypes())
-        self.assertEqual(topics["/arm_controller/follow_joint_trajectory/goal"],
-                         "control_msgs/FollowJointTrajectoryActionGoal")
+        self.assertEqual(
+            topics["/arm_controller/follow_joint_trajectory/goal"], "control_msgs/FollowJointTrajectoryActionGoal"
+        )
         self.assertEqual(topics["/joint_states"], "sensor_msgs/JointState")
         self.assertTrue(rospy.get_param("/use_sim_time"))
 
@@ -73,7 +78,7 @@ class StandardDriverLive(LiveAssertions, unittest.TestCase):
             sb3_check_env(env.unwrapped, warn=True)
             _, info = env.reset(seed=3)
             _, _, _, _, info = env.step(env.action_space.sample())
-            self.assertEqual(info["contacts"], -1)   # the standard driver has no ground truth
+            self.assertEqual(info["contacts"], -1)  # the standard driver has no ground truth
         finally:
             env.close()
 
@@ -85,13 +90,13 @@ class StandardDriverLive(LiveAssertions, unittest.TestCase):
         res = self.step(target=TABLE_COLLIDING, duration=0.05)
         self.assertEqual(res.verdict, DISCARDED_POSE, res.message)
         self.assertIn("table", res.message)
-        np.testing.assert_allclose(res.state.position, WALL_LEFT, atol=1e-6)   # held still
+        np.testing.assert_allclose(res.state.position, WALL_LEFT, atol=1e-6)  # held still
         before = self.truth.snapshot()
         res = self.step(target=WALL_RIGHT, duration=0.05)
         self.assertEqual(res.verdict, REPLANNED, res.message)
         np.testing.assert_allclose(res.state.position, WALL_RIGHT, atol=1e-6)
-        rospy.sleep(0.2)   # the last contact report arrives
-        self.assertGreater(self.truth.snapshot()[2], before[2])   # the simulator reported the motion
+        rospy.sleep(0.2)  # the last contact report arrives
+        self.assertGreater(self.truth.snapshot()[2], before[2])  # the simulator reported the motion
         self.assert_no_new_contacts(before)
 
     # (d) ------------------------------------------------------------------------------------------------
@@ -110,10 +115,13 @@ class StandardDriverLive(LiveAssertions, unittest.TestCase):
                     env.reset(options={"start": WALL_LEFT} if episode % 2 == 0 else None)
             rospy.sleep(0.2)
             msg = "standard driver, real time: %d random steps, verdicts %s, ground-truth contacts %s" % (
-                RANDOM_STEPS, counts, self.truth.pairs or 0)
+                RANDOM_STEPS,
+                counts,
+                self.truth.pairs or 0,
+            )
             rospy.loginfo(msg)
             print(msg)
-            self.assertGreater(sum(v for k, v in counts.items() if k != "safe"), 0)   # the shield had work
+            self.assertGreater(sum(v for k, v in counts.items() if k != "safe"), 0)  # the shield had work
             self.assertEqual(counts.get("aborted", 0), 0)
             self.assert_no_new_contacts(before)
         finally:

@@ -12,8 +12,8 @@ import numpy as np
 import rospy
 import rostest
 from live_helpers import LiveAssertions
-from moverl_msgs.srv import (CheckPath, CheckState, ResetRobot, ShieldStep, ShieldStepResponse,
-                             ValidateMotionResponse)
+
+from moverl_msgs.srv import CheckPath, CheckState, ResetRobot, ShieldStep, ShieldStepResponse, ValidateMotionResponse
 
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 TABLE_COLLIDING = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # arm bent down: fingers in the table
@@ -21,8 +21,12 @@ WALL_LEFT = [-0.6] + HOME[1:]  # hand right of the wall
 WALL_RIGHT = [0.6] + HOME[1:]  # hand left of the wall; turning joint 1 sweeps the hand through it
 
 SAFE, REPLANNED, DISCARDED_SELF, DISCARDED_POSE, DISCARDED_PATH = (
-    ShieldStepResponse.SAFE, ShieldStepResponse.REPLANNED, ShieldStepResponse.DISCARDED_SELF,
-    ShieldStepResponse.DISCARDED_POSE, ShieldStepResponse.DISCARDED_PATH)
+    ShieldStepResponse.SAFE,
+    ShieldStepResponse.REPLANNED,
+    ShieldStepResponse.DISCARDED_SELF,
+    ShieldStepResponse.DISCARDED_POSE,
+    ShieldStepResponse.DISCARDED_PATH,
+)
 TRUNCATED = ShieldStepResponse.TRUNCATED
 CAUSE_POSE, CAUSE_PATH = ValidateMotionResponse.POSE_COLLISION, ValidateMotionResponse.PATH_COLLISION
 SHIELDS = {"plan": "/shield", "discard": "/shield_discard", "last_safe": "/shield_last_safe"}

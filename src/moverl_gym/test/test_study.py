@@ -15,8 +15,9 @@ from moverl_gym.training import EPISODE_FIELDS
 STUDY = Path(__file__).resolve().parents[1] / "scripts" / "study.py"
 
 
-def make_run(root: Path, scenario: str, shield: str, seed: int, success, contacts, length=50, finished=True,
-             wall=100.0):
+def make_run(
+    root: Path, scenario: str, shield: str, seed: int, success, contacts, length=50, finished=True, wall=100.0
+):
     name = study.run_name("ppo", study.env_id(scenario), shield, seed)
     folder = root / name
     folder.mkdir(parents=True)
@@ -25,9 +26,16 @@ def make_run(root: Path, scenario: str, shield: str, seed: int, success, contact
         w.writeheader()
         for i, (s, c) in enumerate(zip(success, contacts)):
             row = {k: 0 for k in EPISODE_FIELDS}
-            row.update(episode=i + 1, timesteps=(i + 1) * length, length=length, success=int(s), contacts=int(c),
-                       interventions=2 if shield == "on" else 0, replanned=1 if shield == "on" else 0,
-                       **{"return": 10.0 * s - 5})
+            row.update(
+                episode=i + 1,
+                timesteps=(i + 1) * length,
+                length=length,
+                success=int(s),
+                contacts=int(c),
+                interventions=2 if shield == "on" else 0,
+                replanned=1 if shield == "on" else 0,
+                **{"return": 10.0 * s - 5},
+            )
             w.writerow(row)
     (folder / "config.yaml").write_text(f"task:\n  start_noise: {0.5 if seed < 5 else 0.0}\nhyperparams: {{}}\n")
     if finished:
@@ -79,7 +87,11 @@ def test_summarize_table_and_missing(tmp_path):
     (tmp_path / "not_a_run").mkdir()
     runs = study.load_runs(tmp_path)
     assert [(r.scenario, r.shield, r.seed, r.finished) for r in runs] == [
-        ("table", "on", 0, True), ("table", "on", 1, True), ("table", "off", 0, True), ("case", "off", 0, False)]
+        ("table", "on", 0, True),
+        ("table", "on", 1, True),
+        ("table", "off", 0, True),
+        ("case", "off", 0, False),
+    ]
     assert study.success_last(runs[1], 200) == pytest.approx(0.5)
     rows = study.summarize(runs, last=200)
     assert [(r["scenario"], r["shield"]) for r in rows] == [("table", "on"), ("table", "off")]
@@ -99,19 +111,30 @@ def test_summarize_table_and_missing(tmp_path):
     groups = study.settings_groups(study.load_runs(tmp_path))
     assert sorted(len(v) for v in groups.values()) == [1, 4]
     missing = study.missing_runs(tmp_path, ["table", "case"], ["on", "off"], [0, 1])
-    assert missing == ["ppo_PandaReachTable-v0_off_s1", "ppo_PandaReachCase-v0_on_s0",
-                       "ppo_PandaReachCase-v0_on_s1", "ppo_PandaReachCase-v0_off_s0",
-                       "ppo_PandaReachCase-v0_off_s1"]
+    assert missing == [
+        "ppo_PandaReachTable-v0_off_s1",
+        "ppo_PandaReachCase-v0_on_s0",
+        "ppo_PandaReachCase-v0_on_s1",
+        "ppo_PandaReachCase-v0_off_s0",
+        "ppo_PandaReachCase-v0_off_s1",
+    ]
 
 
 def test_figures(tmp_path):
     rng = np.random.default_rng(0)
     for sc in ("table", "case"):
         for seed in (0, 1):
-            make_run(tmp_path / "runs", sc, "on", seed, success=rng.random(200) < np.linspace(0, 1, 200),
-                     contacts=[0] * 200)
-            make_run(tmp_path / "runs", sc, "off", seed, success=rng.random(190) < np.linspace(0, 1, 190),
-                     contacts=rng.poisson(np.linspace(20, 1, 190)))
+            make_run(
+                tmp_path / "runs", sc, "on", seed, success=rng.random(200) < np.linspace(0, 1, 200), contacts=[0] * 200
+            )
+            make_run(
+                tmp_path / "runs",
+                sc,
+                "off",
+                seed,
+                success=rng.random(190) < np.linspace(0, 1, 190),
+                contacts=rng.poisson(np.linspace(20, 1, 190)),
+            )
     runs = study.load_runs(tmp_path / "runs")
     for fn, name in ((study.plot_contacts, "fig6.png"), (study.plot_learning, "fig7.png")):
         p = fn(runs, tmp_path / name)
@@ -123,6 +146,7 @@ def test_parse_args_quick(tmp_path):
     sys.path.insert(0, str(STUDY.parent))
     try:
         import importlib
+
         mod = importlib.import_module("study")
     finally:
         sys.path.remove(str(STUDY.parent))
@@ -136,8 +160,9 @@ def test_parse_args_quick(tmp_path):
 def test_study_quick(tmp_path):
     """Live (2 short trainings, own graphs): study.py --quick trains, then writes figures and tables; rerun skips."""
     out = tmp_path / "q"
-    proc = subprocess.run([sys.executable, str(STUDY), "--quick", "--out", str(out)], capture_output=True, text=True,
-                          timeout=170)
+    proc = subprocess.run(
+        [sys.executable, str(STUDY), "--quick", "--out", str(out)], capture_output=True, text=True, timeout=170
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     for f in ("fig6_contacts.png", "fig7_learning.png", "results.md", "results.csv"):
         assert (out / f).exists() and (out / f).stat().st_size > 0, f
@@ -148,6 +173,7 @@ def test_study_quick(tmp_path):
     rows = {r["shield"]: r for r in csv.DictReader(open(out / "results.csv"))}
     assert rows["on"]["contacts_total"] == "0", "the shield let a contact through"
     assert "study.py --quick --out" in (out / "results.md").read_text()
-    again = subprocess.run([sys.executable, str(STUDY), "--quick", "--out", str(out)], capture_output=True,
-                           text=True, timeout=60)
+    again = subprocess.run(
+        [sys.executable, str(STUDY), "--quick", "--out", str(out)], capture_output=True, text=True, timeout=60
+    )
     assert again.returncode == 0 and "every run is finished" in again.stdout, again.stdout + again.stderr

@@ -87,7 +87,10 @@ def test_segment_states_respect_the_step():
 
 def test_crossing_through_a_thin_wall_has_scene_free_ends():
     collides = _wall()
-    scene_free = lambda q: not (0.49 <= q[0] <= 0.515)  # the scene pads the wall by 1 cm
+
+    def scene_free(q):
+        return not (0.49 <= q[0] <= 0.515)  # the scene pads the wall by 1 cm
+
     lower, upper = [-1.0, -1.0], [1.0, 1.0]
     q0, q1, span = audit.crossing_through(collides, scene_free, [0.5001, 0.0], [1.0, 0.3], lower, upper)
     for q in (q0, q1):
@@ -119,14 +122,28 @@ def test_short_goal_stays_close_and_within_limits():
 
 
 def _row(world, planner, solved, t, length):
-    return {"world": world, "planner": planner, "solved": solved, "planning_time": t,
-            "path_length": length if solved else float("nan"), "straight_length": 1.0, "path_valid": solved}
+    return {
+        "world": world,
+        "planner": planner,
+        "solved": solved,
+        "planning_time": t,
+        "path_length": length if solved else float("nan"),
+        "straight_length": 1.0,
+        "path_valid": solved,
+    }
 
 
 def test_summarize_and_rank():
-    rows = [_row("w", "A", 1, 0.01, 2.0), _row("w", "A", 0, 0.1, 0), _row("w", "B", 1, 0.05, 1.0),
-            _row("w", "B", 1, 0.03, 3.0), _row("w", "C", 1, 0.02, 1.0), _row("w", "C", 1, 0.02, 1.0),
-            _row("w", "D", 0, 0.2, 0), _row("w", "D", 0, 0.1, 0)]
+    rows = [
+        _row("w", "A", 1, 0.01, 2.0),
+        _row("w", "A", 0, 0.1, 0),
+        _row("w", "B", 1, 0.05, 1.0),
+        _row("w", "B", 1, 0.03, 3.0),
+        _row("w", "C", 1, 0.02, 1.0),
+        _row("w", "C", 1, 0.02, 1.0),
+        _row("w", "D", 0, 0.2, 0),
+        _row("w", "D", 0, 0.1, 0),
+    ]
     s = bench.summarize(rows, time_limit=0.1)
     by = {(x["world"], x["planner"]): x for x in s}
     assert by[("w", "A")]["solved_rate"] == 0.5 and by[("all", "A")]["problems"] == 2
@@ -156,7 +173,7 @@ def test_pushing_policy_drives_straight_at_the_target_at_full_speed():
     rng = np.random.default_rng(0)
     pol = push.PushingPolicy([np.array([1.0, -0.5, 0.0])], np.array([0.1, 0.1, 0.2]), rng, noise=0.0, switch=50)
     a = pol.act(np.zeros(3))
-    assert np.allclose(a, [1.0, -0.5, 0.0])           # largest need at full speed, the others in proportion
+    assert np.allclose(a, [1.0, -0.5, 0.0])  # largest need at full speed, the others in proportion
     assert np.allclose(pol.act([0.995, -0.5, 0.0]), [0.05, 0.0, 0.0])  # close: exactly what is left
     pol.feedback(True)
     pol.feedback(True)

@@ -15,12 +15,28 @@ TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_train_smoke(tmp_path, algo):
-    cmd = [sys.executable, str(TRAIN), "--algo", algo, "-n", "300", "--seed", "1", "--log-folder", str(tmp_path),
-           "--no-progress", "--checkpoint-freq", "0"]
+    cmd = [
+        sys.executable,
+        str(TRAIN),
+        "--algo",
+        algo,
+        "-n",
+        "300",
+        "--seed",
+        "1",
+        "--log-folder",
+        str(tmp_path),
+        "--no-progress",
+        "--checkpoint-freq",
+        "0",
+    ]
     if algo != "ppo":  # off-policy: start learning after 100 steps so that gradient updates run in the smoke test
         hp = tmp_path / f"{algo}.yml"
-        hp.write_text(yaml.safe_dump({"default": {"policy": "MlpPolicy", "learning_starts": 100, "batch_size": 64,
-                                                  "buffer_size": 1000}}))
+        hp.write_text(
+            yaml.safe_dump(
+                {"default": {"policy": "MlpPolicy", "learning_starts": 100, "batch_size": 64, "buffer_size": 1000}}
+            )
+        )
         cmd += ["--hyperparams", str(hp)]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -46,8 +62,23 @@ def test_train_two_envs_then_evaluate(tmp_path):
     evaluate.py reads the output; no process of either graph (nor the env processes) outlives the run."""
     from moverl_gym.proctree import TreeWatch
 
-    cmd = [sys.executable, str(TRAIN), "--algo", "ppo", "-n", "400", "--n-envs", "2", "--seed", "5", "--log-folder",
-           str(tmp_path), "--no-progress", "--checkpoint-freq", "0"]
+    cmd = [
+        sys.executable,
+        str(TRAIN),
+        "--algo",
+        "ppo",
+        "-n",
+        "400",
+        "--n-envs",
+        "2",
+        "--seed",
+        "5",
+        "--log-folder",
+        str(tmp_path),
+        "--no-progress",
+        "--checkpoint-freq",
+        "0",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     with TreeWatch(proc.pid) as watch:
         try:
@@ -57,7 +88,7 @@ def test_train_two_envs_then_evaluate(tmp_path):
                 proc.kill()
                 proc.communicate()
     assert proc.returncode == 0, err[-3000:]
-    sims = watch.matching("sim_node __name:=sim ")   # the node re-executes itself with the venv's python
+    sims = watch.matching("sim_node __name:=sim ")  # the node re-executes itself with the venv's python
     assert len(sims) == 2, f"one simulator per env process: {watch.cmdlines}"
     left = watch.wait_gone(30)
     assert not left, f"processes of the run still running: {left}"
@@ -74,8 +105,9 @@ def test_train_two_envs_then_evaluate(tmp_path):
     first = {e: next(r for r in rows if r["env"] == e) for e in ("0", "1")}
     assert first["0"]["return"] != first["1"]["return"], first
 
-    ev = subprocess.run([sys.executable, str(EVALUATE), str(run), "--episodes", "2"], capture_output=True, text=True,
-                        timeout=180)
+    ev = subprocess.run(
+        [sys.executable, str(EVALUATE), str(run), "--episodes", "2"], capture_output=True, text=True, timeout=180
+    )
     assert ev.returncode == 0, ev.stderr[-3000:]
     result = json.loads((run / "eval.json").read_text())
     assert result["episodes"] == 2 and result["contacts_total"] == 0 and result["algo"] == "ppo"

@@ -11,14 +11,14 @@ def test_fires_after_the_deadline_and_reports_it():
     fired = threading.Event()
     token = w.arm(0.05, fired.set)
     assert fired.wait(2.0)
-    assert w.disarm(token) is True   # the caller learns that its call was cut
+    assert w.disarm(token) is True  # the caller learns that its call was cut
     w.close()
 
 
 def test_a_disarmed_call_never_fires():
     w = _Watchdog()
     fired = threading.Event()
-    for _ in range(200):              # many calls well within their deadline, as env steps are
+    for _ in range(200):  # many calls well within their deadline, as env steps are
         token = w.arm(0.2, fired.set)
         assert w.disarm(token) is False
     assert not fired.wait(0.5)

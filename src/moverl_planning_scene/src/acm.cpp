@@ -4,15 +4,16 @@
  *        never in collision over random configurations are not checked, as MoveIt's setup assistant decides) and its
  *        cache file.
  */
+#include <unistd.h>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
 #include <sstream>
-#include <unistd.h>
 
 #include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>
@@ -20,7 +21,6 @@
 #include <fcl/geometry/shape/cylinder.h>
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/narrowphase/collision.h>
 
 #include "fcl_checker_internal.h"

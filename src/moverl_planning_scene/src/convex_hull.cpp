@@ -26,7 +26,7 @@ struct Face {
   std::array<int, 3> v{};   // point indices, counter-clockwise seen from outside
   std::array<int, 3> nb{};  // neighbour across edge (v[i], v[i + 1])
   Eigen::Vector3d n = Eigen::Vector3d::Zero();
-  double d = 0.0;           // plane: n . x = d (n = 0 for a zero-area face: never visible)
+  double d = 0.0;  // plane: n . x = d (n = 0 for a zero-area face: never visible)
   std::vector<int> outside;
   int furthest = -1;
   double furthest_dist = 0.0;

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Geometry>
 #include <fcl/geometry/collision_geometry.h>
+#include <Eigen/Geometry>
 
 #include "moverl_planning_scene/fcl_collision_checker.h"
 
@@ -21,13 +21,13 @@ namespace moverl_planning_scene {
 struct FclCollisionChecker::Geom {
   int link = -1;
   ShapeType type = ShapeType::kBox;
-  std::string piece;                                          // mesh piece name (OBJ object/group)
-  Eigen::Vector3d dims = Eigen::Vector3d::Zero();             // primitives (CollisionShapeSpec::dims)
-  std::vector<Eigen::Vector3d> vertices;                      // meshes: the points whose hull is geom (shape frame)
+  std::string piece;                               // mesh piece name (OBJ object/group)
+  Eigen::Vector3d dims = Eigen::Vector3d::Zero();  // primitives (CollisionShapeSpec::dims)
+  std::vector<Eigen::Vector3d> vertices;           // meshes: the points whose hull is geom (shape frame)
   std::shared_ptr<fcl::CollisionGeometry<double>> geom;
   Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  // shape in link frame
-  Eigen::Vector3d center_local = Eigen::Vector3d::Zero();     // bounding sphere centre, link frame
-  double radius = 0.0;                                        // bounding sphere radius
+  Eigen::Vector3d center_local = Eigen::Vector3d::Zero();    // bounding sphere centre, link frame
+  double radius = 0.0;                                       // bounding sphere radius
   Eigen::Isometry3d world_tf = Eigen::Isometry3d::Identity();
   Eigen::Vector3d world_center = Eigen::Vector3d::Zero();
   // The same shape inflated by >= self_padding, for self-collision checks (== geom when self_padding is 0).

@@ -7,20 +7,21 @@
 
 #include "fcl_checker_internal.h"
 
+#include <unistd.h>
+#include <array>
 #include <chrono>
 #include <cmath>
-#include <limits>
-#include <map>
-#include <array>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <map>
 #include <random>
 #include <set>
 #include <sstream>
-#include <unistd.h>
 
 #include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>
@@ -28,7 +29,6 @@
 #include <fcl/geometry/shape/cylinder.h>
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/narrowphase/collision.h>
 #include <octomap/OcTree.h>
 
@@ -43,8 +43,7 @@ FclCollisionChecker::FclCollisionChecker(const RobotModel& model) : model_(model
 FclCollisionChecker::~FclCollisionChecker() = default;
 
 std::unique_ptr<FclCollisionChecker> FclCollisionChecker::create(const RobotModel& model,
-                                                                 const FclCheckerOptions& options,
-                                                                 std::string* error) {
+                                                                 const FclCheckerOptions& options, std::string* error) {
   std::string dummy;
   if (error == nullptr) error = &dummy;
   if (!(options.padding >= 0.0) || !std::isfinite(options.padding)) {

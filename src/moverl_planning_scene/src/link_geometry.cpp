@@ -9,6 +9,7 @@
 #include <set>
 
 #include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>
@@ -16,7 +17,6 @@
 #include <fcl/geometry/shape/cylinder.h>
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/narrowphase/collision.h>
 
 #include "fcl_checker_internal.h"
@@ -59,7 +59,7 @@ std::vector<fcl::Vector3d> inflateTriangles(const MeshPiece& mesh, double paddin
     }
     constexpr double kTolerance = 1e-6;
     if (lo < -kTolerance && hi > kTolerance) continue;  // not a supporting plane
-    if (hi > kTolerance) u = -u;                       // outward: the mesh lies on the negative side
+    if (hi > kTolerance) u = -u;                        // outward: the mesh lies on the negative side
     for (int k = 0; k < 3; ++k) normals[weld[t[k]]].push_back(u);
   }
   constexpr double kMaxStretch = 10.0;  // very sharp vertices: cap the offset at 10 * padding
@@ -206,8 +206,8 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
     reach_radius_ = 0.0;
     for (const Geom& g : geoms_) {
       const double c = dof > 0 ? model_.chainOffsetBound(0, g.link) : -1.0;
-      const double r = c < 0.0 ? (poses[g.link] * g.center_local).norm() + g.radius
-                               : d0 + c + g.center_local.norm() + g.radius;
+      const double r =
+          c < 0.0 ? (poses[g.link] * g.center_local).norm() + g.radius : d0 + c + g.center_local.norm() + g.radius;
       reach_radius_ = std::max(reach_radius_, r);
     }
   }

@@ -54,8 +54,8 @@ bool loadWithAssimp(const std::string& path, const Eigen::Vector3d& scale, std::
   // PyBullet's COLLADA reader applies <unit> and node transforms but not <up_axis> (nor does rviz); assimp would
   // rotate a Z_UP file into its Y-up convention.
   importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
-  const aiScene* scene = importer.ReadFile(
-      path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices);
+  const aiScene* scene =
+      importer.ReadFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices);
   if (scene == nullptr || scene->mNumMeshes == 0) {
     *error = "assimp cannot load mesh '" + path + "': " + importer.GetErrorString();
     return false;
@@ -85,8 +85,8 @@ bool loadWithAssimp(const std::string& path, const Eigen::Vector3d& scale, std::
 
 }  // namespace
 
-bool parseObj(const std::string& text, const Eigen::Vector3d& scale, std::vector<MeshPiece>* pieces,
-              std::string* error, const std::string& source) {
+bool parseObj(const std::string& text, const Eigen::Vector3d& scale, std::vector<MeshPiece>* pieces, std::string* error,
+              const std::string& source) {
   std::vector<Eigen::Vector3d> vertices;
   std::vector<ObjBlock> blocks(1);
   std::istringstream in(text);

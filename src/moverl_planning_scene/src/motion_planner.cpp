@@ -56,8 +56,8 @@ constexpr double kMinSimplifyBudget = 1e-3;  // s; below this, the raw solution 
 // the planner and the simplifier stop early enough to leave it time. Its cost is estimated from the number of states
 // it checks times the measured cost of one state check (running average, initial guess below), with a margin.
 constexpr double kInitialStateCheckCost = 60e-6;  // s per state check before any measurement
-constexpr double kValidationMargin = 1.5;        // estimated validation time x this is reserved
-constexpr double kSolveReserve = 0.1;            // the planner stops at 90 % of the limit (the rest: validation)
+constexpr double kValidationMargin = 1.5;         // estimated validation time x this is reserved
+constexpr double kSolveReserve = 0.1;             // the planner stops at 90 % of the limit (the rest: validation)
 
 template <typename P>
 PlannerFactory make() {
@@ -272,7 +272,8 @@ void MotionPlanner::plan(const std::vector<double>& start, const std::vector<dou
   };
   const double solve_limit = (1.0 - kSolveReserve) * time_limit;
   im.deadline.time = at(solve_limit);
-  const ob::PlannerStatus status = ss.solve(ob::timedPlannerTerminationCondition(std::max(0.0, solve_limit - elapsed())));
+  const ob::PlannerStatus status =
+      ss.solve(ob::timedPlannerTerminationCondition(std::max(0.0, solve_limit - elapsed())));
   if (status != ob::PlannerStatus::EXACT_SOLUTION) {
     im.deadline.time = Clock::time_point::max();
     std::ostringstream m;
@@ -337,9 +338,9 @@ void MotionPlanner::plan(const std::vector<double>& start, const std::vector<dou
   if (!valid(path)) {
     chosen = &raw;
     if (late || !valid(raw)) {
-      return finish(PlanStatus::kNoSolution, late ? name + " solution could not be re-validated within " +
-                                                        std::to_string(time_limit) + " s"
-                                                  : name + " solution failed re-validation");
+      return finish(PlanStatus::kNoSolution,
+                    late ? name + " solution could not be re-validated within " + std::to_string(time_limit) + " s"
+                         : name + " solution failed re-validation");
     }
   }
   const std::size_t dof = start.size();

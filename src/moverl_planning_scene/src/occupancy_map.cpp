@@ -84,8 +84,9 @@ constexpr std::uint8_t kHit = 1, kRobot = 2;
 
 }  // namespace
 
-void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
-                                 const Eigen::Vector3d& origin, MapUpdate* out) const {
+void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
+                                 const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
+                                 MapUpdate* out) const {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();

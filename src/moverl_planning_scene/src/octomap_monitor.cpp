@@ -46,7 +46,6 @@ std::string cloudLayoutError(const sensor_msgs::PointCloud2& c) {
   return "";
 }
 
-
 OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex)
     : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex) {}
 
@@ -107,9 +106,10 @@ bool OctomapMonitor::init(std::string* error) {
   joint_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &joint_queue_);
   joint_spinner_->start();
   publishStatus(ros::Time(0), "");
-  ROS_INFO("planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
-           "mapped within +-%.2f m of the base)",
-           cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach);
+  ROS_INFO(
+      "planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
+      "mapped within +-%.2f m of the base)",
+      cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach);
   // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
   while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {

@@ -87,8 +87,7 @@ std::string PlanningScene::validateConfiguration(const std::vector<double>& q, c
   return "";
 }
 
-std::string PlanningScene::prepare(const std::vector<double>& q, const char* what,
-                                   std::vector<double>* clamped) const {
+std::string PlanningScene::prepare(const std::vector<double>& q, const char* what, std::vector<double>* clamped) const {
   std::string error = validateConfiguration(q, what);
   if (!error.empty()) return error;
   for (std::size_t i = 0; i < q.size(); ++i) {
@@ -305,8 +304,8 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   out->outcome = MotionOutcome::kPathCollision;
   out->pairs = path_result_.pairs;
   std::ostringstream m;
-  m << "straight path collides at fraction " << path_result_.collision_fraction << " ("
-    << describe(path_result_.pairs) << ")";
+  m << "straight path collides at fraction " << path_result_.collision_fraction << " (" << describe(path_result_.pairs)
+    << ")";
   if (find_last_free) {
     t0 = Clock::now();
     findLastFree(/*goal_checked=*/true, out);

@@ -1,15 +1,15 @@
 #include "moverl_planning_scene/robot_model.h"
 
+#include <urdf_parser/urdf_parser.h>
 #include <kdl/jntarray.hpp>
 #include <kdl/tree.hpp>
 #include <kdl/treefksolverpos_recursive.hpp>
 #include <kdl_parser/kdl_parser.hpp>
-#include <urdf_parser/urdf_parser.h>
 
+#include <algorithm>
 #include <cmath>
 #include <deque>
 #include <fstream>
-#include <algorithm>
 
 namespace moverl_planning_scene {
 namespace {
@@ -202,7 +202,7 @@ std::unique_ptr<RobotModel> RobotModel::fromUrdf(const std::string& urdf_xml, co
   m->offset_bound_.assign(dof, std::vector<double>(n_links, -1.0));
   for (std::size_t i = 0; i < dof; ++i) {
     const int root = m->joint_child_link_[i];
-    m->offset_bound_[i][root] = 0.0;  // the joint frame is the child link frame
+    m->offset_bound_[i][root] = 0.0;             // the joint frame is the child link frame
     for (std::size_t l = 0; l < n_links; ++l) {  // parents come first
       const int p = m->link_parent_[l];
       if (static_cast<int>(l) != root && p >= 0 && m->offset_bound_[i][p] >= 0.0) {

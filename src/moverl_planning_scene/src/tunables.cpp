@@ -2,8 +2,8 @@
 
 #include <map>
 #include <sstream>
-#include <vector>
 #include <stdexcept>
+#include <vector>
 
 #include <yaml-cpp/yaml.h>
 

@@ -7,6 +7,7 @@
 #include <set>
 
 #include <fcl/geometry/bvh/BVH_model.h>
+#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>
@@ -14,7 +15,6 @@
 #include <fcl/geometry/shape/cylinder.h>
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/narrowphase/collision.h>
 
 #include "fcl_checker_internal.h"
@@ -30,12 +30,12 @@ bool sweptGeometry(const WorldObject& o, double p, double lo, double hi,
                    std::shared_ptr<fcl::CollisionGeometry<double>>* geom, Eigen::Isometry3d* pose, double* radius,
                    std::string* why) {
   const std::vector<double>& d = o.dimensions;
-  const double h = 0.5 * (hi - lo);                  // half the travel
-  const Eigen::Vector3d a = o.motion.axis;           // unit
+  const double h = 0.5 * (hi - lo);         // half the travel
+  const Eigen::Vector3d a = o.motion.axis;  // unit
   *pose = o.pose;
-  pose->translation() += a * (0.5 * (lo + hi));      // centre of the travel
+  pose->translation() += a * (0.5 * (lo + hi));  // centre of the travel
   const Eigen::Matrix3d R = o.pose.linear();
-  const Eigen::Vector3d u = R.transpose() * a;       // motion axis in the object's frame
+  const Eigen::Vector3d u = R.transpose() * a;  // motion axis in the object's frame
   constexpr double kAligned = 1.0 - 1e-9;
   auto box = [&](double x, double y, double z) {
     // A box of these (padded) dims in the frame *pose, swept along u by +/- h: |x_i + s u_i| <= d_i/2 + h |u_i|.

@@ -6,6 +6,7 @@
  */
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdio>
@@ -14,7 +15,6 @@
 #include <random>
 #include <set>
 #include <sstream>
-#include <unistd.h>
 
 #include "moverl_planning_scene/convex_hull.h"
 #include "moverl_planning_scene/fcl_collision_checker.h"
@@ -234,8 +234,8 @@ TEST(MeshLoader, ObjPiecesFollowObjectsAndGroups) {
   EXPECT_EQ(pieces[1].name, "second");
   EXPECT_EQ(pieces[1].vertices.size(), 3u);
   EXPECT_EQ(pieces[2].name, "part");
-  EXPECT_EQ(pieces[2].vertices.size(), 4u);     // the quad, relative indices
-  EXPECT_EQ(pieces[2].triangles.size(), 2u);    // fanned
+  EXPECT_EQ(pieces[2].vertices.size(), 4u);              // the quad, relative indices
+  EXPECT_EQ(pieces[2].triangles.size(), 2u);             // fanned
   EXPECT_EQ(pieces[1].vertices[1], Vector3d(12, 0, 0));  // scaled
   for (const auto& p : pieces) {
     for (const auto& v : p.vertices) EXPECT_NE(v, Vector3d(18, 9, 9));
@@ -353,8 +353,8 @@ TEST(FclConvex, SupportEqualsThePointSetsOnEveryPandaMesh) {
     ASSERT_TRUE(mps::loadMeshPieces(meshes + name + ".obj", Vector3d::Ones(), true, &pieces, &error)) << error;
     for (const auto& piece : pieces) {
       const mps::ConvexHull hull = mps::computeConvexHull(piece.vertices);
-      for (const std::vector<Vector3d>& pts : {piece.vertices, hull.vertices, mps::inflateHull(hull, 0.004),
-                                               mps::inflateHull(hull, 0.01)}) {
+      for (const std::vector<Vector3d>& pts :
+           {piece.vertices, hull.vertices, mps::inflateHull(hull, 0.004), mps::inflateHull(hull, 0.01)}) {
         const auto convex = mps::makeFclConvex(pts);
         walked += pts.size() > 32 && convex->getFaceCount() > 0;  // FCL walks edges above 32 vertices
         for (int k = 0; k < 2000; ++k) {

@@ -27,9 +27,12 @@ from moverl_sim.urdf import resolve_uri
 HERE = Path(__file__).resolve().parent
 FIXTURES = HERE / "fixtures" / "geometry"
 REPO = HERE.parents[2]
-ROBOT_CONFIGS = [p for p in sorted((REPO / "config" / "robots").glob("*.yaml"))
-                 + sorted((REPO / "src" / "moverl_gym" / "test" / "robots").glob("*.yaml"))
-                 if isinstance(yaml.safe_load(p.read_text()), dict) and "robot" in yaml.safe_load(p.read_text())]
+ROBOT_CONFIGS = [
+    p
+    for p in sorted((REPO / "config" / "robots").glob("*.yaml"))
+    + sorted((REPO / "src" / "moverl_gym" / "test" / "robots").glob("*.yaml"))
+    if isinstance(yaml.safe_load(p.read_text()), dict) and "robot" in yaml.safe_load(p.read_text())
+]
 
 
 def _check(rep):
@@ -77,5 +80,6 @@ def test_fixtures_are_what_the_generator_writes(tmp_path):
     spec.loader.exec_module(gen)
     for f in gen.write_all(tmp_path):
         committed = FIXTURES / f.relative_to(tmp_path)
-        assert committed.is_file() and filecmp.cmp(f, committed, shallow=False), f"{committed} is stale: rerun " \
-            "src/moverl_planning_scene/test/fixtures/geometry/make_fixtures.py"
+        assert committed.is_file() and filecmp.cmp(f, committed, shallow=False), (
+            f"{committed} is stale: rerun src/moverl_planning_scene/test/fixtures/geometry/make_fixtures.py"
+        )

@@ -49,7 +49,6 @@ void integrate(mps::OccupancyMap* map, const std::vector<Eigen::Vector3d>& pts, 
   map->apply(u);
 }
 
-
 }  // namespace
 
 TEST(OccupancyMap, RejectsBadOptions) {
@@ -71,10 +70,10 @@ TEST(OccupancyMap, RejectsBadOptions) {
 TEST(OccupancyMap, HitsFreeSpaceRangeAndRobotPoints) {
   auto map = makeMap();
   const Eigen::Vector3d origin(0.0, 0.0, 1.0);
-  const std::vector<Eigen::Vector3d> pts = {{0.5, 0.0, 0.0},                   // obstacle
-                                            {-0.5, 0.0, 0.0},                  // on the robot (masked)
-                                            {0.0, 5.0, 1.0},                   // beyond max_range
-                                            {std::nan(""), 0.0, 0.0}};         // invalid
+  const std::vector<Eigen::Vector3d> pts = {{0.5, 0.0, 0.0},            // obstacle
+                                            {-0.5, 0.0, 0.0},           // on the robot (masked)
+                                            {0.0, 5.0, 1.0},            // beyond max_range
+                                            {std::nan(""), 0.0, 0.0}};  // invalid
   mps::MapUpdate u;
   map->computeUpdate(pts, {0, 1, 0, 0}, origin, &u);
   EXPECT_EQ(u.stats.points, 4u);
@@ -84,9 +83,9 @@ TEST(OccupancyMap, HitsFreeSpaceRangeAndRobotPoints) {
   EXPECT_EQ(u.stats.hit_cells, 1u);
   map->apply(u);
   EXPECT_TRUE(map->occupied({0.5, 0.0, 0.0}));
-  EXPECT_FALSE(map->occupied({-0.5, 0.0, 0.0}));   // robot point: nothing marked
-  EXPECT_FALSE(map->occupied({0.0, 2.9, 1.0}));    // cleared up to max_range, no end point
-  EXPECT_FALSE(map->occupied({0.25, 0.0, 0.5}));   // half way along the beam: free
+  EXPECT_FALSE(map->occupied({-0.5, 0.0, 0.0}));  // robot point: nothing marked
+  EXPECT_FALSE(map->occupied({0.0, 2.9, 1.0}));   // cleared up to max_range, no end point
+  EXPECT_FALSE(map->occupied({0.25, 0.0, 0.5}));  // half way along the beam: free
   EXPECT_EQ(map->occupiedLeafCount(), 1u);
   // The half-way cell is known free, a cell off every beam is unknown.
   EXPECT_NE(map->tree()->search(0.25, 0.0, 0.5), nullptr);
@@ -220,9 +219,10 @@ TEST_F(PandaOctomap, SensedTableBlocksTheRobot) {
   for (int k = 0; k < 20; ++k) scene_->checkPath(kHome, goal, &pc);
   const double path_ms = 1e3 * std::chrono::duration<double>(Clock::now() - t1).count() / 20;
   EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << pc.message;
-  std::printf("[ octomap ] %zu points integrated in %.1f ms (%zu occupied leaves); state check %.3f ms, "
-              "path check (%zu states) %.3f ms\n",
-              top.size(), 1e3 * integrate_s, map->occupiedLeafCount(), state_ms, pc.checked_states, path_ms);
+  std::printf(
+      "[ octomap ] %zu points integrated in %.1f ms (%zu occupied leaves); state check %.3f ms, "
+      "path check (%zu states) %.3f ms\n",
+      top.size(), 1e3 * integrate_s, map->occupiedLeafCount(), state_ms, pc.checked_states, path_ms);
   scene_->checker().setOctree(nullptr);
   scene_->checkState(kIntoTable, &sc);
   EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << "octree removed: " << sc.message;

@@ -26,7 +26,7 @@ const std::vector<double> kHome = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
 const std::vector<double> kSelfCollision = {0.0, 0.2, 0.0, -3.0, 0.0, 1.0, 0.785};
 // Leaning forward and down: the hand goes below the table top (z = 0).
 const std::vector<double> kIntoTable = {0.0, 1.0, 0.0, -1.5, 0.0, 1.571, 0.785};
-constexpr double kPlanTime = 1.0;     // s, around the wall
+constexpr double kPlanTime = 1.0;  // s, around the wall
 // s, allowed overrun of a planning time limit in wall time: what is tested is that planning is bounded (an unbounded
 // planner would run for seconds), not how fast this machine is while other jobs share its 2 cores.
 constexpr double kTimeSlack = 0.5;
@@ -186,7 +186,8 @@ TEST_F(PandaScene, ResolutionGuarantee) {
   for (double& v : q1) v += 0.1;
   q1[3] = std::min(q1[3], scene_->model().upperLimits()[3]);
   double motion = 0.0;
-  for (std::size_t i = 0; i < q0.size(); ++i) motion += scene_->checker().jointRadiusBound(i) * std::fabs(q1[i] - q0[i]);
+  for (std::size_t i = 0; i < q0.size(); ++i)
+    motion += scene_->checker().jointRadiusBound(i) * std::fabs(q1[i] - q0[i]);
   const std::size_t n = scene_->checker().interiorStateCount(q0.data(), q1.data());
   EXPECT_EQ(n, static_cast<std::size_t>(std::ceil(motion / scene_->checker().options().path_resolution)));
   mps::PathCheck pc;
@@ -309,8 +310,8 @@ TEST_F(PandaScene, BadInputsAreInvalidRequests) {
     q[i] = v;
     return q;
   };
-  const std::vector<std::vector<double>> bad = {{0.0, 0.0}, with(2, nan), with(3, 0.5), with(0, 3.5),
-                                                with(1, std::numeric_limits<double>::infinity())};
+  const std::vector<std::vector<double>> bad = {
+      {0.0, 0.0}, with(2, nan), with(3, 0.5), with(0, 3.5), with(1, std::numeric_limits<double>::infinity())};
   for (const auto& q : bad) {
     mps::StateCheck sc;
     scene_->checkState(q, &sc);
@@ -579,17 +580,20 @@ TEST_F(PandaScene, SweptInflationContainsTheMotion) {
     o.id = "o";
     const int shape = trial % 3;
     o.type = shape == 0 ? mps::ShapeType::kBox : shape == 1 ? mps::ShapeType::kSphere : mps::ShapeType::kCylinder;
-    o.dimensions = shape == 0 ? std::vector<double>{0.1 + 0.05 * u(rng), 0.2, 0.05}
-                   : shape == 1 ? std::vector<double>{0.07} : std::vector<double>{0.3, 0.05};
-    o.pose.linear() = Eigen::Quaterniond(Eigen::AngleAxisd(3 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()))
-                          .toRotationMatrix();
+    o.dimensions = shape == 0   ? std::vector<double>{0.1 + 0.05 * u(rng), 0.2, 0.05}
+                   : shape == 1 ? std::vector<double>{0.07}
+                                : std::vector<double>{0.3, 0.05};
+    o.pose.linear() =
+        Eigen::Quaterniond(Eigen::AngleAxisd(3 * u(rng), Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized()))
+            .toRotationMatrix();
     if (trial % 4 == 0) o.pose.linear().setIdentity();  // axis-aligned motions too
     o.pose.translation() = Eigen::Vector3d(0.5 * u(rng), 0.5 * u(rng), 1.0 + 0.3 * u(rng));
     Eigen::Vector3d axis = trial % 4 == 0 ? Eigen::Vector3d::Unit(trial % 3) : Eigen::Vector3d(u(rng), u(rng), u(rng));
     o.motion = oscillation(axis, 0.2 + 0.1 * u(rng), 1.0 + 0.5 * u(rng), 3 * u(rng));
     setWorld({o});
     auto& checker = scene_->checker();
-    const double t0 = 2 + u(rng), t1 = trial % 5 == 0 ? std::numeric_limits<double>::infinity() : t0 + 0.2 + 0.2 * u(rng);
+    const double t0 = 2 + u(rng),
+                 t1 = trial % 5 == 0 ? std::numeric_limits<double>::infinity() : t0 + 0.2 + 0.2 * u(rng);
     if (trial % 5 != 0) checker.setMotionWindow(t0, t1);
     // Surface points of the padded shape in its own frame.
     std::vector<Eigen::Vector3d> pts;

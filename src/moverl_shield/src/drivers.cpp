@@ -219,8 +219,9 @@ bool FollowJointTrajectoryDriver::waitUntilReady(double timeout, std::string* er
   }
   std::lock_guard<std::mutex> lock(mutex_);
   *error = std::string(client_->isServerConnected() ? "" : "no action server " + action_name_ + "; ") +
-           (states_ > 0 ? "" : "no usable joint state on " + joint_states_topic_ +
-                                   (state_error_.empty() ? "" : " (" + state_error_ + ")")) +
+           (states_ > 0 ? ""
+                        : "no usable joint state on " + joint_states_topic_ +
+                              (state_error_.empty() ? "" : " (" + state_error_ + ")")) +
            " after " + std::to_string(timeout) + " s";
   return false;
 }
@@ -229,8 +230,8 @@ bool FollowJointTrajectoryDriver::currentState(RobotState* state, std::string* e
   // The state must have arrived after the last move ended (the robot's final state, not one on the way), and be
   // fresh: younger than max_state_age by arrival (a stalled driver stops publishing) and by stamp (clocks agree).
   const auto now = SteadyClock::now();
-  const auto max_age = std::chrono::duration_cast<SteadyClock::duration>(
-      std::chrono::duration<double>(options_.max_state_age));
+  const auto max_age =
+      std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(options_.max_state_age));
   SteadyClock::time_point newer_than;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -316,8 +317,8 @@ MoveResult FollowJointTrajectoryDriver::execute(const TimedTrajectory& trajector
   // no joint state for max_state_age of wall time is a stall, whatever the clock says.
   const ros::Time move_end = (start.isZero() ? ros::Time::now() : start) + ros::Duration(trajectory.duration());
   const double driver_deadline = move_end.toSec() + options_.goal_time + options_.result_margin;
-  const auto max_silence = std::chrono::duration_cast<SteadyClock::duration>(
-      std::chrono::duration<double>(options_.max_state_age));
+  const auto max_silence =
+      std::chrono::duration_cast<SteadyClock::duration>(std::chrono::duration<double>(options_.max_state_age));
   client_->sendGoal(goal, done);
   bool finished = false;
   std::string why;

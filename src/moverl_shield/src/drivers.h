@@ -40,19 +40,19 @@ struct RobotState {
 /// \brief How a move ended, as the shield reports it.
 struct MoveResult {
   DriverEnd end = DriverEnd::kUnreachable;
-  std::int32_t error_code = 0;  ///< control_msgs/FollowJointTrajectoryResult code (0 when none)
-  std::string message;          ///< the driver's error string, or why the shield gave up
+  std::int32_t error_code = 0;          ///< control_msgs/FollowJointTrajectoryResult code (0 when none)
+  std::string message;                  ///< the driver's error string, or why the shield gave up
   moverl_msgs::ContactReport contacts;  ///< ground truth (available=false when the driver has none)
-  double seconds = 0.0;         ///< wall time spent waiting for the driver
+  double seconds = 0.0;                 ///< wall time spent waiting for the driver
 };
 
 /// \brief Tunables of both drivers (set from config/shield.yaml, where each is commented).
 struct DriverOptions {
-  double result_margin = 2.0;   ///< s a result may come after the move's planned end before the move counts as lost
-  double max_state_age = 0.5;   ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
+  double result_margin = 2.0;     ///< s a result may come after the move's planned end before the move counts as lost
+  double max_state_age = 0.5;     ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
   double limit_tolerance = 0.02;  ///< rad (m): states this far beyond a joint limit are clamped onto it
-  double start_lead = 0.02;     ///< s between sending a goal and its start stamp (transport to the controller)
-  double goal_time = 0.5;       ///< s the controller may take after the trajectory's end to settle (goal_time_tolerance)
+  double start_lead = 0.02;       ///< s between sending a goal and its start stamp (transport to the controller)
+  double goal_time = 0.5;  ///< s the controller may take after the trajectory's end to settle (goal_time_tolerance)
   double stopped_velocity_tolerance = 0.01;  ///< rad/s: goal velocity tolerance (at rest)
 };
 

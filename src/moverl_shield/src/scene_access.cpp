@@ -65,8 +65,10 @@ class ServiceScene : public SceneAccess {
     if (!scene_nh_.getParam("joint_radius_bounds", f->joint_radius_bounds) ||
         !scene_nh_.getParam("padding", f->padding) || !scene_nh_.getParam("path_resolution", f->path_resolution) ||
         !scene_nh_.getParam("planning_time", f->planning_time)) {
-      *error = "the planning scene's parameters joint_radius_bounds, padding, path_resolution and planning_time are "
-               "not set in " + scene_nh_.getNamespace() + " (is the scene up?)";
+      *error =
+          "the planning scene's parameters joint_radius_bounds, padding, path_resolution and planning_time are "
+          "not set in " +
+          scene_nh_.getNamespace() + " (is the scene up?)";
       return false;
     }
     return true;

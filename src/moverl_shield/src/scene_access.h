@@ -26,7 +26,7 @@ namespace moverl_shield {
 /// \brief What the shield needs to know about the scene besides its answers: read from the scene (its YAML), never
 ///        defaulted here (kUnset until read).
 struct SceneFacts {
-  std::vector<double> joint_radius_bounds;                ///< per joint, m of robot motion per unit of joint motion
+  std::vector<double> joint_radius_bounds;                 ///< per joint, m of robot motion per unit of joint motion
   double padding = moverl_planning_scene::kUnset;          ///< obstacle inflation (m)
   double path_resolution = moverl_planning_scene::kUnset;  ///< max motion of a robot point between checked states (m)
   double planning_time = moverl_planning_scene::kUnset;    ///< the scene's planning time limit (s)

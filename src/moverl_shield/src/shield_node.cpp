@@ -2,9 +2,10 @@
 //
 // Per env step (service ~step): read the robot's current state from the driver, ask the planning scene ONE
 // ValidateMotion question (a function call: by default the shield hosts the scene, see scene_access.h), then execute
-// the direct move, the replacement plan or the truncated straight move through the driver, or hold still. ~strategy says what happens to an unsafe action (plan, discard, last_safe; see
-// config/shield.yaml). ~reset brings the robot to an episode's start: the simulator's teleport when the driver has one,
-// else a shield-checked move (straight, or an OMPL plan).
+// the direct move, the replacement plan or the truncated straight move through the driver, or hold still. ~strategy
+// says what happens to an unsafe action (plan, discard, last_safe; see config/shield.yaml). ~reset brings the robot to
+// an episode's start: the simulator's teleport when the driver has one, else a shield-checked move (straight, or an
+// OMPL plan).
 //
 // Drivers (drivers.h): the standard control_msgs/FollowJointTrajectory action with the robot's joint states (real
 // robots, the simulator in real time), or the simulator's lockstep services (training). The env sees no difference.
@@ -39,10 +40,10 @@
 
 #include "deadline.h"
 #include "drivers.h"
-#include "scene_access.h"
 #include "moverl_shield/driver_core.h"
 #include "moverl_shield/shield_core.h"
 #include "moverl_shield/trajectory.h"
+#include "scene_access.h"
 
 namespace moverl_shield {
 namespace {
@@ -105,8 +106,7 @@ std::string describe(CallEnd end, const std::string& service, double timeout) {
 
 class ShieldNode {
  public:
-  ShieldNode(ros::NodeHandle& nh, ros::NodeHandle& pnh)
-      : nh_(nh) {
+  ShieldNode(ros::NodeHandle& nh, ros::NodeHandle& pnh) : nh_(nh) {
     enabled_ = required<bool>(pnh, "enabled");
     const std::string strategy = required<std::string>(pnh, "strategy");
     if (!parseStrategy(strategy, &strategy_)) {
@@ -154,8 +154,8 @@ class ShieldNode {
     driver_nh.setCallbackQueue(&driver_queue_);
     if (name == "follow_joint_trajectory") {
       auto fjt = std::make_unique<FollowJointTrajectoryDriver>(
-          driver_nh, joints_, model.lowerLimits(), model.upperLimits(),
-          required<std::string>(pnh, "action"), required<std::string>(pnh, "joint_states"), driver);
+          driver_nh, joints_, model.lowerLimits(), model.upperLimits(), required<std::string>(pnh, "action"),
+          required<std::string>(pnh, "joint_states"), driver);
       driver_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &driver_queue_);
       driver_spinner_->start();
       std::string error;
@@ -212,8 +212,9 @@ class ShieldNode {
     // errors must stay within that.
     const double slack = padding - resolution / 2.0;
     if (tracking_budget_ > slack + 1e-12) {
-      *error = "~tracking_budget " + std::to_string(tracking_budget_) + " m exceeds what the padding leaves along a path (" +
-               std::to_string(slack) + " m = padding - path_resolution / 2)";
+      *error = "~tracking_budget " + std::to_string(tracking_budget_) +
+               " m exceeds what the padding leaves along a path (" + std::to_string(slack) +
+               " m = padding - path_resolution / 2)";
       return false;
     }
     driver_->setPathTolerance(pathTolerances(tracking_budget_, facts.joint_radius_bounds));
@@ -372,7 +373,8 @@ class ShieldNode {
     setExecution(r, res);
     const Verdict verdict = verdictForDriverEnd(decided, r.end, r.error_code);
     if (verdict != decided) {
-      res.message = "driver " + driver_->name() + ": " + r.message + (res.message.empty() ? "" : " (" + res.message + ")");
+      res.message =
+          "driver " + driver_->name() + ": " + r.message + (res.message.empty() ? "" : " (" + res.message + ")");
     }
     RobotState after;
     std::string error;
@@ -569,7 +571,7 @@ class ShieldNode {
   trajectory_msgs::JointTrajectory executed_;  // what this step sent to the driver (for ~events)
   ros::ServiceServer step_srv_, reset_srv_;
   std::vector<std::string> joints_;
-  int ee_link_ = -1;                                  ///< index of the end-effector link in the model's links
+  int ee_link_ = -1;                                   ///< index of the end-effector link in the model's links
   mutable std::vector<Eigen::Isometry3d> link_poses_;  ///< FK scratch
   bool enabled_ = true;
   Strategy strategy_ = Strategy::kPlan;

@@ -1,4 +1,5 @@
 """Shared fixtures. No roscore needed; works with or without devel/setup.bash sourced."""
+
 import os
 import sys
 
@@ -20,6 +21,7 @@ HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 @pytest.fixture(scope="session")
 def panda_urdf(tmp_path_factory):
     from moverl_sim.urdf import robot_description
+
     path = tmp_path_factory.mktemp("urdf") / "panda.urdf"
     path.write_text(robot_description(PANDA_URI))
     return str(path)
@@ -28,12 +30,14 @@ def panda_urdf(tmp_path_factory):
 @pytest.fixture(scope="session")
 def table_world():
     from moverl_sim.world import load_world
+
     return load_world(TABLE_WORLD)
 
 
 def make_sim(panda_urdf, world, **kwargs):
     from moverl_sim.core import Simulator
     from moverl_sim.settings import sim_settings
+
     return Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, world, **{**sim_settings(), **kwargs})
 
 

@@ -1,26 +1,49 @@
 """Simulated depth cameras: world-file parsing, pose, rendering geometry (moverl_sim.camera). No roscore."""
 
 import numpy as np
+import pybullet
 import pytest
+from pybullet_utils import bullet_client
 
+from moverl_sim.camera import (
+    Camera,
+    depth_from_zbuffer,
+    look_at_rotation,
+    quaternion_to_rotation,  # noqa: E402
+    rotation_to_quaternion,
+)
 from moverl_sim.world import WorldCamera, WorldFileError, load_world, parse_world, rpy_to_quaternion
 
-pybullet = pytest.importorskip("pybullet")
-from pybullet_utils import bullet_client  # noqa: E402
-
-from moverl_sim.camera import (Camera, depth_from_zbuffer, look_at_rotation, quaternion_to_rotation,  # noqa: E402
-                               rotation_to_quaternion)
-
-CAM = {"id": "front", "xyz": [1.2, 0.5, 1.0], "target": [0.3, 0.0, 0.1], "width": 160, "height": 120,
-       "fov": 60, "near": 0.1, "far": 3.5, "rate": 2}
+CAM = {
+    "id": "front",
+    "xyz": [1.2, 0.5, 1.0],
+    "target": [0.3, 0.0, 0.1],
+    "width": 160,
+    "height": 120,
+    "fov": 60,
+    "near": 0.1,
+    "far": 3.5,
+    "rate": 2,
+}
 
 
 def camera(**kw):
     d = dict(CAM)
     d.update(kw)
-    return Camera(WorldCamera(id=d["id"], xyz=tuple(d["xyz"]), target=tuple(d["target"]),
-                              up=tuple(d.get("up", (0, 0, 1))), width=d["width"], height=d["height"],
-                              fov=d["fov"], near=d["near"], far=d["far"], rate=d["rate"]))
+    return Camera(
+        WorldCamera(
+            id=d["id"],
+            xyz=tuple(d["xyz"]),
+            target=tuple(d["target"]),
+            up=tuple(d.get("up", (0, 0, 1))),
+            width=d["width"],
+            height=d["height"],
+            fov=d["fov"],
+            near=d["near"],
+            far=d["far"],
+            rate=d["rate"],
+        )
+    )
 
 
 # Box of the geometry tests: 0.3 (x) x 1.0 (y) x 0.6 (z), centre C, yawed and slightly rolled.
@@ -59,18 +82,20 @@ def face_camera(width=160, height=120):
     """Camera in front of the box's -x face (inside the face's y/z extent, so only that face is visible), looking
     obliquely (~35 deg) at a point of the face, with a rolled up vector."""
     xyz = box_world([-1.15, 0.35, 0.2])
-    target = box_world([-0.15, -0.25, -0.1])   # on the face x_local = -0.15
+    target = box_world([-0.15, -0.25, -0.1])  # on the face x_local = -0.15
     return camera(xyz=xyz.tolist(), target=target.tolist(), up=[0.2, 0.1, 1.0], width=width, height=height)
 
 
 # ---------------------------------------------------------------------- world files
 def test_camera_world_file_is_parsed(tmp_path):
     p = tmp_path / "w.yaml"
-    p.write_text("name: w\ncameras:\n"
-                 "  - {id: front, xyz: [1.2, 0.5, 1.0], target: [0.3, 0, 0.1], width: 160, height: 120,\n"
-                 "     fov: 60, near: 0.1, far: 3.5, rate: 2}\n"
-                 "  - {id: side_2, xyz: [0, -1, 1], target: [0, 0, 0], up: [1, 0, 0], width: 8, height: 6,\n"
-                 "     fov: 45.5, near: 0.05, far: 2, rate: 0.5}\n")
+    p.write_text(
+        "name: w\ncameras:\n"
+        "  - {id: front, xyz: [1.2, 0.5, 1.0], target: [0.3, 0, 0.1], width: 160, height: 120,\n"
+        "     fov: 60, near: 0.1, far: 3.5, rate: 2}\n"
+        "  - {id: side_2, xyz: [0, -1, 1], target: [0, 0, 0], up: [1, 0, 0], width: 8, height: 6,\n"
+        "     fov: 45.5, near: 0.05, far: 2, rate: 0.5}\n"
+    )
     w = load_world(p)
     assert [c.id for c in w.cameras] == ["front", "side_2"]
     c = w.camera("front")
@@ -78,12 +103,14 @@ def test_camera_world_file_is_parsed(tmp_path):
     assert (c.width, c.height, c.fov, c.near, c.far, c.rate) == (160, 120, 60.0, 0.1, 3.5, 2.0)
     assert c.optical_frame == "front_optical_frame"
     assert w.camera("side_2").up == (1.0, 0.0, 0.0)
-    assert parse_world({"name": "w"}).cameras == ()   # optional
+    assert parse_world({"name": "w"}).cameras == ()  # optional
 
 
 def test_repo_worlds_have_cameras():
     import os
+
     from conftest import REPO_DIR
+
     for name in ("table", "human", "case"):
         w = load_world(os.path.join(REPO_DIR, "worlds", name + ".yaml"))
         assert 2 <= len(w.cameras) <= 3, name
@@ -134,12 +161,15 @@ def test_camera_world_file_errors(case):
 
 
 # ---------------------------------------------------------------------- pose
-@pytest.mark.parametrize("xyz,target,up", [
-    ([1.2, 0.5, 1.0], [0.3, 0.0, 0.1], [0, 0, 1]),
-    ([0.0, -1.0, 1.5], [0.2, 0.1, 0.0], [0, 0, 1]),
-    ([0.4, 0.0, 1.6], [0.4, 0.0, 0.0], [1, 0, 0]),      # straight down, image up = +x
-    ([-0.5, 0.3, 0.2], [1.0, 0.3, 0.2], [0.1, 0.3, 1]),  # horizontal, tilted up vector
-])
+@pytest.mark.parametrize(
+    "xyz,target,up",
+    [
+        ([1.2, 0.5, 1.0], [0.3, 0.0, 0.1], [0, 0, 1]),
+        ([0.0, -1.0, 1.5], [0.2, 0.1, 0.0], [0, 0, 1]),
+        ([0.4, 0.0, 1.6], [0.4, 0.0, 0.0], [1, 0, 0]),  # straight down, image up = +x
+        ([-0.5, 0.3, 0.2], [1.0, 0.3, 0.2], [0.1, 0.3, 1]),  # horizontal, tilted up vector
+    ],
+)
 def test_pose_quaternion_maps_optical_axes(xyz, target, up):
     cam = camera(xyz=xyz, target=target, up=up)
     pos, q = cam.pose
@@ -148,10 +178,10 @@ def test_pose_quaternion_maps_optical_axes(xyz, target, up):
     R = quaternion_to_rotation(q)
     view = np.subtract(target, xyz) / np.linalg.norm(np.subtract(target, xyz))
     up_n = np.asarray(up, dtype=float) / np.linalg.norm(up)
-    assert R @ [0, 0, 1] == pytest.approx(view, abs=1e-9)               # optical z: forward
+    assert R @ [0, 0, 1] == pytest.approx(view, abs=1e-9)  # optical z: forward
     y = R @ [0, 1, 0]
     down = -(up_n - np.dot(up_n, view) * view)
-    assert y == pytest.approx(down / np.linalg.norm(down), abs=1e-9)      # optical y: -up (made orthogonal)
+    assert y == pytest.approx(down / np.linalg.norm(down), abs=1e-9)  # optical y: -up (made orthogonal)
     assert np.dot(y, -up_n) > 0.0
     assert R @ [1, 0, 0] == pytest.approx(np.cross(view, up_n) / np.linalg.norm(np.cross(view, up_n)), abs=1e-9)
     assert np.linalg.det(R) == pytest.approx(1.0)
@@ -183,13 +213,14 @@ def test_points_hit_the_box_face_in_world_coordinates(box_client):
     # The face's pixels: every pixel whose sampling ray meets the face (2 mm inside its edges) is a hit.
     u = np.tile(np.arange(cam.width), cam.height)
     v = np.repeat(np.arange(cam.height), cam.width)
-    rays = np.stack([(u - cam.principal_point[0]) / cam.focal, (v - cam.principal_point[1]) / cam.focal,
-                     np.ones(u.shape)], -1)
+    rays = np.stack(
+        [(u - cam.principal_point[0]) / cam.focal, (v - cam.principal_point[1]) / cam.focal, np.ones(u.shape)], -1
+    )
     o = box_local(cam.optical_to_world([[0, 0, 0]]))[0]
     d = box_local(cam.optical_to_world(rays)) - o
     s = (-BOX_HALF[0] - o[0]) / d[:, 0]
     p = o + s[:, None] * d
-    margin = 2e-3   # TinyRenderer covers exactly the pixels whose sampling ray meets the face
+    margin = 2e-3  # TinyRenderer covers exactly the pixels whose sampling ray meets the face
     inside = (s > 0) & (np.abs(p[:, 1]) < BOX_HALF[1] - margin) & (np.abs(p[:, 2]) < BOX_HALF[2] - margin)
     assert inside.sum() > 2000 and np.all(hit[inside])
 
@@ -238,7 +269,7 @@ def test_no_return_pixels_are_at_far(box_client):
 def test_depth_from_zbuffer():
     near, far = 0.1, 3.5
     z = np.array([0.5, 1.0, 3.0])
-    zbuf = (1.0 / near - 1.0 / z) / (1.0 / near - 1.0 / far)     # OpenGL depth of z
+    zbuf = (1.0 / near - 1.0 / z) / (1.0 / near - 1.0 / far)  # OpenGL depth of z
     assert depth_from_zbuffer(zbuf, near, far) == pytest.approx(z)
     assert depth_from_zbuffer(np.array([0.0, 1.0]), near, far).tolist() == [near, far]
 
@@ -246,6 +277,7 @@ def test_depth_from_zbuffer():
 def test_render_in_a_simulator(panda_urdf, table_world):
     """Camera.render works on the Simulator's client: the table top (z = 0) and the robot are seen."""
     from conftest import HOME, make_sim
+
     sim = make_sim(panda_urdf, table_world)
     try:
         sim.reset_robot(HOME)
@@ -254,7 +286,7 @@ def test_render_in_a_simulator(panda_urdf, table_world):
         hit = np.linalg.norm(world - cam.position, axis=1) < 3.0
         on_table = hit & (np.abs(world[:, 2]) < 2e-3)
         above = hit & (world[:, 2] > 0.05)
-        assert on_table.sum() > 1000 and above.sum() > 100   # table top and robot
+        assert on_table.sum() > 1000 and above.sum() > 100  # table top and robot
     finally:
         sim.close()
 
@@ -263,13 +295,18 @@ def test_point_cloud_message():
     pytest.importorskip("sensor_msgs", reason="ROS messages not sourced (source env.sh)")
     from sensor_msgs import point_cloud2
     from sensor_msgs.msg import PointField
+
     from moverl_sim.ros_conversions import points_to_msg
+
     pts = np.arange(2 * 3 * 3, dtype=np.float32).reshape(-1, 3)
     msg = points_to_msg(pts, 3, 2, "front_optical_frame", 1.25)
     assert (msg.height, msg.width, msg.point_step, msg.row_step) == (2, 3, 12, 36)
     assert msg.header.frame_id == "front_optical_frame" and msg.header.stamp.to_sec() == pytest.approx(1.25)
     assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == [
-        ("x", 0, PointField.FLOAT32, 1), ("y", 4, PointField.FLOAT32, 1), ("z", 8, PointField.FLOAT32, 1)]
+        ("x", 0, PointField.FLOAT32, 1),
+        ("y", 4, PointField.FLOAT32, 1),
+        ("z", 8, PointField.FLOAT32, 1),
+    ]
     assert not msg.is_bigendian and msg.is_dense
     assert np.array(list(point_cloud2.read_points(msg)), dtype=np.float32) == pytest.approx(pts)
     with pytest.raises(ValueError):
@@ -279,21 +316,28 @@ def test_point_cloud_message():
 # ---------------------------------------------------------------------- coverage of the repo worlds
 def test_coverage_reachable_surfaces():
     from moverl_sim import coverage
-    w = parse_world({"name": "w", "objects": [
-        {"id": "table", "shape": "box", "size": [1.5, 0.8, 0.03], "xyz": [0.35, 0, -0.015]},
-        {"id": "near", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.5, 0, 0.05]},
-        {"id": "far_away", "shape": "sphere", "size": [0.1], "xyz": [2.0, 0, 0.5]}]})
+
+    w = parse_world(
+        {
+            "name": "w",
+            "objects": [
+                {"id": "table", "shape": "box", "size": [1.5, 0.8, 0.03], "xyz": [0.35, 0, -0.015]},
+                {"id": "near", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.5, 0, 0.05]},
+                {"id": "far_away", "shape": "sphere", "size": [0.1], "xyz": [2.0, 0, 0.5]},
+            ],
+        }
+    )
     s = coverage.surface_samples(w, 0.02)
     reach = coverage.reachable_mask(s, w)
     near = s.objects == 1
     top = near & (s.normals[:, 2] > 0.5)
     bottom = near & (s.normals[:, 2] < -0.5)
-    assert reach[top].all() and not reach[bottom].any()          # the bottom face sits on the table
-    assert not reach[s.objects == 2].any()                       # out of reach
+    assert reach[top].all() and not reach[bottom].any()  # the bottom face sits on the table
+    assert not reach[s.objects == 2].any()  # out of reach
     table_top = (s.objects == 0) & (s.normals[:, 2] > 0.5)
     under_box = table_top & (np.abs(s.points[:, 0] - 0.5) < 0.05) & (np.abs(s.points[:, 1]) < 0.05)
-    assert under_box.any() and not reach[under_box].any()         # covered by the box
-    assert not reach[(s.objects == 0) & (s.normals[:, 2] < -0.5)].any()   # the table's underside
+    assert under_box.any() and not reach[under_box].any()  # covered by the box
+    assert not reach[(s.objects == 0) & (s.normals[:, 2] < -0.5)].any()  # the table's underside
 
 
 @pytest.mark.parametrize("name,minimum", [("table", 0.99), ("human", 0.98), ("case", 0.99)])
@@ -301,8 +345,11 @@ def test_repo_world_cameras_see_the_reachable_obstacle_surface(panda_urdf, name,
     """The worlds' cameras see (almost) all the obstacle surface the robot can reach, the robot at home (the
     human at the centre and both ends of the walk). render_world --cameras prints the same figures."""
     import os
+
     from conftest import HOME, REPO_DIR, make_sim
+
     from moverl_sim import coverage
+
     w = load_world(os.path.join(REPO_DIR, "worlds", name + ".yaml"))
     cams = [Camera(c) for c in w.cameras]
     sim = make_sim(panda_urdf, w)

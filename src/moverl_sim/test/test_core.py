@@ -3,14 +3,14 @@ import time
 
 import numpy as np
 import pytest
-
 from conftest import FIXED, HOME, JOINTS, make_sim
+
 from moverl_sim.core import InvalidTrajectory, LimitViolation, Simulator
 from moverl_sim.world import parse_world
 
 HOME_NP = np.array(HOME)
-INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]       # hand pushed down into the table top
-FOLDED = [0.0, -0.785, 0.0, -3.136, 0.0, 0.0, 0.785]         # elbow fully folded: wrist hits the upper arm
+INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
+FOLDED = [0.0, -0.785, 0.0, -3.136, 0.0, 0.0, 0.785]  # elbow fully folded: wrist hits the upper arm
 
 
 def test_limits_come_from_the_urdf(sim):
@@ -24,7 +24,7 @@ def test_limits_come_from_the_urdf(sim):
 def test_adjacent_pairs_look_through_fixed_and_empty_links(sim):
     idx = {name: i for i, name in sim.link_names.items()}
     adjacent = sim.adjacent_pairs
-    assert (idx["panda_link7"], idx["panda_hand"]) in adjacent        # via panda_link8 (fixed, no geometry)
+    assert (idx["panda_link7"], idx["panda_hand"]) in adjacent  # via panda_link8 (fixed, no geometry)
     assert (idx["panda_link1"], idx["panda_link2"]) in adjacent
     assert (idx["panda_leftfinger"], idx["panda_hand"]) in adjacent
     assert (idx["panda_link2"], idx["panda_link7"]) not in adjacent
@@ -75,12 +75,12 @@ def test_multi_point_trajectory_interpolates_linearly(home_sim):
     end = HOME_NP + 0.1
     motion = home_sim.prepare([0.0, 0.1, 0.2], [HOME, mid, end])
     assert motion.n == 48
-    q12 = np.array([v[0] for v in motion.targets[11]])      # substep 12: t = 0.05 s, halfway to mid
+    q12 = np.array([v[0] for v in motion.targets[11]])  # substep 12: t = 0.05 s, halfway to mid
     assert q12 == pytest.approx(((HOME_NP + mid) / 2).tolist(), abs=1e-12)
-    q36 = np.array([v[0] for v in motion.targets[35]])      # t = 0.15 s, halfway mid -> end
+    q36 = np.array([v[0] for v in motion.targets[35]])  # t = 0.15 s, halfway mid -> end
     assert q36 == pytest.approx(((mid + end) / 2).tolist(), abs=1e-12)
-    assert home_sim.joint_positions() == pytest.approx(HOME)   # prepare moves nothing
-    res = home_sim.execute([0.1, 0.2], [mid, end])         # no t=0 point: starts from the current state
+    assert home_sim.joint_positions() == pytest.approx(HOME)  # prepare moves nothing
+    res = home_sim.execute([0.1, 0.2], [mid, end])  # no t=0 point: starts from the current state
     assert res.positions == pytest.approx(end.tolist())
 
 
@@ -93,8 +93,8 @@ BAD = {
     "decreasing": (InvalidTrajectory, [0.2, 0.1], [HOME, HOME]),
     "negative_time": (InvalidTrajectory, [-0.1, 0.1], [HOME, HOME]),
     "start_mismatch": (InvalidTrajectory, [0.0, 0.5], [(HOME_NP + 0.01).tolist(), HOME]),
-    "position_limit": (LimitViolation, [5.0], [HOME[:3] + [0.1] + HOME[4:]]),     # joint4 upper limit 0
-    "velocity_limit": (LimitViolation, [0.05], [(HOME_NP + 0.2).tolist()]),       # 4 rad/s > 2.175
+    "position_limit": (LimitViolation, [5.0], [HOME[:3] + [0.1] + HOME[4:]]),  # joint4 upper limit 0
+    "velocity_limit": (LimitViolation, [0.05], [(HOME_NP + 0.2).tolist()]),  # 4 rad/s > 2.175
 }
 
 
@@ -118,7 +118,7 @@ def test_error_messages_name_the_joint(home_sim):
 
 def test_velocity_at_the_limit_is_accepted(home_sim):
     q = list(HOME)
-    q[0] += 2.175 * 0.1          # exactly at the URDF velocity limit
+    q[0] += 2.175 * 0.1  # exactly at the URDF velocity limit
     res = home_sim.execute([0.1], [q])
     assert res.positions[0] == pytest.approx(q[0])
 
@@ -129,7 +129,7 @@ def test_reset_robot_validates(home_sim):
             home_sim.reset_robot(bad)
         assert home_sim.joint_positions() == pytest.approx(HOME)
     t0 = home_sim.sim_time
-    home_sim.reset_robot(FOLDED)                  # teleport: no substeps, no contacts counted
+    home_sim.reset_robot(FOLDED)  # teleport: no substeps, no contacts counted
     assert home_sim.sim_time == t0
     assert home_sim.joint_positions() == pytest.approx(FOLDED)
 
@@ -157,7 +157,7 @@ def test_two_simulators_are_independent(panda_urdf, table_world):
         s1.reset_robot(HOME)
         s2.reset_robot(HOME)
         assert s1.execute([2.0], [INTO_TABLE]).contacts.world_contacts > 0
-        assert s2.execute([2.0], [INTO_TABLE]).contacts.world_contacts == 0   # no table in s2
+        assert s2.execute([2.0], [INTO_TABLE]).contacts.world_contacts == 0  # no table in s2
         assert s1.joint_positions() == pytest.approx(s2.joint_positions())
     finally:
         s1.close()
@@ -165,10 +165,16 @@ def test_two_simulators_are_independent(panda_urdf, table_world):
 
 
 def test_world_shapes_collide(panda_urdf):
-    w = parse_world({"name": "shapes", "objects": [
-        {"id": "ball", "shape": "sphere", "size": [0.05], "xyz": [0.307, 0.0, 0.59]},       # at the hand
-        {"id": "post", "shape": "cylinder", "size": [0.3, 0.04], "xyz": [0.0, 0.0, 0.45]},  # around link2
-        {"id": "far", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [-1.0, -1.0, 0.5]}]})
+    w = parse_world(
+        {
+            "name": "shapes",
+            "objects": [
+                {"id": "ball", "shape": "sphere", "size": [0.05], "xyz": [0.307, 0.0, 0.59]},  # at the hand
+                {"id": "post", "shape": "cylinder", "size": [0.3, 0.04], "xyz": [0.0, 0.0, 0.45]},  # around link2
+                {"id": "far", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [-1.0, -1.0, 0.5]},
+            ],
+        }
+    )
     s = make_sim(panda_urdf, w)
     try:
         s.reset_robot(HOME)
@@ -180,13 +186,14 @@ def test_world_shapes_collide(panda_urdf):
 
 def test_bad_configuration_is_reported(panda_urdf, table_world):
     from moverl_sim.settings import sim_settings
+
     kw = sim_settings()
     with pytest.raises(ValueError, match="panda_jointX.*panda_joint1"):
         Simulator(panda_urdf, JOINTS[:6] + ["panda_jointX"], "panda_link0", FIXED, table_world, **kw)
     with pytest.raises(ValueError, match="base link 'nope'"):
         Simulator(panda_urdf, JOINTS, "nope", FIXED, table_world, **kw)
     with pytest.raises(ValueError, match="panda_joint8"):
-        Simulator(panda_urdf, JOINTS[:6] + ["panda_joint8"], "panda_link0", FIXED, table_world, **kw)   # fixed joint
+        Simulator(panda_urdf, JOINTS[:6] + ["panda_joint8"], "panda_link0", FIXED, table_world, **kw)  # fixed joint
     with pytest.raises(ValueError, match="nope_joint"):
         Simulator(panda_urdf, JOINTS, "panda_link0", {"nope_joint": 0.0}, table_world, **kw)
     with pytest.raises(ValueError, match="control"):
@@ -199,7 +206,7 @@ def test_link_poses(home_sim):
     pos, quat = poses["panda_link0"]
     assert pos == pytest.approx((0, 0, 0), abs=1e-9) and quat == pytest.approx((0, 0, 0, 1), abs=1e-9)
     assert poses["panda_link8"][0] == pytest.approx(poses["panda_hand"][0], abs=1e-6)
-    assert poses["panda_link8"][0][2] > 0.4                       # flange above the table at home
+    assert poses["panda_link8"][0][2] > 0.4  # flange above the table at home
     assert np.linalg.norm(quat) == pytest.approx(1.0)
 
 
@@ -235,13 +242,28 @@ def test_execute_speed(home_sim):
 
 def test_world_message_conversion(table_world):
     pytest.importorskip("moverl_msgs", reason="moverl_msgs not built/sourced (source devel/setup.bash)")
+    from shape_msgs.msg import SolidPrimitive
+
     from moverl_sim.core import ContactStats
     from moverl_sim.ros_conversions import contacts_to_msg, world_to_msg
-    from shape_msgs.msg import SolidPrimitive
-    w = parse_world({"name": "w", "goal": [0.4, 0.2, 0.2], "objects": [
-        {"id": "b", "shape": "box", "size": [1, 2, 3], "xyz": [1, 2, 3]},
-        {"id": "c", "shape": "cylinder", "size": [0.4, 0.05], "xyz": [0, 0, 0], "rpy": [0, 0, math.pi / 2],
-         "observed": False}]})
+
+    w = parse_world(
+        {
+            "name": "w",
+            "goal": [0.4, 0.2, 0.2],
+            "objects": [
+                {"id": "b", "shape": "box", "size": [1, 2, 3], "xyz": [1, 2, 3]},
+                {
+                    "id": "c",
+                    "shape": "cylinder",
+                    "size": [0.4, 0.05],
+                    "xyz": [0, 0, 0],
+                    "rpy": [0, 0, math.pi / 2],
+                    "observed": False,
+                },
+            ],
+        }
+    )
     msg = world_to_msg(w, 1.5)
     assert msg.header.frame_id == "world" and msg.header.stamp.to_sec() == pytest.approx(1.5)
     assert [o.id for o in msg.objects] == ["b", "c"]
@@ -249,8 +271,13 @@ def test_world_message_conversion(table_world):
     assert msg.objects[1].shape.type == SolidPrimitive.CYLINDER
     assert list(msg.objects[1].shape.dimensions) == [0.4, 0.05]
     assert msg.objects[1].pose.orientation.z == pytest.approx(math.sqrt(0.5)) and not msg.objects[1].observed
-    stats = ContactStats(substeps=12, substeps_in_contact=3, world_pairs={("panda_hand", "table"): 0.01},
-                         self_pairs={("panda_link2", "panda_link7"): 0.02}, total_contact_substeps=7)
+    stats = ContactStats(
+        substeps=12,
+        substeps_in_contact=3,
+        world_pairs={("panda_hand", "table"): 0.01},
+        self_pairs={("panda_link2", "panda_link7"): 0.02},
+        total_contact_substeps=7,
+    )
     c = contacts_to_msg(stats, 2.0)
     assert c.available and c.substeps == 12 and c.substeps_in_contact == 3
     assert c.world_contacts == 1 and c.self_contacts == 1 and c.total_contact_substeps == 7

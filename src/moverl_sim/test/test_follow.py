@@ -4,6 +4,7 @@ No roscore: goals are plain objects with the fields of trajectory_msgs/JointTraj
 JointTolerance. The tracking figures of the dynamic simulator that the shield's path tolerances rely on are measured
 here (a min_jerk move, the robot tracks it at 1 kHz within a tenth of the smallest Panda tolerance).
 """
+
 from types import SimpleNamespace as NS
 
 import numpy as np
@@ -15,7 +16,7 @@ from moverl_sim import follow
 from moverl_sim.core import ContactStats
 
 LO, HI = [-3.0] * 7, [3.0] * 7
-INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]       # hand pushed down into the table top
+INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
 with open(f"{REPO_DIR}/config/robots/panda.yaml") as _f:
     ACCELERATION_LIMITS = np.array(yaml.safe_load(_f)["robot"]["acceleration_limits"])
 SHUFFLED = JOINTS[::-1]
@@ -54,14 +55,17 @@ def test_joint_names_must_match_the_controller_in_any_order():
     np.testing.assert_allclose(traj.positions[-1], HOME)
 
 
-@pytest.mark.parametrize("points, what", [
-    ([pt(HOME[:6], 1.0)], "positions"),
-    ([pt(HOME, 1.0, v=[0.0] * 3)], "velocities"),
-    ([pt(HOME, 1.0), pt(HOME, 1.0)], "strictly increasing"),
-    ([pt(HOME, 2.0), pt(HOME, 1.0)], "strictly increasing"),
-    ([pt([np.nan] + HOME[1:], 1.0)], "not finite"),
-    ([pt([3.5] + HOME[1:], 1.0)], "limits"),
-])
+@pytest.mark.parametrize(
+    "points, what",
+    [
+        ([pt(HOME[:6], 1.0)], "positions"),
+        ([pt(HOME, 1.0, v=[0.0] * 3)], "velocities"),
+        ([pt(HOME, 1.0), pt(HOME, 1.0)], "strictly increasing"),
+        ([pt(HOME, 2.0), pt(HOME, 1.0)], "strictly increasing"),
+        ([pt([np.nan] + HOME[1:], 1.0)], "not finite"),
+        ([pt([3.5] + HOME[1:], 1.0)], "limits"),
+    ],
+)
 def test_malformed_goals_are_invalid(points, what):
     assert what in rejected(follow.INVALID_GOAL, points)
 
@@ -81,9 +85,9 @@ def test_empty_trajectory_stops_where_the_controller_holds():
 def test_future_start_holds_then_follows():
     target = HOLD + 0.1
     traj = accept([pt(HOLD, 0.0), pt(target, 1.0)], start=12.0, now=10.0)
-    np.testing.assert_allclose(traj.desired(11.0)[0], HOLD)             # before the start: hold
-    np.testing.assert_allclose(traj.desired(12.5)[0], HOLD + 0.05)      # linear in between
-    np.testing.assert_allclose(traj.desired(14.0)[0], target)           # after the end: the last point
+    np.testing.assert_allclose(traj.desired(11.0)[0], HOLD)  # before the start: hold
+    np.testing.assert_allclose(traj.desired(12.5)[0], HOLD + 0.05)  # linear in between
+    np.testing.assert_allclose(traj.desired(14.0)[0], target)  # after the end: the last point
     assert traj.end == 13.0
 
 
@@ -91,7 +95,7 @@ def test_zero_stamp_first_point_at_zero_is_replaced_by_a_bridge_from_the_setpoin
     elsewhere = HOLD + 0.2
     traj = accept([pt(elsewhere, 0.0), pt(HOLD + 0.1, 1.0)], start=0.0, now=10.0)
     assert traj.times[0] == 10.0
-    np.testing.assert_allclose(traj.positions[0], HOLD)                 # from where the controller holds
+    np.testing.assert_allclose(traj.positions[0], HOLD)  # from where the controller holds
     np.testing.assert_allclose(traj.desired(10.5)[0], HOLD + 0.05)
 
 
@@ -106,7 +110,7 @@ def test_points_already_passed_are_dropped_and_bridged():
 def test_goal_tolerances_override_the_defaults():
     defaults = follow.Tolerances.defaults(7, path=0.1, goal=0.2, goal_time=0.5)
     t = defaults.merged(JOINTS, [tol(JOINTS[0], 0.01), tol(JOINTS[1], -1)], [tol(JOINTS[2], 0.03, 0.5)], 0.0)
-    assert t.path[0] == 0.01 and t.path[1] == 0.0 and t.path[2] == 0.1   # set, removed, kept
+    assert t.path[0] == 0.01 and t.path[1] == 0.0 and t.path[2] == 0.1  # set, removed, kept
     assert t.goal[2] == 0.03 and t.goal_velocity[2] == 0.5 and t.goal[0] == 0.2
     assert t.goal_time == 0.5
     assert defaults.merged(JOINTS, [], [], 1.5).goal_time == 1.5
@@ -115,8 +119,9 @@ def test_goal_tolerances_override_the_defaults():
 
 
 def test_path_tolerance_aborts_while_running():
-    traj = accept([pt(HOLD, 0.0), pt(HOLD + 0.1, 1.0)], start=10.0, now=10.0,
-                  path_tolerance=[tol(j, 0.01) for j in JOINTS])
+    traj = accept(
+        [pt(HOLD, 0.0), pt(HOLD + 0.1, 1.0)], start=10.0, now=10.0, path_tolerance=[tol(j, 0.01) for j in JOINTS]
+    )
     desired, _ = traj.desired(10.5)
     assert follow.check(traj, 10.5, desired + 0.005, np.zeros(7)) is None
     lagging = desired.copy()
@@ -126,15 +131,20 @@ def test_path_tolerance_aborts_while_running():
 
 
 def test_goal_tolerance_waits_goal_time_then_aborts():
-    traj = accept([pt(HOLD, 0.0), pt(HOLD + 0.1, 1.0)], start=10.0, now=10.0,
-                  goal_tolerance=[tol(j, 0.01, 0.05) for j in JOINTS], goal_time=0.5)
+    traj = accept(
+        [pt(HOLD, 0.0), pt(HOLD + 0.1, 1.0)],
+        start=10.0,
+        now=10.0,
+        goal_tolerance=[tol(j, 0.01, 0.05) for j in JOINTS],
+        goal_time=0.5,
+    )
     end = HOLD + 0.1
     assert follow.check(traj, 11.0, end, np.zeros(7)) == (follow.SUCCESSFUL, "")
     short = end - 0.05
-    assert follow.check(traj, 11.2, short, np.zeros(7)) is None                  # within goal_time: wait
+    assert follow.check(traj, 11.2, short, np.zeros(7)) is None  # within goal_time: wait
     assert follow.check(traj, 11.6, short, np.zeros(7))[0] == follow.GOAL_TOLERANCE_VIOLATED
     moving = np.full(7, 0.1)
-    assert follow.check(traj, 11.2, end, moving) is None                          # not yet at rest
+    assert follow.check(traj, 11.2, end, moving) is None  # not yet at rest
     assert follow.check(traj, 11.6, end, moving)[0] == follow.GOAL_TOLERANCE_VIOLATED
 
 
@@ -174,12 +184,21 @@ def test_dynamic_control_tracks_a_min_jerk_move(panda_urdf, table_world, hz, bou
         worst = 0.0
         for sign in (1, -1, 1):
             q0 = np.array(s.joint_positions())
-            d = sign * np.array(s.velocity_limits) * 0.05                # the largest env action
+            d = sign * np.array(s.velocity_limits) * 0.05  # the largest env action
             q1 = q0 + d
             # The shield's min_jerk timing: peak velocity and acceleration within the Panda's limits.
             T = max(1.875 * 0.05, float(np.max(np.sqrt(5.7735 * np.abs(d) / ACCELERATION_LIMITS))))
-            traj = follow.accept(JOINTS, s.lower, s.upper, JOINTS, minjerk_points(q0, q1, T, 10), s.sim_time,
-                                 s.sim_time, q0, follow.Tolerances.defaults(7))
+            traj = follow.accept(
+                JOINTS,
+                s.lower,
+                s.upper,
+                JOINTS,
+                minjerk_points(q0, q1, T, 10),
+                s.sim_time,
+                s.sim_time,
+                q0,
+                follow.Tolerances.defaults(7),
+            )
             while s.sim_time < traj.end + 0.02:
                 t = s.sim_time
                 q, v = traj.desired(t)
@@ -200,7 +219,7 @@ def test_lockstep_dynamic_motion_stops_at_its_path_tolerance(panda_urdf, table_w
         motion = s.prepare([2.0], [INTO_TABLE], path_tolerance=[0.01] * 7)
         s.advance(motion, motion.n)
         assert motion.aborted and "path tolerance" in motion.aborted
-        assert motion.k < motion.n                                       # stopped early
+        assert motion.k < motion.n  # stopped early
         stopped = s.finish(motion).positions
         s.hold(200)
         np.testing.assert_allclose(s.joint_positions(), stopped, atol=2e-3)  # holds where it stopped
@@ -213,14 +232,14 @@ def test_start_point_may_be_the_clamped_state_of_a_robot_beyond_its_limit(panda_
     try:
         s.reset_robot(HOME)
         beyond = list(HOME)
-        beyond[3] = s.upper[3] + 0.004                                   # an encoder a little past the stop
+        beyond[3] = s.upper[3] + 0.004  # an encoder a little past the stop
         s._p.resetJointState(s.robot, s.joint_indices[3], beyond[3])
         clamped = list(np.clip(beyond, s.lower, s.upper))
         back = list(clamped)
         back[3] -= 0.1
-        motion = s.prepare([0.0, 0.5], [clamped, back])                  # the shield sends the clamped state first
+        motion = s.prepare([0.0, 0.5], [clamped, back])  # the shield sends the clamped state first
         assert motion.n == 120
-        with pytest.raises(ValueError, match="current state"):           # anything else is still refused
+        with pytest.raises(ValueError, match="current state"):  # anything else is still refused
             s.prepare([0.0, 0.5], [beyond[:3] + [clamped[3] - 0.01] + beyond[4:], back])
     finally:
         s.close()
@@ -233,7 +252,7 @@ def test_idle_contacts_are_counted_when_asked(panda_urdf, table_world):
         stats = ContactStats()
         s.hold(10, stats)
         assert stats.substeps == 10 and stats.substeps_in_contact == 10 and stats.world_contacts > 0
-        s.hold(10)                                                        # without stats: nothing detected
+        s.hold(10)  # without stats: nothing detected
         assert stats.substeps == 10
     finally:
         s.close()

@@ -1,9 +1,10 @@
 """Moving obstacles: the world file's `motion:` key, the motion model and the simulator placing them in sim time."""
+
 import math
 
 import pytest
-
 from conftest import HOME, make_sim
+
 from moverl_sim.world import ObjectMotion, WorldFileError, parse_world
 
 
@@ -25,30 +26,43 @@ def test_motion_is_parsed_and_the_axis_normalised():
 def test_oscillation_model():
     m = ObjectMotion(axis=(0.0, 1.0, 0.0), amplitude=0.5, period=2.0, phase=0.0)
     assert m.displacement(0.0) == pytest.approx(0.0)
-    assert m.displacement(0.5) == pytest.approx(0.5)        # quarter period: +amplitude
+    assert m.displacement(0.5) == pytest.approx(0.5)  # quarter period: +amplitude
     assert m.displacement(1.5) == pytest.approx(-0.5)
     assert m.displacement(2.0) == pytest.approx(0.0, abs=1e-12)
     assert m.max_speed == pytest.approx(math.pi * 0.5)
     o = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0}).objects[0]
-    assert o.position_at(0.5) == pytest.approx((0.307, 1.0, 0.59))   # xyz is the centre of the swing
+    assert o.position_at(0.5) == pytest.approx((0.307, 1.0, 0.59))  # xyz is the centre of the swing
     assert o.position_at(0.0) == pytest.approx(o.xyz)
 
 
-@pytest.mark.parametrize("motion, key, words", [
-    ("fast", "motion", "expected a mapping"),
-    ({"axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "missing required key"),
-    ({"type": "circle", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "unknown motion type"),
-    ({"type": "oscillate", "amplitude": 0.1, "period": 1}, "motion.axis", "missing required key"),
-    ({"type": "oscillate", "axis": [0, 0, 0], "amplitude": 0.1, "period": 1}, "motion.axis", "non-zero"),
-    ({"type": "oscillate", "axis": [0, 1], "amplitude": 0.1, "period": 1}, "motion.axis", "expected 3 numbers"),
-    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": -0.1, "period": 1}, "motion.amplitude", ">= 0"),
-    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 0}, "motion.period", "> 0"),
-    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": "big", "period": 1}, "motion.amplitude", "finite number"),
-    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": float("inf")}, "motion.period",
-     "finite number"),
-    ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1, "speed": 2}, "motion.speed",
-     "unknown key"),
-])
+@pytest.mark.parametrize(
+    "motion, key, words",
+    [
+        ("fast", "motion", "expected a mapping"),
+        ({"axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "missing required key"),
+        ({"type": "circle", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1}, "motion.type", "unknown motion type"),
+        ({"type": "oscillate", "amplitude": 0.1, "period": 1}, "motion.axis", "missing required key"),
+        ({"type": "oscillate", "axis": [0, 0, 0], "amplitude": 0.1, "period": 1}, "motion.axis", "non-zero"),
+        ({"type": "oscillate", "axis": [0, 1], "amplitude": 0.1, "period": 1}, "motion.axis", "expected 3 numbers"),
+        ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": -0.1, "period": 1}, "motion.amplitude", ">= 0"),
+        ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 0}, "motion.period", "> 0"),
+        (
+            {"type": "oscillate", "axis": [0, 1, 0], "amplitude": "big", "period": 1},
+            "motion.amplitude",
+            "finite number",
+        ),
+        (
+            {"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": float("inf")},
+            "motion.period",
+            "finite number",
+        ),
+        (
+            {"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1, "speed": 2},
+            "motion.speed",
+            "unknown key",
+        ),
+    ],
+)
 def test_malformed_motions_name_the_key(motion, key, words):
     with pytest.raises(WorldFileError) as err:
         _world(motion)
@@ -96,8 +110,13 @@ def test_moving_obstacles_are_deterministic(panda_urdf):
             out = []
             for _ in range(5):
                 r = s.execute([0.37], [HOME])
-                out.append((s.obstacle_positions()["ball"], r.contacts.substeps_in_contact,
-                            sorted(r.contacts.world_pairs.items())))
+                out.append(
+                    (
+                        s.obstacle_positions()["ball"],
+                        r.contacts.substeps_in_contact,
+                        sorted(r.contacts.world_pairs.items()),
+                    )
+                )
             runs.append(out)
         finally:
             s.close()
@@ -108,11 +127,12 @@ def test_world_message_carries_the_motion():
     pytest.importorskip("moverl_msgs", reason="moverl_msgs not built/sourced (source devel/setup.bash)")
     from moverl_msgs.msg import ObstacleMotion
     from moverl_sim.ros_conversions import world_to_msg
+
     w = _world({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.5, "period": 2.0, "phase": math.pi / 2})
     o = world_to_msg(w).objects[0]
     assert o.motion.type == ObstacleMotion.OSCILLATE and list(o.motion.axis) == [0, 1, 0]
     assert (o.motion.amplitude, o.motion.period, o.motion.phase) == (0.5, 2.0, math.pi / 2)
-    assert o.pose.position.y == pytest.approx(1.0)   # the pose at t = 0: centre + amplitude * sin(phase)
+    assert o.pose.position.y == pytest.approx(1.0)  # the pose at t = 0: centre + amplitude * sin(phase)
     static = world_to_msg(_world(None)).objects[0]
     assert static.motion.type == ObstacleMotion.NONE and static.pose.position.y == pytest.approx(0.5)
 
@@ -132,7 +152,8 @@ def test_displacement_matches_the_shared_cases():
 
 
 def test_position_at_starts_where_the_swing_begins():
-    o = _world({"type": "oscillate", "axis": [0, 0, 1], "amplitude": 0.75, "period": 1.0,
-                "phase": math.pi / 2}).objects[0]
-    assert o.start == pytest.approx((o.xyz[0], o.xyz[1], o.xyz[2] + 0.75))   # the top of its swing
+    o = _world(
+        {"type": "oscillate", "axis": [0, 0, 1], "amplitude": 0.75, "period": 1.0, "phase": math.pi / 2}
+    ).objects[0]
+    assert o.start == pytest.approx((o.xyz[0], o.xyz[1], o.xyz[2] + 0.75))  # the top of its swing
     assert o.position_at(0.5) == pytest.approx((o.xyz[0], o.xyz[1], o.xyz[2] - 0.75))

@@ -4,8 +4,8 @@ import sys
 import xml.etree.ElementTree as ET
 
 import pytest
-
 from conftest import PANDA_URI, PKG_DIR
+
 from moverl_sim.urdf import UrdfError, resolve_uri, robot_description
 
 SCRIPT = os.path.join(PKG_DIR, "scripts", "robot_description")
@@ -13,13 +13,16 @@ SCRIPT = os.path.join(PKG_DIR, "scripts", "robot_description")
 
 def test_resolve_uri_forms(tmp_path):
     import pybullet_data
+
     data = pybullet_data.getDataPath()
     assert resolve_uri(PANDA_URI) == os.path.join(data, "franka_panda", "panda.urdf")
     assert resolve_uri("/a/b/../c.urdf") == "/a/c.urdf"
     assert resolve_uri("file:///a/b.urdf") == "/a/b.urdf"
     assert resolve_uri("meshes/x.obj", base_dir="/r") == "/r/meshes/x.obj"
     # package://<name>/... with no such ROS package: relative to the URDF folder
-    assert resolve_uri("package://meshes_moverl_nonexistent/x.obj", base_dir="/r") == "/r/meshes_moverl_nonexistent/x.obj"
+    assert (
+        resolve_uri("package://meshes_moverl_nonexistent/x.obj", base_dir="/r") == "/r/meshes_moverl_nonexistent/x.obj"
+    )
     with pytest.raises(UrdfError, match="unsupported URI scheme"):
         resolve_uri("http://example.com/robot.urdf")
     with pytest.raises(UrdfError, match="no ROS package"):
@@ -30,9 +33,11 @@ def test_resolve_ros_package(tmp_path, monkeypatch):
     pytest.importorskip("rospkg", reason="rospkg (python3-rospkg) is needed for package:// lookups")
     pkg = tmp_path / "fake_moverl_pkg"
     pkg.mkdir()
-    (pkg / "package.xml").write_text('<?xml version="1.0"?><package format="2"><name>fake_moverl_pkg</name>'
-                                     '<version>0.0.0</version><description>x</description>'
-                                     '<maintainer email="a@b.c">a</maintainer><license>BSD</license></package>')
+    (pkg / "package.xml").write_text(
+        '<?xml version="1.0"?><package format="2"><name>fake_moverl_pkg</name>'
+        '<version>0.0.0</version><description>x</description>'
+        '<maintainer email="a@b.c">a</maintainer><license>BSD</license></package>'
+    )
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path))
     assert resolve_uri("package://fake_moverl_pkg/urdf/r.urdf") == str(pkg / "urdf" / "r.urdf")
 
@@ -46,7 +51,7 @@ def test_robot_description_meshes_absolute_and_existing():
     for f in meshes:
         assert os.path.isabs(f) and os.path.isfile(f), f
     assert "package://" not in text
-    assert {l.get("name") for l in root.iter("link")} >= {"panda_link0", "panda_hand", "panda_link8"}
+    assert {link.get("name") for link in root.iter("link")} >= {"panda_link0", "panda_hand", "panda_link8"}
 
 
 def test_robot_description_errors(tmp_path):
@@ -61,8 +66,10 @@ def test_robot_description_errors(tmp_path):
     with pytest.raises(UrdfError, match="expected <robot>"):
         robot_description(str(notrobot))
     missing_mesh = tmp_path / "mm.urdf"
-    missing_mesh.write_text("<robot name='x'><link name='a'><visual><geometry>"
-                            "<mesh filename='meshes/none.obj'/></geometry></visual></link></robot>")
+    missing_mesh.write_text(
+        "<robot name='x'><link name='a'><visual><geometry>"
+        "<mesh filename='meshes/none.obj'/></geometry></visual></link></robot>"
+    )
     with pytest.raises(UrdfError, match="does not exist"):
         robot_description(str(missing_mesh))
 

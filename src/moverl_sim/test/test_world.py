@@ -2,8 +2,8 @@ import math
 import os
 
 import pytest
-
 from conftest import TABLE_WORLD
+
 from moverl_sim.world import World, WorldFileError, load_world, rpy_to_quaternion
 
 
@@ -23,9 +23,11 @@ def test_table_world_is_parsed():
 
 def test_all_shapes_and_defaults(tmp_path):
     p = tmp_path / "w.yaml"
-    p.write_text("name: w\nobjects:\n"
-                 "  - {id: s, shape: sphere, size: [0.1], xyz: [0.5, 0, 0.3]}\n"
-                 "  - {id: c, shape: cylinder, size: [0.4, 0.05], xyz: [0.4, 0.3, 0.2], rpy: [0, 0, 1.5707963267948966]}\n")
+    p.write_text(
+        "name: w\nobjects:\n"
+        "  - {id: s, shape: sphere, size: [0.1], xyz: [0.5, 0, 0.3]}\n"
+        "  - {id: c, shape: cylinder, size: [0.4, 0.05], xyz: [0.4, 0.3, 0.2], rpy: [0, 0, 1.5707963267948966]}\n"
+    )
     w = load_world(p)
     assert w.frame == "world" and w.goal is None
     s, c = w.objects
@@ -47,9 +49,15 @@ BAD_WORLDS = {
     "not_mapping": ("- a\n- b\n", "mapping"),
     "missing_name": ("objects: []\n", "'name'"),
     "unknown_top_key": ("name: w\nobstacles: []\n", "'obstacles'"),
-    "unknown_shape": ("name: w\nobjects:\n  - {id: a, shape: cone, size: [1], xyz: [0, 0, 0]}\n", "unknown shape 'cone'"),
+    "unknown_shape": (
+        "name: w\nobjects:\n  - {id: a, shape: cone, size: [1], xyz: [0, 0, 0]}\n",
+        "unknown shape 'cone'",
+    ),
     "size_length": ("name: w\nobjects:\n  - {id: a, shape: box, size: [1, 1], xyz: [0, 0, 0]}\n", "(id a).size"),
-    "size_length_cyl": ("name: w\nobjects:\n  - {id: a, shape: cylinder, size: [1], xyz: [0, 0, 0]}\n", "[height, radius]"),
+    "size_length_cyl": (
+        "name: w\nobjects:\n  - {id: a, shape: cylinder, size: [1], xyz: [0, 0, 0]}\n",
+        "[height, radius]",
+    ),
     "size_nonpositive": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [0], xyz: [0, 0, 0]}\n", "positive"),
     "size_negative": ("name: w\nobjects:\n  - {id: a, shape: box, size: [1, -1, 1], xyz: [0, 0, 0]}\n", "positive"),
     "duplicate_id": ("name: w\nobjects:\n" + OBJ + OBJ, "duplicate id 'box1'"),
@@ -57,10 +65,19 @@ BAD_WORLDS = {
     "inf_size": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [.inf], xyz: [0, 0, 0]}\n", "non-finite"),
     "inf_goal": ("name: w\ngoal: [0, .inf, 0]\nobjects: []\n", "'goal'"),
     "xyz_length": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0]}\n", "expected 3 numbers"),
-    "string_number": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [big], xyz: [0, 0, 0]}\n", "expected numbers"),
+    "string_number": (
+        "name: w\nobjects:\n  - {id: a, shape: sphere, size: [big], xyz: [0, 0, 0]}\n",
+        "expected numbers",
+    ),
     "missing_xyz": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1]}\n", "(id a).xyz': missing"),
-    "unknown_object_key": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], mass: 1}\n", ".mass"),
-    "bad_observed": ("name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], observed: maybe}\n", ".observed"),
+    "unknown_object_key": (
+        "name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], mass: 1}\n",
+        ".mass",
+    ),
+    "bad_observed": (
+        "name: w\nobjects:\n  - {id: a, shape: sphere, size: [1], xyz: [0, 0, 0], observed: maybe}\n",
+        ".observed",
+    ),
     "numeric_id": ("name: w\nobjects:\n  - {id: 3, shape: sphere, size: [1], xyz: [0, 0, 0]}\n", "objects[0].id"),
 }
 
@@ -86,5 +103,6 @@ def test_missing_world_file(tmp_path):
 def test_world_dataclass_is_extensible():
     # New optional keys become dataclass fields with defaults: constructing without them must work.
     from moverl_sim.world import WorldObject
+
     o = WorldObject(id="a", shape="sphere", size=(0.1,), xyz=(0, 0, 0))
     assert o.rpy == (0.0, 0.0, 0.0) and o.observed is True

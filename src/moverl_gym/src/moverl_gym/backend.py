@@ -15,6 +15,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from moverl_sim.world import ObjectMotion
 
 
@@ -23,17 +24,17 @@ class Obstacle:
     """One world object as the env sees it."""
 
     id: str
-    pose: np.ndarray                      # x, y, z, qx, qy, qz, qw at motion time 0, robot base frame
-    observed: bool                        # part of the observation
+    pose: np.ndarray  # x, y, z, qx, qy, qz, qw at motion time 0, robot base frame
+    observed: bool  # part of the observation
     motion: "ObjectMotion | None" = None  # None: static
 
 
 @dataclass(frozen=True)
 class WorldInfo:
     name: str
-    goal: "tuple | None"                  # the world's default end-effector goal
-    obstacles: tuple                      # of Obstacle
-    motion_epoch: float = 0.0             # driver clock (s) at which motion time was 0
+    goal: "tuple | None"  # the world's default end-effector goal
+    obstacles: tuple  # of Obstacle
+    motion_epoch: float = 0.0  # driver clock (s) at which motion time was 0
 
 
 @dataclass
@@ -42,15 +43,15 @@ class StepResult:
 
     verdict: int
     message: str
-    q: np.ndarray                         # controlled joints after the step
-    stamp: float                          # their stamp, driver clock (s)
-    ee: np.ndarray                        # end-effector pose after the step (x, y, z, qx, qy, qz, qw)
-    contacts: int                         # ground-truth contact pairs of the step's motion; -1 when unknown
-    contact_substeps: int                 # physics substeps in contact; -1 when unknown
-    unsafe_cause: int = 0                 # ShieldStep.unsafe_cause
+    q: np.ndarray  # controlled joints after the step
+    stamp: float  # their stamp, driver clock (s)
+    ee: np.ndarray  # end-effector pose after the step (x, y, z, qx, qy, qz, qw)
+    contacts: int  # ground-truth contact pairs of the step's motion; -1 when unknown
+    contact_substeps: int  # physics substeps in contact; -1 when unknown
+    unsafe_cause: int = 0  # ShieldStep.unsafe_cause
     strategy: str = ""
     planning_time: float = 0.0
-    driver_error_code: int = 0            # control_msgs/FollowJointTrajectoryResult code, 0 when none
+    driver_error_code: int = 0  # control_msgs/FollowJointTrajectoryResult code, 0 when none
     timing: dict = field(default_factory=dict)  # state_check, path_check, planning, execution (s)
 
 
@@ -60,8 +61,8 @@ class ResetResult:
     message: str
     q: "np.ndarray | None"
     stamp: float
-    motion_epoch: float                   # when motion time is 0 from now on (driver clock, s)
-    unreachable: bool = False             # a planned reset found no path to a free target: try another
+    motion_epoch: float  # when motion time is 0 from now on (driver clock, s)
+    unreachable: bool = False  # a planned reset found no path to a free target: try another
 
 
 class Backend(ABC):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import yaml
+
 from moverl_msgs.srv import ShieldStepResponse
 
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
@@ -24,8 +25,9 @@ class BulletBackend(Backend):
     shield: must be False (there is no shield here).
     """
 
-    def __init__(self, world: str = "table", robot: str = "panda", robot_config: "str | None" = None,
-                 shield: bool = False):
+    def __init__(
+        self, world: str = "table", robot: str = "panda", robot_config: "str | None" = None, shield: bool = False
+    ):
         if shield:
             raise ValueError("the PyBullet backend has no shield: use shield=False, or the ROS backend")
         from moverl_sim.urdf import robot_description
@@ -47,10 +49,16 @@ class BulletBackend(Backend):
             raise ValueError(f"no world file {wf} (worlds available: {known})")
         self._world = load_world(str(wf))
         self.world = WorldInfo(
-            name=self._world.name, goal=self._world.goal,
-            obstacles=tuple(Obstacle(id=o.id, pose=np.array(list(o.start) + list(o.quaternion)), observed=o.observed,
-                                     motion=o.motion) for o in self._world.objects),
-            motion_epoch=0.0)
+            name=self._world.name,
+            goal=self._world.goal,
+            obstacles=tuple(
+                Obstacle(
+                    id=o.id, pose=np.array(list(o.start) + list(o.quaternion)), observed=o.observed, motion=o.motion
+                )
+                for o in self._world.objects
+            ),
+            motion_epoch=0.0,
+        )
         self.sim = None
         self._start()
 
@@ -65,8 +73,14 @@ class BulletBackend(Backend):
         fd, self._urdf_path = tempfile.mkstemp(prefix="moverl_bullet_", suffix=".urdf")
         with os.fdopen(fd, "w") as f:
             f.write(self.urdf)
-        self.sim = Simulator(self._urdf_path, self.joints, rc["base_link"], rc.get("fixed_joint_positions"),
-                             self._world, **sim_settings())
+        self.sim = Simulator(
+            self._urdf_path,
+            self.joints,
+            rc["base_link"],
+            rc.get("fixed_joint_positions"),
+            self._world,
+            **sim_settings(),
+        )
         self.sim.reset_robot(np.clip(self.home, self.sim.lower, self.sim.upper))
         self._ee = {name: i for i, name in self.sim.link_names.items()}[self.ee_link]
 
@@ -78,9 +92,15 @@ class BulletBackend(Backend):
         q0 = np.array(self.sim.joint_positions())
         result = self.sim.execute([0.0, duration], [q0, target])
         c = result.contacts
-        return StepResult(verdict=ShieldStepResponse.UNCHECKED, message="", q=np.array(result.positions),
-                          stamp=self.sim.sim_time, ee=self._ee_now(), contacts=c.world_contacts + c.self_contacts,
-                          contact_substeps=c.substeps_in_contact)
+        return StepResult(
+            verdict=ShieldStepResponse.UNCHECKED,
+            message="",
+            q=np.array(result.positions),
+            stamp=self.sim.sim_time,
+            ee=self._ee_now(),
+            contacts=c.world_contacts + c.self_contacts,
+            contact_substeps=c.substeps_in_contact,
+        )
 
     def reset(self, q: "np.ndarray | None") -> ResetResult:
         if q is not None:
@@ -88,7 +108,7 @@ class BulletBackend(Backend):
                 self.sim.reset_robot(q)
             except ValueError as exc:
                 return ResetResult(False, str(exc), None, self.sim.sim_time, self.sim.motion_epoch)
-            self.sim.restart_motions()   # as the simulator node's reset does
+            self.sim.restart_motions()  # as the simulator node's reset does
         return ResetResult(True, "", np.array(self.sim.joint_positions()), self.sim.sim_time, self.sim.motion_epoch)
 
     def check_state(self, q: np.ndarray) -> bool:

@@ -2,10 +2,10 @@
 
 The env's logic works on plain data (moverl_gym.backend): the ROS backend (the default) talks to the shield of a
 graph the env launches or attaches to; the PyBullet backend (backend="bullet", no shield) steps the same robot and
-world in-process, without a roscore. Paper sections 4.2-4.6. Action: Box[-1, 1]^n, scaled to delta q within +-dt * qdot_limit, clipped to the
-joint limits (ActionScaler). Observation: joint angles (obs_type="joints") and/or the end-effector pose,
-the goal, and the pose of every observed obstacle (7 numbers each). Reward: ReachTask. Each episode starts
-at a random collision-free configuration; it terminates at the goal and is truncated after
+world in-process, without a roscore. Paper sections 4.2-4.6. Action: Box[-1, 1]^n, scaled to delta q within
++-dt * qdot_limit, clipped to the joint limits (ActionScaler). Observation: joint angles (obs_type="joints") and/or
+the end-effector pose, the goal, and the pose of every observed obstacle (7 numbers each). Reward: ReachTask. Each
+episode starts at a random collision-free configuration; it terminates at the goal and is truncated after
 config.max_episode_steps (config/env.yaml, or task={"max_episode_steps": n}): the env counts them itself.
 """
 
@@ -16,6 +16,7 @@ import time
 
 import gymnasium as gym
 import numpy as np
+
 from control_msgs.msg import FollowJointTrajectoryResult as _Fjt
 from moverl_msgs.srv import ShieldStepResponse as _Step
 from moverl_msgs.srv import ValidateMotionResponse as _Motion
@@ -28,28 +29,49 @@ from .robot import ActionScaler, JointLimits
 from .task import ReachTask, TaskConfig
 
 #: Shield verdicts by code, named as in moverl_msgs/ShieldStep (the generated class is the one source of the codes).
-VERDICTS = {getattr(_Step, name): name.lower() for name in dir(_Step)
-            if name.isupper() and isinstance(getattr(_Step, name), int)}
+VERDICTS = {
+    getattr(_Step, name): name.lower()
+    for name in dir(_Step)
+    if name.isupper() and isinstance(getattr(_Step, name), int)
+}
 #: The collision the shield found (and prevented or avoided) for each verdict.
 #: For TRUNCATED (strategy last_safe) it depends on the step: see _collision_type (unsafe_cause).
-COLLISION_TYPES = {_Step.REPLANNED: "path", _Step.DISCARDED_SELF: "self", _Step.DISCARDED_POSE: "pose",
-                   _Step.DISCARDED_PATH: "path", _Step.DISCARDED_START: "start", _Step.TRUNCATED: "path"}
+COLLISION_TYPES = {
+    _Step.REPLANNED: "path",
+    _Step.DISCARDED_SELF: "self",
+    _Step.DISCARDED_POSE: "pose",
+    _Step.DISCARDED_PATH: "path",
+    _Step.DISCARDED_START: "start",
+    _Step.TRUNCATED: "path",
+}
 #: ShieldStep.unsafe_cause codes (moverl_msgs/ValidateMotion outcomes) -> collision type.
-UNSAFE_CAUSES = {_Motion.SELF_COLLISION: "self", _Motion.POSE_COLLISION: "pose", _Motion.PATH_COLLISION: "path",
-                 _Motion.START_IN_COLLISION: "start"}
+UNSAFE_CAUSES = {
+    _Motion.SELF_COLLISION: "self",
+    _Motion.POSE_COLLISION: "pose",
+    _Motion.PATH_COLLISION: "path",
+    _Motion.START_IN_COLLISION: "start",
+}
 #: Verdicts that count as discarded (the action was unsafe: the agent gets safety_penalty). A truncated step
 #: (strategy last_safe) moved only along the safe part of the unsafe action: it counts too.
-DISCARDED = frozenset({_Step.DISCARDED_SELF, _Step.DISCARDED_POSE, _Step.DISCARDED_PATH, _Step.DISCARDED_START,
-                       _Step.TRUNCATED})
+DISCARDED = frozenset(
+    {_Step.DISCARDED_SELF, _Step.DISCARDED_POSE, _Step.DISCARDED_PATH, _Step.DISCARDED_START, _Step.TRUNCATED}
+)
 #: Verdicts after which the env cannot go on (MoveRLError), with the component that failed.
-FAILURES = {_Step.INVALID_REQUEST: "shield (invalid request)", _Step.SCENE_UNAVAILABLE: "planning scene",
-            _Step.EXECUTION_FAILED: "robot driver (refused the move)", _Step.DRIVER_UNAVAILABLE: "robot driver",
-            _Step.STATE_UNAVAILABLE: "robot joint states"}
+FAILURES = {
+    _Step.INVALID_REQUEST: "shield (invalid request)",
+    _Step.SCENE_UNAVAILABLE: "planning scene",
+    _Step.EXECUTION_FAILED: "robot driver (refused the move)",
+    _Step.DRIVER_UNAVAILABLE: "robot driver",
+    _Step.STATE_UNAVAILABLE: "robot joint states",
+}
 #: The driver stopped the move on the way (e.g. the arm was blocked): the episode ends (truncated).
 ABORTED = _Step.ABORTED
 #: control_msgs/FollowJointTrajectoryResult error codes by value (info["driver_error"]).
-DRIVER_ERRORS = {getattr(_Fjt, name): name for name in dir(_Fjt)
-                 if name.isupper() and isinstance(getattr(_Fjt, name), int) and getattr(_Fjt, name) != _Fjt.SUCCESSFUL}
+DRIVER_ERRORS = {
+    getattr(_Fjt, name): name
+    for name in dir(_Fjt)
+    if name.isupper() and isinstance(getattr(_Fjt, name), int) and getattr(_Fjt, name) != _Fjt.SUCCESSFUL
+}
 OBS_TYPES = ("joints", "ee")
 
 
@@ -78,17 +100,29 @@ class MoveRLReachEnv(gym.Env):
         recover: when a component of the graph fails (MoveRLError), end the episode (truncated, info["graph_failure"]
             says what failed) instead of raising, and tear the graph down and relaunch it at the next reset()
             (info["graph_restarts"] counts them; info["graph_failures"] counts failures, including those a reset()
-            finds between episodes, which relaunches at once and names the failure in its info). Only for a graph this env launched with the simulator: never with a
-            real robot, where a failure stops the run. Bounded: max_graph_restarts relaunches in a row, each failing
-            within restart_min_steps steps (config/env.yaml), end the run with MoveRLError. "auto": on exactly when
+            finds between episodes, which relaunches at once and names the failure in its info). Only for a graph this
+            env launched with the simulator: never with a real robot, where a failure stops the run. Bounded:
+            max_graph_restarts relaunches in a row, each failing within restart_min_steps steps (config/env.yaml), end
+            the run with MoveRLError. "auto": on exactly when
             this env launched the graph with the simulator.
     """
 
     metadata = {"render_modes": []}
 
-    def __init__(self, world: str = "table", obs_type: str = "joints", shield: bool = True, graph: str = "auto",
-                 robot: str = "panda", goal=None, launch_args: dict | None = None, task: dict | None = None,
-                 render_mode=None, recover: "bool | str" = False, backend: "str | Backend" = "ros"):
+    def __init__(
+        self,
+        world: str = "table",
+        obs_type: str = "joints",
+        shield: bool = True,
+        graph: str = "auto",
+        robot: str = "panda",
+        goal=None,
+        launch_args: dict | None = None,
+        task: dict | None = None,
+        render_mode=None,
+        recover: "bool | str" = False,
+        backend: "str | Backend" = "ros",
+    ):
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {OBS_TYPES}, got {obs_type!r}")
         if render_mode is not None:
@@ -97,9 +131,9 @@ class MoveRLReachEnv(gym.Env):
             raise ValueError(f"recover must be True, False or 'auto', got {recover!r}")
         self.obs_type = obs_type
         self.config = TaskConfig.from_yaml(config_file("env.yaml"), **(task or {}))
-        self.graph_restarts = 0          # relaunches so far (reported in every info)
-        self.graph_failures = 0          # failures found so far, at a step or a reset (reported in every info)
-        self._failure = None             # what failed, until the next reset relaunches the graph
+        self.graph_restarts = 0  # relaunches so far (reported in every info)
+        self.graph_failures = 0  # failures found so far, at a step or a reset (reported in every info)
+        self._failure = None  # what failed, until the next reset relaunches the graph
         self._restarts_in_a_row = 0
         self._steps_since_restart = 0
         self._backend = None
@@ -113,16 +147,21 @@ class MoveRLReachEnv(gym.Env):
             elif backend == "ros":
                 from .ros_backend import RosBackend
 
-                self._backend = RosBackend(graph, dict(world=world, robot=robot, shield=shield, **(launch_args or {})),
-                                           call_timeout=self.config.step_timeout,
-                                           reset_timeout=self.config.reset_timeout)
+                self._backend = RosBackend(
+                    graph,
+                    dict(world=world, robot=robot, shield=shield, **(launch_args or {})),
+                    call_timeout=self.config.step_timeout,
+                    reset_timeout=self.config.reset_timeout,
+                )
             else:
                 raise ValueError(f"backend must be 'ros', 'bullet' or a Backend, got {backend!r}")
             b = self._backend
             self.attached = bool(getattr(b, "attached", False))
             if recover is True and not b.restartable:
-                raise ValueError("recover=True relaunches the graph the env launched with the simulator; it is never "
-                                 "used with an attached graph or a real robot (there a failure stops the run)")
+                raise ValueError(
+                    "recover=True relaunches the graph the env launched with the simulator; it is never "
+                    "used with an attached graph or a real robot (there a failure stops the run)"
+                )
             self.recover = b.restartable if recover == "auto" else bool(recover)
             self._setup(world, shield, goal)
         except BaseException:
@@ -137,8 +176,10 @@ class MoveRLReachEnv(gym.Env):
     def _setup(self, world: str, shield: bool, goal) -> None:
         b = self._backend
         if self.attached and b.shield_enabled != bool(shield):
-            raise GraphError(f"the attached graph has the shield {'on' if b.shield_enabled else 'off'}, "
-                             f"but the env was asked for shield={shield}")
+            raise GraphError(
+                f"the attached graph has the shield {'on' if b.shield_enabled else 'off'}, "
+                f"but the env was asked for shield={shield}"
+            )
         self.shield_enabled = b.shield_enabled
         self.limits = JointLimits.from_urdf(b.urdf, b.joints)
         self._home = np.clip(np.asarray(b.home, dtype=np.float64), self.limits.lower, self.limits.upper)
@@ -154,8 +195,9 @@ class MoveRLReachEnv(gym.Env):
         self._obstacles0 = np.concatenate([o.pose for o in observed]) if observed else np.zeros(0)  # at motion time 0
         self._obstacles = self._obstacles0
         # Observed moving obstacles: (offset of x in the obstacle vector, their motion).
-        self._movers = [(7 * k, np.asarray(o.motion.axis), o.motion) for k, o in enumerate(observed)
-                        if o.motion is not None]
+        self._movers = [
+            (7 * k, np.asarray(o.motion.axis), o.motion) for k, o in enumerate(observed) if o.motion is not None
+        ]
         self._motion_epoch = w.motion_epoch
         n = self.limits.size
         size = (n if obs_type_has_joints(self.obs_type) else 0) + 7 + 3 + 7 * len(observed)
@@ -171,7 +213,7 @@ class MoveRLReachEnv(gym.Env):
         t = stamp - self._motion_epoch
         out = self._obstacles0.copy()
         for i, axis, motion in self._movers:
-            out[i:i + 3] += axis * motion.displacement(t)
+            out[i : i + 3] += axis * motion.displacement(t)
         return out
 
     # -- gym API -------------------------------------------------------------------------------------------
@@ -206,9 +248,11 @@ class MoveRLReachEnv(gym.Env):
         quick = self._steps_since_restart < self.config.restart_min_steps
         self._restarts_in_a_row = self._restarts_in_a_row + 1 if quick else 1
         if self._restarts_in_a_row > self.config.max_graph_restarts:
-            raise MoveRLError(f"the graph failed {self._restarts_in_a_row} times in a row, each within "
-                              f"{self.config.restart_min_steps} steps of a relaunch; giving up. Last failure: "
-                              f"{exc}") from exc
+            raise MoveRLError(
+                f"the graph failed {self._restarts_in_a_row} times in a row, each within "
+                f"{self.config.restart_min_steps} steps of a relaunch; giving up. Last failure: "
+                f"{exc}"
+            ) from exc
 
     def _relaunch(self) -> str:
         """Tear the failed graph down and launch it again (same arguments, same master port). Returns what failed."""
@@ -227,7 +271,7 @@ class MoveRLReachEnv(gym.Env):
         res = self._reset_robot(options.get("start"))
         self._episode_steps = 0
         self.q = res.q
-        self._motion_epoch = res.motion_epoch   # a simulator reset restarts the obstacles' motions; a move does not
+        self._motion_epoch = res.motion_epoch  # a simulator reset restarts the obstacles' motions; a move does not
         self._obstacles = self._obstacles_at(res.stamp)
         self.ee = self._backend.ee_pose(self.q)
         self.distance = self.task.distance(self.ee[:3])
@@ -240,7 +284,7 @@ class MoveRLReachEnv(gym.Env):
         if isinstance(start, str):
             if start != "current":
                 raise ValueError(f'options["start"] must be a configuration or "current", got {start!r}')
-            res = self._backend.reset(None)   # the robot stays; the backend reports its state
+            res = self._backend.reset(None)  # the robot stays; the backend reports its state
             if not res.success:
                 raise MoveRLError(f"could not read the robot's state: {res.message}")
             return res
@@ -263,8 +307,10 @@ class MoveRLReachEnv(gym.Env):
             q = self.np_random.uniform(lo, hi)
             if self._backend.check_state(q):
                 return self._backend.ee_pose(q)[:3]
-        raise MoveRLError(f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
-                          f"random samples of world '{self.world_name}'")
+        raise MoveRLError(
+            f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
+            f"random samples of world '{self.world_name}'"
+        )
 
     def _sample_start(self) -> np.ndarray:
         """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform)."""
@@ -276,10 +322,13 @@ class MoveRLReachEnv(gym.Env):
         for _ in range(self.config.start_sampling_attempts):
             q = self.np_random.uniform(lo, hi)
             if self._backend.check_state(q) and not self.task.is_success(
-                    self.task.distance(self._backend.ee_pose(q)[:3])):
+                self.task.distance(self._backend.ee_pose(q)[:3])
+            ):
                 return q
-        raise MoveRLError(f"no collision-free start configuration found in {self.config.start_sampling_attempts} "
-                          f"random samples of world '{self.world_name}'")
+        raise MoveRLError(
+            f"no collision-free start configuration found in {self.config.start_sampling_attempts} "
+            f"random samples of world '{self.world_name}'"
+        )
 
     def step(self, action):
         if self.q is None or self._failure is not None:
@@ -296,11 +345,23 @@ class MoveRLReachEnv(gym.Env):
                 raise
             self._fail(exc)
             # The episode ends here; the next reset() relaunches the graph. The robot did not move.
-            info = {"verdict": "graph_failed", "graph_failure": str(exc), "graph_restarts": self.graph_restarts,
-                    "graph_failures": self.graph_failures,
-                    "collision_type": None, "discarded": False, "replanned": False, "contacts": 0,
-                    "contact_substeps": 0, "cost": 0.0, "distance": self.distance, "is_success": False,
-                    "driver_error": None, "strategy": "", "planning_time": 0.0}
+            info = {
+                "verdict": "graph_failed",
+                "graph_failure": str(exc),
+                "graph_restarts": self.graph_restarts,
+                "graph_failures": self.graph_failures,
+                "collision_type": None,
+                "discarded": False,
+                "replanned": False,
+                "contacts": 0,
+                "contact_substeps": 0,
+                "cost": 0.0,
+                "distance": self.distance,
+                "is_success": False,
+                "driver_error": None,
+                "strategy": "",
+                "planning_time": 0.0,
+            }
             return self._observation(), 0.0, False, True, info
         round_trip = time.perf_counter() - t0
         self._steps_since_restart += 1

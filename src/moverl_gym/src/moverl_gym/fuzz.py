@@ -28,8 +28,8 @@ def float_vectors(valid: list[float]) -> list[tuple[str, list[float]]]:
 
 def trajectories(joints: list[str], q: list[float]):
     """trajectory_msgs/JointTrajectory variants (a valid one is a 0.5 s move from q)."""
-    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
     import rospy
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
     def traj(names=None, points=None):
         t = JointTrajectory()
@@ -38,23 +38,29 @@ def trajectories(joints: list[str], q: list[float]):
         return t
 
     def point(pos, t, vel=(), acc=()):
-        return JointTrajectoryPoint(positions=list(pos), velocities=list(vel), accelerations=list(acc),
-                                    time_from_start=rospy.Duration.from_sec(t))
+        return JointTrajectoryPoint(
+            positions=list(pos),
+            velocities=list(vel),
+            accelerations=list(acc),
+            time_from_start=rospy.Duration.from_sec(t),
+        )
 
     moved = [x + 0.05 for x in q]
-    out = [("no points", traj(points=[])),
-           ("no joint names", traj(names=[])),
-           ("unknown joint", traj(names=joints[:-1] + ["no_such_joint"])),
-           ("duplicated joint", traj(names=joints[:-1] + [joints[0]])),
-           ("missing joint", traj(names=joints[:-1])),
-           ("shuffled joints", traj(names=joints[::-1], points=[point(q[::-1], 0.0), point(moved[::-1], 0.5)])),
-           ("non-monotonic times", traj(points=[point(q, 0.0), point(moved, 0.5), point(q, 0.25)])),
-           ("repeated time", traj(points=[point(q, 0.0), point(moved, 0.0)])),
-           ("positions one short", traj(points=[point(q, 0.0), point(moved[:-1], 0.5)])),
-           ("velocities one short", traj(points=[point(q, 0.0), point(moved, 0.5, vel=[0.0] * (len(q) - 1))])),
-           ("far beyond the limits", traj(points=[point(q, 0.0), point([x + 10.0 for x in q], 0.5)])),
-           ("too fast", traj(points=[point(q, 0.0), point([x + 1.0 for x in q], 0.01)])),
-           ("10000 points", traj(points=[point(q, 0.0)] + [point(moved, 0.5 + 1e-4 * k) for k in range(10000)]))]
+    out = [
+        ("no points", traj(points=[])),
+        ("no joint names", traj(names=[])),
+        ("unknown joint", traj(names=joints[:-1] + ["no_such_joint"])),
+        ("duplicated joint", traj(names=joints[:-1] + [joints[0]])),
+        ("missing joint", traj(names=joints[:-1])),
+        ("shuffled joints", traj(names=joints[::-1], points=[point(q[::-1], 0.0), point(moved[::-1], 0.5)])),
+        ("non-monotonic times", traj(points=[point(q, 0.0), point(moved, 0.5), point(q, 0.25)])),
+        ("repeated time", traj(points=[point(q, 0.0), point(moved, 0.0)])),
+        ("positions one short", traj(points=[point(q, 0.0), point(moved[:-1], 0.5)])),
+        ("velocities one short", traj(points=[point(q, 0.0), point(moved, 0.5, vel=[0.0] * (len(q) - 1))])),
+        ("far beyond the limits", traj(points=[point(q, 0.0), point([x + 10.0 for x in q], 0.5)])),
+        ("too fast", traj(points=[point(q, 0.0), point([x + 1.0 for x in q], 0.01)])),
+        ("10000 points", traj(points=[point(q, 0.0)] + [point(moved, 0.5 + 1e-4 * k) for k in range(10000)])),
+    ]
     for name, x in POISON:
         bad = list(moved)
         bad[len(bad) // 2] = x
@@ -67,24 +73,26 @@ def trajectories(joints: list[str], q: list[float]):
 
 def joint_states(joints: list[str], q: list[float]):
     """sensor_msgs/JointState variants (what a broken driver may publish)."""
-    from sensor_msgs.msg import JointState
     import rospy
+    from sensor_msgs.msg import JointState
 
     def js(names, pos, vel=None, stamp=None):
         m = JointState(name=list(names), position=list(pos), velocity=list(vel if vel is not None else []))
         m.header.stamp = stamp if stamp is not None else rospy.Time(0)
         return m
 
-    out = [("empty", js([], [])),
-           ("unknown names only", js([f"x{i}" for i in range(len(q))], q)),
-           ("missing a joint", js(joints[:-1], q[:-1])),
-           ("duplicated joint", js(joints + [joints[0]], q + [q[0] + 0.5])),
-           ("more names than positions", js(joints, q[:-1])),
-           ("more positions than names", js(joints[:-1], q)),
-           ("velocities one short", js(joints, q, vel=[0.0] * (len(q) - 1))),
-           ("far beyond the limits", js(joints, [x + 10.0 for x in q])),
-           ("stamp far in the future", js(joints, q, stamp=rospy.Time(4e9))),
-           ("100000 unknown joints", js([f"j{i}" for i in range(100000)], [0.0] * 100000))]
+    out = [
+        ("empty", js([], [])),
+        ("unknown names only", js([f"x{i}" for i in range(len(q))], q)),
+        ("missing a joint", js(joints[:-1], q[:-1])),
+        ("duplicated joint", js(joints + [joints[0]], q + [q[0] + 0.5])),
+        ("more names than positions", js(joints, q[:-1])),
+        ("more positions than names", js(joints[:-1], q)),
+        ("velocities one short", js(joints, q, vel=[0.0] * (len(q) - 1))),
+        ("far beyond the limits", js(joints, [x + 10.0 for x in q])),
+        ("stamp far in the future", js(joints, q, stamp=rospy.Time(4e9))),
+        ("100000 unknown joints", js([f"j{i}" for i in range(100000)], [0.0] * 100000)),
+    ]
     for name, x in POISON:
         bad = list(q)
         bad[0] = x
@@ -94,8 +102,9 @@ def joint_states(joints: list[str], q: list[float]):
 
 def worlds(valid):
     """moverl_msgs/World variants of a valid world message."""
-    from moverl_msgs.msg import ObstacleMotion, WorldObject
     from shape_msgs.msg import SolidPrimitive
+
+    from moverl_msgs.msg import ObstacleMotion, WorldObject
 
     def variant(edit):
         w = copy.deepcopy(valid)
@@ -112,34 +121,51 @@ def worlds(valid):
             for a in path:
                 obj = getattr(obj, a)
             setattr(obj, last, value)
+
         return edit
 
     def oscillate(axis=(0.0, 0.0, 1.0), amplitude=0.1, period=1.0, phase=0.0):
-        return set_("motion", ObstacleMotion(type=ObstacleMotion.OSCILLATE, axis=list(axis), amplitude=amplitude,
-                                             period=period, phase=phase))
+        return set_(
+            "motion",
+            ObstacleMotion(
+                type=ObstacleMotion.OSCILLATE, axis=list(axis), amplitude=amplitude, period=period, phase=phase
+            ),
+        )
 
-    out = [("unknown shape type", variant(set_("shape.type", 99))),
-           ("box with 2 dimensions", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX,
-                                                                         dimensions=[0.1, 0.1])))),
-           ("sphere with no dimension", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.SPHERE)))),
-           ("negative size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX,
-                                                                  dimensions=[-0.1, 0.1, 0.1])))),
-           ("huge size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[1e300] * 3)))),
-           ("nan size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX,
-                                                             dimensions=[math.nan, 0.1, 0.1])))),
-           ("nan position", variant(set_("pose.position.x", math.nan))),
-           ("inf position", variant(set_("pose.position.z", math.inf))),
-           ("nan orientation", variant(set_("pose.orientation.w", math.nan))),
-           ("unknown motion type", variant(set_("motion.type", 42))),
-           ("zero period", variant(oscillate(period=0.0))),
-           ("negative amplitude", variant(oscillate(amplitude=-1.0))),
-           ("nan axis", variant(oscillate(axis=(math.nan, 0.0, 0.0)))),
-           ("zero axis", variant(oscillate(axis=(0.0, 0.0, 0.0)))),
-           ("inf phase", variant(oscillate(phase=math.inf))),
-           ("duplicated ids", variant(lambda w: w.objects.append(copy.deepcopy(w.objects[0])))),
-           ("10000 objects", variant(lambda w: w.objects.extend(
-               WorldObject(id=f"o{k}", shape=SolidPrimitive(type=SolidPrimitive.SPHERE, dimensions=[0.01]),
-                           pose=copy.deepcopy(w.objects[0].pose)) for k in range(10000))))]
+    out = [
+        ("unknown shape type", variant(set_("shape.type", 99))),
+        (
+            "box with 2 dimensions",
+            variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[0.1, 0.1]))),
+        ),
+        ("sphere with no dimension", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.SPHERE)))),
+        ("negative size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[-0.1, 0.1, 0.1])))),
+        ("huge size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[1e300] * 3)))),
+        ("nan size", variant(set_("shape", SolidPrimitive(type=SolidPrimitive.BOX, dimensions=[math.nan, 0.1, 0.1])))),
+        ("nan position", variant(set_("pose.position.x", math.nan))),
+        ("inf position", variant(set_("pose.position.z", math.inf))),
+        ("nan orientation", variant(set_("pose.orientation.w", math.nan))),
+        ("unknown motion type", variant(set_("motion.type", 42))),
+        ("zero period", variant(oscillate(period=0.0))),
+        ("negative amplitude", variant(oscillate(amplitude=-1.0))),
+        ("nan axis", variant(oscillate(axis=(math.nan, 0.0, 0.0)))),
+        ("zero axis", variant(oscillate(axis=(0.0, 0.0, 0.0)))),
+        ("inf phase", variant(oscillate(phase=math.inf))),
+        ("duplicated ids", variant(lambda w: w.objects.append(copy.deepcopy(w.objects[0])))),
+        (
+            "10000 objects",
+            variant(
+                lambda w: w.objects.extend(
+                    WorldObject(
+                        id=f"o{k}",
+                        shape=SolidPrimitive(type=SolidPrimitive.SPHERE, dimensions=[0.01]),
+                        pose=copy.deepcopy(w.objects[0].pose),
+                    )
+                    for k in range(10000)
+                )
+            ),
+        ),
+    ]
     return out
 
 
@@ -153,8 +179,11 @@ def point_clouds(frame: str):
         m = PointCloud2()
         m.header.frame_id = frame_id
         m.height, m.width = height, width
-        m.fields = fields if fields is not None else [
-            PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
+        m.fields = (
+            fields
+            if fields is not None
+            else [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
+        )
         m.point_step, m.row_step = point_step, point_step * width
         m.is_bigendian, m.is_dense = False, True
         if data is None:
@@ -164,19 +193,29 @@ def point_clouds(frame: str):
         return m
 
     f32 = PointField.FLOAT32
-    return [("no fields", cloud(fields=[])),
-            ("no z field", cloud(fields=[PointField(name=n, offset=4 * i, datatype=f32, count=1)
-                                         for i, n in enumerate("xy")])),
-            ("x as uint8", cloud(fields=[PointField(name="x", offset=0, datatype=PointField.UINT8, count=1)] +
-                                 [PointField(name=n, offset=4 * (i + 1), datatype=f32, count=1)
-                                  for i, n in enumerate("yz")])),
-            ("field beyond point_step", cloud(fields=[PointField(name=n, offset=40 + 4 * i, datatype=f32, count=1)
-                                                      for i, n in enumerate("xyz")])),
-            ("point_step 4", cloud(point_step=4)),
-            ("data too short", cloud(data=b"\0" * 10)),
-            ("claims 1e9 points", cloud(width=100000, height=10000, data=b"\0" * 144)),
-            ("empty", cloud(width=0, height=0, data=b"")),
-            ("nan points", cloud(values=[math.nan, math.nan, math.nan])),
-            ("inf points", cloud(values=[math.inf, 0.0, 1.0])),
-            ("unknown frame", cloud(frame_id="no_such_frame")),
-            ("no frame", cloud(frame_id=""))]
+    return [
+        ("no fields", cloud(fields=[])),
+        (
+            "no z field",
+            cloud(fields=[PointField(name=n, offset=4 * i, datatype=f32, count=1) for i, n in enumerate("xy")]),
+        ),
+        (
+            "x as uint8",
+            cloud(
+                fields=[PointField(name="x", offset=0, datatype=PointField.UINT8, count=1)]
+                + [PointField(name=n, offset=4 * (i + 1), datatype=f32, count=1) for i, n in enumerate("yz")]
+            ),
+        ),
+        (
+            "field beyond point_step",
+            cloud(fields=[PointField(name=n, offset=40 + 4 * i, datatype=f32, count=1) for i, n in enumerate("xyz")]),
+        ),
+        ("point_step 4", cloud(point_step=4)),
+        ("data too short", cloud(data=b"\0" * 10)),
+        ("claims 1e9 points", cloud(width=100000, height=10000, data=b"\0" * 144)),
+        ("empty", cloud(width=0, height=0, data=b"")),
+        ("nan points", cloud(values=[math.nan, math.nan, math.nan])),
+        ("inf points", cloud(values=[math.inf, 0.0, 1.0])),
+        ("unknown frame", cloud(frame_id="no_such_frame")),
+        ("no frame", cloud(frame_id="")),
+    ]

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-MARGIN = 0.001       # PyBullet's collision margin around convex hulls (gUrdfDefaultCollisionMargin)
-PROBE = 1e-4         # radius of the probe sphere used to ask PyBullet whether a point is inside a link
+MARGIN = 0.001  # PyBullet's collision margin around convex hulls (gUrdfDefaultCollisionMargin)
+PROBE = 1e-4  # radius of the probe sphere used to ask PyBullet whether a point is inside a link
 # PyBullet's hull computer (btConvexHullComputer) snaps a piece's points to a grid of 1/10216 of its bounding box per
 # axis, so its hull vertices may lie up to sqrt(3) * extent / 10216 outside the exact hull (0.05 mm for a 30 cm piece,
 # far inside the paddings). A PyBullet point may lie this far (plus 1e-6 m) outside the scene's shape of its link.
@@ -48,14 +48,19 @@ def scene_geometry_binary() -> str:
     """Path of the scene_geometry executable of the catkin workspace (devel or install space)."""
     from .paths import repo_root
 
-    candidates = [Path(p) / "lib" / "moverl_planning_scene" / "scene_geometry"
-                  for p in os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep) if p]
+    candidates = [
+        Path(p) / "lib" / "moverl_planning_scene" / "scene_geometry"
+        for p in os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep)
+        if p
+    ]
     candidates.append(repo_root() / "devel" / "lib" / "moverl_planning_scene" / "scene_geometry")
     for c in candidates:
         if c.is_file() and os.access(c, os.X_OK):
             return str(c)
-    raise GeometryParityError("scene_geometry not found (build the workspace: ./catkin_ws_setup.sh); looked in "
-                              + ", ".join(str(c) for c in candidates))
+    raise GeometryParityError(
+        "scene_geometry not found (build the workspace: ./catkin_ws_setup.sh); looked in "
+        + ", ".join(str(c) for c in candidates)
+    )
 
 
 def urdf_movable_joints(urdf_path) -> list[str]:
@@ -104,7 +109,7 @@ def _interior(points: np.ndarray, rng, count: int, k: int = 8) -> np.ndarray:
     for _ in range(count):
         i = rng.integers(len(points))
         d = np.linalg.norm(points - points[i], axis=1)
-        near = points[np.argsort(d)[:k + 1]]
+        near = points[np.argsort(d)[: k + 1]]
         w = rng.dirichlet(np.ones(len(near)))
         out.append(w @ near)
     return np.array(out)
@@ -212,8 +217,9 @@ def _scene_points(geoms, rng, interior: int) -> np.ndarray:
     return np.vstack(pts) if pts else np.zeros((0, 3))
 
 
-def compare(urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3, interior: int = 100,
-            seed: int = 0) -> dict:
+def compare(
+    urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3, interior: int = 100, seed: int = 0
+) -> dict:
     """Compares PyBullet's and the scene's shape of every link at `configs` random configurations (the first one
     all zeros, clipped to the limits). joints: controlled joints (default: every revolute/prismatic joint);
     fixed: positions of the other movable joints. Returns {"links": {name: {...}}, "contained": bool, ...}."""
@@ -249,9 +255,20 @@ def compare(urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3
                 poses[k] = m
                 a += 1
             scene_pose.append(poses)
-        report = {k: {"pybullet_points": 0, "outside": 0, "outside_by_m": 0.0, "tolerance_m": 0.0, "scene_points": 0,
-                      "scene_excess_m": 0.0, "fk_error_m": 0.0, "pybullet_shape": False,
-                      "scene_shape": bullet.names[k] in geometry} for k in links}
+        report = {
+            k: {
+                "pybullet_points": 0,
+                "outside": 0,
+                "outside_by_m": 0.0,
+                "tolerance_m": 0.0,
+                "scene_points": 0,
+                "scene_excess_m": 0.0,
+                "fk_error_m": 0.0,
+                "pybullet_shape": False,
+                "scene_shape": bullet.names[k] in geometry,
+            }
+            for k in links
+        }
         queries = []  # (config, link, point in the base frame)
         for c, q in enumerate(Q):
             bullet.set(q)
@@ -266,8 +283,7 @@ def compare(urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3
                 r["pybullet_shape"] = True
                 extent = float(np.max(pts.max(axis=0) - pts.min(axis=0))) if len(pts) else 0.0
                 r["tolerance_m"] = max(r["tolerance_m"], math.sqrt(3) * QUANTUM * extent + 1e-6)
-                inside = [x for x in _interior(pts, rng, interior)
-                          if bullet.distance(k, x) < -(MARGIN + PROBE) - 1e-5]
+                inside = [x for x in _interior(pts, rng, interior) if bullet.distance(k, x) < -(MARGIN + PROBE) - 1e-5]
                 pts = np.vstack([pts, np.array(inside).reshape(-1, 3)])
                 r["pybullet_points"] += len(pts)
                 queries += [(c, k, x) for x in _apply(world_to_base, pts)]
@@ -279,6 +295,7 @@ def compare(urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3
                     for x in spts:
                         # distance beyond PyBullet's shape (margin included; negative inside)
                         r["scene_excess_m"] = max(r["scene_excess_m"], bullet.distance(k, x) + PROBE)
+
         # Contained: every PyBullet point inside the scene's shape of its link.
         def ask(tol, items):  # tol None: each link's tolerance
             cmds, last = [], None
@@ -310,17 +327,23 @@ def compare(urdf_path, joints=None, base_link=None, fixed=None, configs: int = 3
     finally:
         bullet.close()
     named = {bullet.names[k]: v for k, v in report.items() if v["pybullet_shape"] or v["scene_shape"]}
-    return {"urdf": str(urdf_path), "configs": len(Q), "links": named,
-            "contained": all(v["outside"] == 0 for v in named.values()),
-            "tight": all(v["scene_excess_m"] <= TIGHT_TOL for v in named.values() if v["pybullet_shape"]),
-            "fk_error_m": max((v["fk_error_m"] for v in named.values()), default=0.0)}
+    return {
+        "urdf": str(urdf_path),
+        "configs": len(Q),
+        "links": named,
+        "contained": all(v["outside"] == 0 for v in named.values()),
+        "tight": all(v["scene_excess_m"] <= TIGHT_TOL for v in named.values() if v["pybullet_shape"]),
+        "fk_error_m": max((v["fk_error_m"] for v in named.values()), default=0.0),
+    }
 
 
 def format_report(rep: dict) -> str:
     """A table: one line per link with collision geometry."""
-    head = (f"{'link':28s} {'PyBullet pts':>12s} {'outside scene':>13s} {'by up to':>9s} {'allowed':>9s} "
-            f"{'scene pts':>9s} "
-            f"{'scene beyond PyBullet':>21s} {'FK error':>9s}")
+    head = (
+        f"{'link':28s} {'PyBullet pts':>12s} {'outside scene':>13s} {'by up to':>9s} {'allowed':>9s} "
+        f"{'scene pts':>9s} "
+        f"{'scene beyond PyBullet':>21s} {'FK error':>9s}"
+    )
     lines = [head, "-" * len(head)]
     for name, r in rep["links"].items():
         by = "-" if r["outside"] == 0 else f"{1e3 * r['outside_by_m']:.3g} mm"
@@ -329,11 +352,15 @@ def format_report(rep: dict) -> str:
         else:
             beyond = f"{1e3 * max(0.0, r['scene_excess_m']):.2f} mm"
         allowed = f"{1e3 * r['tolerance_m']:.3f} mm"
-        lines.append(f"{name:28s} {r['pybullet_points']:12d} {r['outside']:13d} {by:>9s} {allowed:>9s} "
-                     f"{r['scene_points']:9d} "
-                     f"{beyond:>21s} {1e3 * r['fk_error_m']:7.4f} mm")
-    lines.append(f"contained (every PyBullet point inside the scene's shape, up to PyBullet's hull rounding): "
-                 f"{rep['contained']}; "
-                 f"tight (scene within PyBullet's shape, margin included, + {1e3 * TIGHT_TOL:g} mm): "
-                 f"{rep['tight']}; {rep['configs']} configurations")
+        lines.append(
+            f"{name:28s} {r['pybullet_points']:12d} {r['outside']:13d} {by:>9s} {allowed:>9s} "
+            f"{r['scene_points']:9d} "
+            f"{beyond:>21s} {1e3 * r['fk_error_m']:7.4f} mm"
+        )
+    lines.append(
+        f"contained (every PyBullet point inside the scene's shape, up to PyBullet's hull rounding): "
+        f"{rep['contained']}; "
+        f"tight (scene within PyBullet's shape, margin included, + {1e3 * TIGHT_TOL:g} mm): "
+        f"{rep['tight']}; {rep['configs']} configurations"
+    )
     return "\n".join(lines)

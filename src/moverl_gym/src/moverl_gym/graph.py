@@ -91,8 +91,16 @@ class LaunchedGraph:
         GraphError: the graph could not be started (with the tail of its log), or close() left processes.
     """
 
-    def __init__(self, launch_args: dict, port: int | None = None, wait_for=(), timeout: float = 60.0,
-                 expose: str | None = None, grace: float | None = None, attempts: int = 5):
+    def __init__(
+        self,
+        launch_args: dict,
+        port: int | None = None,
+        wait_for=(),
+        timeout: float = 60.0,
+        expose: str | None = None,
+        grace: float | None = None,
+        attempts: int = 5,
+    ):
         for tool in ("roslaunch", "rosmaster"):
             if shutil.which(tool) is None:
                 raise GraphError(f"{tool} is not on PATH: source devel/setup.bash (see README) first")
@@ -114,8 +122,13 @@ class LaunchedGraph:
 
     def _environment(self, host: str) -> dict:
         env = dict(os.environ)
-        env.update(ROS_MASTER_URI=self.uri, ROS_HOSTNAME=host, ROS_LOG_DIR=str(self.log_dir),
-                   ROS_HOME=env.get("ROS_HOME", str(Path.home() / ".ros")), MOVERL_ROOT=str(repo_root()))
+        env.update(
+            ROS_MASTER_URI=self.uri,
+            ROS_HOSTNAME=host,
+            ROS_LOG_DIR=str(self.log_dir),
+            ROS_HOME=env.get("ROS_HOME", str(Path.home() / ".ros")),
+            MOVERL_ROOT=str(repo_root()),
+        )
         env.pop("ROS_IP", None)  # ROS_HOSTNAME wins anyway; one name, no surprises
         env[reaper.MARKER] = self.graph_id
         if not self.expose:
@@ -133,16 +146,36 @@ class LaunchedGraph:
             self.port = port or free_port()
             self.uri = f"http://{host}:{self.port}"
             spec = dict(
-                owner=os.getpid(), log=str(self.log_dir / "roslaunch.log"), grace=self.grace,
+                owner=os.getpid(),
+                log=str(self.log_dir / "roslaunch.log"),
+                grace=self.grace,
                 kill_timeout=KILL_TIMEOUT,
-                master=dict(uri=self.uri, timeout=max(1.0, min(15.0, deadline - time.monotonic())),
-                            cmd=["rosmaster", "--core", "-p", str(self.port), "-w", "3",
-                                 f"__log:={self.log_dir / 'master.log'}"]),
+                master=dict(
+                    uri=self.uri,
+                    timeout=max(1.0, min(15.0, deadline - time.monotonic())),
+                    cmd=[
+                        "rosmaster",
+                        "--core",
+                        "-p",
+                        str(self.port),
+                        "-w",
+                        "3",
+                        f"__log:={self.log_dir / 'master.log'}",
+                    ],
+                ),
                 extra=[[_rosout(), "__name:=rosout", f"__log:={self.log_dir / 'rosout.log'}"]],
                 # roslaunch's own escalation (SIGINT, SIGTERM, SIGKILL to its nodes), bounded by the grace period:
                 # it is what stops the nodes if the reaper itself is SIGKILLed (then roslaunch gets SIGTERM).
-                launch=["roslaunch", "-p", str(self.port), f"--sigint-timeout={self.grace}", "--sigterm-timeout=1",
-                        str(launch_file())] + [f"{k}:={_launch_value(v)}" for k, v in launch_args.items()])
+                launch=[
+                    "roslaunch",
+                    "-p",
+                    str(self.port),
+                    f"--sigint-timeout={self.grace}",
+                    "--sigterm-timeout=1",
+                    str(launch_file()),
+                ]
+                + [f"{k}:={_launch_value(v)}" for k, v in launch_args.items()],
+            )
             self._reaper = reaper.Handle(spec, self._environment(host), self._log)
             event = self._reaper.wait_for(("master", "taken", "master-exit", "error"), deadline)
             if event and event[0] == "master":
@@ -155,8 +188,10 @@ class LaunchedGraph:
             taken.append(self.port)
         else:
             if port is not None:
-                raise GraphError(f"master port {port} is taken by another process; this process's rospy node is "
-                                 "bound to that port (one master per process): start the env in a fresh process")
+                raise GraphError(
+                    f"master port {port} is taken by another process; this process's rospy node is "
+                    "bound to that port (one master per process): start the env in a fresh process"
+                )
             raise GraphError(f"master ports {taken} were all taken by other processes before the master bound them")
         self._wait(wait_for, deadline, timeout)
 
@@ -165,8 +200,10 @@ class LaunchedGraph:
         while True:
             for event in self._reaper.poll(0.1):  # start-up only, never on the step path
                 if event[0] in ("exit", "error"):
-                    raise GraphError(f"roslaunch {'exited with code' if event[0] == 'exit' else 'failed:'} "
-                                     f"{' '.join(event[1:])}:\n{self.log_tail()}")
+                    raise GraphError(
+                        f"roslaunch {'exited with code' if event[0] == 'exit' else 'failed:'} "
+                        f"{' '.join(event[1:])}:\n{self.log_tail()}"
+                    )
             if self._reaper.ended:
                 raise GraphError(f"the graph's reaper exited (code {self._reaper.proc.poll()}):\n{self.log_tail()}")
             pending = [s for s in pending if not service_exists(self.uri, s)]
@@ -212,8 +249,10 @@ class LaunchedGraph:
         self.last_close = dict(seconds=time.monotonic() - t0, sigkilled=killed)
         self._log.close()
         if left:
-            raise GraphError(f"processes of the graph survived SIGKILL for {KILL_TIMEOUT:.0f} s: {left} "
-                             f"(uninterruptible sleep?); log: {self.log_dir}")
+            raise GraphError(
+                f"processes of the graph survived SIGKILL for {KILL_TIMEOUT:.0f} s: {left} "
+                f"(uninterruptible sleep?); log: {self.log_dir}"
+            )
 
     def _stop_reaper(self) -> tuple[list[str], list[str]]:
         """Stop the current reaper and its graph; (processes SIGKILLed, processes left) as "name pid"."""
@@ -236,9 +275,11 @@ def loopback_shim() -> Path:
         lib = Path(prefix) / "lib" / SHIM
         if lib.is_file():
             return lib
-    raise GraphError(f"{SHIM} (package moverl_loopback) is not in the workspace {prefixes}: build it "
-                     "(./catkin_ws_setup.sh) and source devel/setup.bash. Without it roscpp nodes would listen on "
-                     f"every interface; to run a graph reachable from other hosts on purpose set {EXPOSE_ENV}")
+    raise GraphError(
+        f"{SHIM} (package moverl_loopback) is not in the workspace {prefixes}: build it "
+        "(./catkin_ws_setup.sh) and source devel/setup.bash. Without it roscpp nodes would listen on "
+        f"every interface; to run a graph reachable from other hosts on purpose set {EXPOSE_ENV}"
+    )
 
 
 def _rosout() -> str:

@@ -51,7 +51,7 @@ class TreeWatch:
         self.root = root
         self.period = period
         self.seen: dict[tuple[int, int], Proc] = {}
-        self.cmdlines: dict[tuple[int, int], str] = {}   # the latest command line of each (a process may exec)
+        self.cmdlines: dict[tuple[int, int], str] = {}  # the latest command line of each (a process may exec)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="moverl_treewatch", daemon=True)
 

@@ -41,8 +41,14 @@ def main(argv: list[str]) -> int:
     from ray.cluster_utils import Cluster
 
     ray_constants.ENABLE_RAY_CLUSTER = os.environ.get(LOOPBACK_SWITCH) != "0"
-    common = dict(node_ip_address="127.0.0.1", temp_dir=spec["temp_dir"], include_dashboard=False,
-                  object_store_memory=spec["object_store_memory"], min_worker_port=0, max_worker_port=0)
+    common = dict(
+        node_ip_address="127.0.0.1",
+        temp_dir=spec["temp_dir"],
+        include_dashboard=False,
+        object_store_memory=spec["object_store_memory"],
+        min_worker_port=0,
+        max_worker_port=0,
+    )
     cluster = Cluster(initialize_head=True, head_node_args={**common, **spec["nodes"][0]})
     try:
         for node in spec["nodes"][1:]:
@@ -56,7 +62,7 @@ def main(argv: list[str]) -> int:
             pass
     finally:
         cluster.shutdown()
-        shutil.rmtree(spec["temp_dir"], ignore_errors=True)   # sessions, sockets, logs (the driver keeps the rest)
+        shutil.rmtree(spec["temp_dir"], ignore_errors=True)  # sessions, sockets, logs (the driver keeps the rest)
     return 0
 
 

@@ -161,8 +161,14 @@ def reap(statuses: dict[int, int]) -> None:
         statuses[pid] = os.waitstatus_to_exitcode(status)
 
 
-def stop_processes(graph_id: str, root: int | None, first: int | None, grace: float, kill_timeout: float,
-                   statuses: dict[int, int] | None = None) -> tuple[list[Proc], list[Proc]]:
+def stop_processes(
+    graph_id: str,
+    root: int | None,
+    first: int | None,
+    grace: float,
+    kill_timeout: float,
+    statuses: dict[int, int] | None = None,
+) -> tuple[list[Proc], list[Proc]]:
     """Stop the graph: SIGINT to `first` (roslaunch), SIGINT to the rest once `first` is gone, SIGKILL at once to
     stopped processes and to everything after `grace` s; return when none is left or `grace + kill_timeout` s
     have passed.
@@ -265,8 +271,11 @@ def listening_sockets(procs: Iterable[Proc]) -> list[Socket]:
     for p in procs:
         for inode in socket_inodes(p.pid):
             owner[inode] = p
-    return sorted(Socket(proto, addr, port, owner[inode].pid, owner[inode].name)
-                  for proto, addr, port, inode in open_sockets() if inode in owner)
+    return sorted(
+        Socket(proto, addr, port, owner[inode].pid, owner[inode].name)
+        for proto, addr, port, inode in open_sockets()
+        if inode in owner
+    )
 
 
 def is_loopback(address: str) -> bool:
@@ -284,9 +293,15 @@ class Handle:
 
     def __init__(self, spec: dict, env: dict, log):
         python = sys.executable or "/usr/bin/python3"
-        self.proc = subprocess.Popen([python, "-I", "-S", os.path.abspath(__file__), json.dumps(spec)], env=env,
-                                     bufsize=0, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log,
-                                     start_new_session=True)
+        self.proc = subprocess.Popen(
+            [python, "-I", "-S", os.path.abspath(__file__), json.dumps(spec)],
+            env=env,
+            bufsize=0,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=log,
+            start_new_session=True,
+        )
         self.events: list[list[str]] = []
         self.ended = False  # its stdout closed: it has exited (or is about to)
         self._buf = b""
@@ -365,8 +380,9 @@ class _Supervisor:
             pass
 
     def start(self, cmd: list[str]) -> subprocess.Popen:
-        p = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT,
-                             preexec_fn=_die_with_reaper)
+        p = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT, preexec_fn=_die_with_reaper
+        )
         self.children.append(p)
         return p
 
@@ -432,8 +448,14 @@ class _Supervisor:
         except OSError as exc:  # a command that cannot be started: stop what was, report
             self.say("error", str(exc).replace("\n", " "))
         t0 = time.monotonic()
-        killed, left = stop_processes(self.graph_id, os.getpid(), launch.pid if launch else None,
-                                      self.spec["grace"], self.spec["kill_timeout"], self.statuses)
+        killed, left = stop_processes(
+            self.graph_id,
+            os.getpid(),
+            launch.pid if launch else None,
+            self.spec["grace"],
+            self.spec["kill_timeout"],
+            self.statuses,
+        )
         reap(self.statuses)
         for p in self.children:  # exit codes collected by reap(): keep Popen from waiting on them again
             p.returncode = self.statuses.get(p.pid, p.returncode)

@@ -22,5 +22,6 @@ def register_envs() -> None:
             env_id = f"MoveRL/{ROBOT}Reach{scenario}{suffix}-{VERSION}"
             if env_id in gym.registry:
                 continue
-            gym.register(env_id, entry_point="moverl_gym.env:MoveRLReachEnv",
-                         kwargs={"world": world, "obs_type": obs_type})
+            gym.register(
+                env_id, entry_point="moverl_gym.env:MoveRLReachEnv", kwargs={"world": world, "obs_type": obs_type}
+            )

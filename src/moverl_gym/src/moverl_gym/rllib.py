@@ -37,9 +37,22 @@ import gymnasium as gym
 ENV_NAME = "moverl"
 #: Counters summed over every runner and kept over the whole run (and across a resume): result key
 #: env_runners/moverl/<name>.
-LIFETIME_COUNTERS = ("contacts", "contact_substeps", "cost", "interventions", "discarded_self", "discarded_pose",
-                     "discarded_path", "discarded_start", "replanned", "truncated", "graph_failures", "graph_restarts",
-                     "steps_without_ground_truth", "envs_created")
+LIFETIME_COUNTERS = (
+    "contacts",
+    "contact_substeps",
+    "cost",
+    "interventions",
+    "discarded_self",
+    "discarded_pose",
+    "discarded_path",
+    "discarded_start",
+    "replanned",
+    "truncated",
+    "graph_failures",
+    "graph_restarts",
+    "steps_without_ground_truth",
+    "envs_created",
+)
 _VERDICT_COUNTERS = ("discarded_self", "discarded_pose", "discarded_path", "discarded_start", "replanned", "truncated")
 
 
@@ -49,7 +62,7 @@ def env_creator(env_config: dict) -> gym.Env:
 
     cfg = dict(env_config)
     env_id = cfg.pop("env_id")
-    cfg.pop("num_envs", None)   # RLlib adds it for vector entry points; one env per runner here
+    cfg.pop("num_envs", None)  # RLlib adds it for vector entry points; one env per runner here
     return gym.make(env_id, **cfg)
 
 
@@ -71,15 +84,15 @@ def metrics_callback():
         the hot path stays a dictionary lookup."""
 
         def on_environment_created(self, *, env_runner, metrics_logger, env, env_context, **kwargs):
-            for name in LIFETIME_COUNTERS:   # every key present from the start, zero included
+            for name in LIFETIME_COUNTERS:  # every key present from the start, zero included
                 metrics_logger.log_value(("moverl", name), 0, reduce="lifetime_sum")
             metrics_logger.log_value(("moverl", "envs_created"), 1, reduce="lifetime_sum")
 
         def on_episode_start(self, *, episode, metrics_logger, **kwargs):
             info = episode.get_infos(-1)
-            if info.get("graph_restart"):   # this reset relaunched the graph (env recovery)
+            if info.get("graph_restart"):  # this reset relaunched the graph (env recovery)
                 metrics_logger.log_value(("moverl", "graph_restarts"), 1, reduce="lifetime_sum")
-            if info.get("graph_failure"):   # this reset found the graph failed (between episodes)
+            if info.get("graph_failure"):  # this reset found the graph failed (between episodes)
                 metrics_logger.log_value(("moverl", "graph_failures"), 1, reduce="lifetime_sum")
 
         def on_episode_step(self, *, episode, metrics_logger, **kwargs):
@@ -87,12 +100,11 @@ def metrics_callback():
             log = metrics_logger.log_value
             contacts = info.get("contacts", 0)
             if contacts:
-                if contacts < 0:          # the driver has no ground truth (a real robot)
+                if contacts < 0:  # the driver has no ground truth (a real robot)
                     log(("moverl", "steps_without_ground_truth"), 1, reduce="lifetime_sum")
                 else:
                     log(("moverl", "contacts"), contacts, reduce="lifetime_sum")
-                    log(("moverl", "contact_substeps"), max(info.get("contact_substeps", 0), 0),
-                        reduce="lifetime_sum")
+                    log(("moverl", "contact_substeps"), max(info.get("contact_substeps", 0), 0), reduce="lifetime_sum")
             if info.get("cost"):
                 log(("moverl", "cost"), info["cost"], reduce="lifetime_sum")
             if info.get("discarded"):
@@ -105,14 +117,16 @@ def metrics_callback():
 
         def on_episode_end(self, *, episode, metrics_logger, **kwargs):
             info = episode.get_infos(-1)
-            metrics_logger.log_value(("moverl", "success_rate"), float(bool(info.get("is_success", False))),
-                                     reduce="mean", window=100)
+            metrics_logger.log_value(
+                ("moverl", "success_rate"), float(bool(info.get("is_success", False))), reduce="mean", window=100
+            )
 
         def on_train_result(self, *, algorithm, result, **kwargs):
             group = algorithm.env_runner_group
             result.setdefault("moverl", {}).update(
                 env_runner_restarts=int(group.num_remote_worker_restarts()),
-                healthy_env_runners=int(group.num_healthy_remote_workers()))
+                healthy_env_runners=int(group.num_healthy_remote_workers()),
+            )
 
     return MoveRLMetrics
 
@@ -134,8 +148,13 @@ class LocalCluster:
         grace: seconds Ray gets to shut down cleanly before SIGKILL.
     """
 
-    def __init__(self, nodes: list[dict], object_store_memory: int = 200 * 1024 * 1024, timeout: float = 120.0,
-                 grace: float = 10.0):
+    def __init__(
+        self,
+        nodes: list[dict],
+        object_store_memory: int = 200 * 1024 * 1024,
+        timeout: float = 120.0,
+        grace: float = 10.0,
+    ):
         import sys
 
         from . import raycluster, reaper
@@ -149,16 +168,29 @@ class LocalCluster:
         address_file = self.root / "address"
         # Ray's session folder goes below temp_dir (its default below $RAY_TMPDIR, where it also writes its address
         # file), with unix sockets whose paths must fit in 107 bytes: keep $TMPDIR short.
-        spec = {"nodes": nodes, "temp_dir": str(self.root / "ray"), "address_file": str(address_file),
-                "object_store_memory": object_store_memory}
+        spec = {
+            "nodes": nodes,
+            "temp_dir": str(self.root / "ray"),
+            "address_file": str(address_file),
+            "object_store_memory": object_store_memory,
+        }
         (self.root / "ray").mkdir()
         env = dict(os.environ)
         env[reaper.MARKER] = self.cluster_id
         env["RAY_TMPDIR"] = str(self.root)
         env[raycluster.LOOPBACK_SWITCH] = "0"
         self._reaper = reaper.Handle(
-            {"owner": os.getpid(), "log": str(self.root / "cluster.log"), "grace": grace, "kill_timeout": 5.0,
-             "master": None, "launch": [sys.executable, raycluster.__file__, json.dumps(spec)]}, env, self._log)
+            {
+                "owner": os.getpid(),
+                "log": str(self.root / "cluster.log"),
+                "grace": grace,
+                "kill_timeout": 5.0,
+                "master": None,
+                "launch": [sys.executable, raycluster.__file__, json.dumps(spec)],
+            },
+            env,
+            self._log,
+        )
         deadline = time.monotonic() + timeout
         try:
             while not address_file.exists():
@@ -205,15 +237,19 @@ class LocalCluster:
             r, self._reaper = self._reaper, None
             if r is not None:
                 r.stop(time.monotonic() + self.grace + 20.0)
-                self.last_shutdown = {"seconds": time.monotonic() - t0,
-                                      "sigkilled": [" ".join(e[1:]) for e in r.events if e[0] == "killed"],
-                                      "left": [" ".join(e[1:]) for e in r.events if e[0] == "left"]}
+                self.last_shutdown = {
+                    "seconds": time.monotonic() - t0,
+                    "sigkilled": [" ".join(e[1:]) for e in r.events if e[0] == "killed"],
+                    "left": [" ".join(e[1:]) for e in r.events if e[0] == "left"],
+                }
             self._log.close()
             if not (self.last_shutdown or {}).get("left"):
                 shutil.rmtree(self.root, ignore_errors=True)
         if self.last_shutdown and self.last_shutdown["left"]:
-            raise GraphError(f"processes of the Ray cluster survived SIGKILL: {self.last_shutdown['left']} (log: "
-                             f"{self.root / 'cluster.log'})")
+            raise GraphError(
+                f"processes of the Ray cluster survived SIGKILL: {self.last_shutdown['left']} (log: "
+                f"{self.root / 'cluster.log'})"
+            )
 
 
 def node_layout(num_env_runners: int, nodes: int) -> list[dict]:

@@ -4,6 +4,7 @@ of them) and the paper's action scaling (sec. 4.3)."""
 from __future__ import annotations
 
 import numpy as np
+
 from moverl_sim.urdf import JointLimits
 
 __all__ = ["JointLimits", "ActionScaler"]

@@ -32,7 +32,7 @@ SHIELD_STEP = "/shield/step"
 SHIELD_RESET = "/shield/reset"
 SCENE_CHECK = "/planning_scene/check_state"
 SCENE_FK = "/planning_scene/fk"
-SCENE_WORLD = "/planning_scene/get_world"   # the world as its source (simulator or world server) describes it
+SCENE_WORLD = "/planning_scene/get_world"  # the world as its source (simulator or world server) describes it
 REQUIRED_SERVICES = (SHIELD_STEP, SHIELD_RESET, SCENE_CHECK, SCENE_FK, SCENE_WORLD)
 
 _NODE_MASTER: str | None = None  # rospy allows one node (one master) per process
@@ -48,7 +48,7 @@ class _Watchdog:
 
     def __init__(self):
         self._cv = threading.Condition()
-        self._armed = None      # (deadline on time.monotonic(), action, token)
+        self._armed = None  # (deadline on time.monotonic(), action, token)
         self._wake_at = math.inf  # when the thread wakes up next (inf: when notified)
         self._fired = set()
         self._next = 0
@@ -85,7 +85,7 @@ class _Watchdog:
                     _, action, token = self._armed
                     self._armed = None
                     try:
-                        action()        # under the lock: disarm() returns only after it finished
+                        action()  # under the lock: disarm() returns only after it finished
                     finally:
                         self._fired.add(token)
                     continue
@@ -115,26 +115,30 @@ class _Proxy:
         errors = (self._rospy.ServiceException, self._rospy.ROSException, OSError)
         for attempt in range(2):
             proxy = self._proxy
-            token = self._watchdog.arm(timeout, proxy.close)   # closing the socket unblocks the call
+            token = self._watchdog.arm(timeout, proxy.close)  # closing the socket unblocks the call
             try:
                 return proxy.call(request)
             except errors as exc:
                 if self._watchdog.disarm(token):
                     self._renew()
-                    raise MoveRLError(f"node {_node_of(self.name)} did not answer {self.name} within its deadline of "
-                                      f"{timeout:.1f} s (stalled?): connection dropped, nothing more is sent to it") \
-                        from exc
+                    raise MoveRLError(
+                        f"node {_node_of(self.name)} did not answer {self.name} within its deadline of "
+                        f"{timeout:.1f} s (stalled?): connection dropped, nothing more is sent to it"
+                    ) from exc
                 self._renew()
                 if attempt == 1:
                     from .graph import master_alive
 
                     master = os.environ.get("ROS_MASTER_URI", "")
                     if master and not master_alive(master):
-                        raise MoveRLError(f"the graph is down: its ROS master {master} does not answer (roslaunch "
-                                          f"shuts the whole graph down when a required node, the simulator, dies); "
-                                          f"{self.name}: {exc}") from exc
-                    raise MoveRLError(f"node {_node_of(self.name)} is unreachable ({self.name}: {exc}); is the MoveRL "
-                                      "graph up?") from exc
+                        raise MoveRLError(
+                            f"the graph is down: its ROS master {master} does not answer (roslaunch "
+                            f"shuts the whole graph down when a required node, the simulator, dies); "
+                            f"{self.name}: {exc}"
+                        ) from exc
+                    raise MoveRLError(
+                        f"node {_node_of(self.name)} is unreachable ({self.name}: {exc}); is the MoveRL graph up?"
+                    ) from exc
             finally:
                 self._watchdog.disarm(token)
 
@@ -183,8 +187,9 @@ class RosBackend(Backend):
         wait_timeout: seconds to wait for the services at start-up.
     """
 
-    def __init__(self, graph: str, launch_args: dict, call_timeout: float, reset_timeout: float,
-                 wait_timeout: float = 30.0):
+    def __init__(
+        self, graph: str, launch_args: dict, call_timeout: float, reset_timeout: float, wait_timeout: float = 30.0
+    ):
         if graph not in ("auto", "attach", "launch"):
             raise ValueError(f"graph must be 'auto', 'attach' or 'launch', got {graph!r}")
         self._launch_args = dict(launch_args)
@@ -201,6 +206,7 @@ class RosBackend(Backend):
     # -- graph --------------------------------------------------------------------------------------------------
     def _connect(self, graph: str) -> None:
         import rospy
+
         from moverl_msgs.srv import CheckState, GetFK, GetWorld, ResetRobot, ShieldStep
 
         uri = os.environ.get("ROS_MASTER_URI", "")
@@ -212,8 +218,10 @@ class RosBackend(Backend):
                 time.sleep(0.1)
                 attachable = master_alive(uri) and service_exists(uri, SHIELD_STEP)
         if graph == "attach" and not attachable:
-            raise GraphError(f"no MoveRL graph (service {SHIELD_STEP}) at ROS_MASTER_URI={uri or '<unset>'} "
-                             f"after {self._timeouts[2] if uri else 0} s")
+            raise GraphError(
+                f"no MoveRL graph (service {SHIELD_STEP}) at ROS_MASTER_URI={uri or '<unset>'} "
+                f"after {self._timeouts[2] if uri else 0} s"
+            )
         self.attached = not (graph == "launch" or (graph == "auto" and not attachable))
         if not self.attached:
             args = {k: v for k, v in self._launch_args.items() if k != "world"}
@@ -226,8 +234,10 @@ class RosBackend(Backend):
             if _NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
                 port = int(_NODE_MASTER.rsplit(":", 1)[1])
                 if master_alive(_NODE_MASTER):
-                    raise GraphError("this process already runs a MoveRL graph; close that env first, or use "
-                                     "one process per env (SubprocVecEnv)")
+                    raise GraphError(
+                        "this process already runs a MoveRL graph; close that env first, or use "
+                        "one process per env (SubprocVecEnv)"
+                    )
             self._graph = LaunchedGraph(args, port=port, wait_for=REQUIRED_SERVICES)
             uri = self._graph.uri
         init_node(uri)
@@ -244,15 +254,19 @@ class RosBackend(Backend):
         self._fk = _Proxy(SCENE_FK, GetFK, self._watchdog, call_timeout)
         self._world = _Proxy(SCENE_WORLD, GetWorld, self._watchdog, call_timeout)
         self._proxies = (self._step, self._reset, self._check, self._fk, self._world)
-        self._srv = {"step": ShieldStep._request_class, "reset": ResetRobot._request_class,
-                     "check": CheckState._request_class, "fk": GetFK._request_class}
+        self._srv = {
+            "step": ShieldStep._request_class,
+            "reset": ResetRobot._request_class,
+            "check": CheckState._request_class,
+            "fk": GetFK._request_class,
+        }
         self.urdf = rospy.get_param("/robot_description")
         self.joints = list(rospy.get_param("/robot/joints"))
         self.home = list(rospy.get_param("/robot/home"))
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
         self.world = _world_info(self._world(GetWorld._request_class()).world)
         simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
-        self.restartable = simulated   # never a real robot's graph, nor one this env did not launch
+        self.restartable = simulated  # never a real robot's graph, nor one this env did not launch
 
     @property
     def graph(self):
@@ -271,21 +285,36 @@ class RosBackend(Backend):
         res = self._step(self._srv["step"](target=target.tolist(), duration=float(duration)))
         c = res.contacts
         known = c.available
-        return StepResult(verdict=res.verdict, message=res.message, q=np.array(res.state.position),
-                          stamp=res.state.header.stamp.to_sec(), ee=_pose_array(res.ee_pose),
-                          contacts=(c.world_contacts + c.self_contacts) if known else -1,
-                          contact_substeps=c.substeps_in_contact if known else -1, unsafe_cause=res.unsafe_cause,
-                          strategy=res.strategy, planning_time=res.planning_time,
-                          driver_error_code=res.driver_error_code,
-                          timing={"state_check": res.state_check_time, "path_check": res.path_check_time,
-                                  "planning": res.planning_time, "execution": res.execution_time})
+        return StepResult(
+            verdict=res.verdict,
+            message=res.message,
+            q=np.array(res.state.position),
+            stamp=res.state.header.stamp.to_sec(),
+            ee=_pose_array(res.ee_pose),
+            contacts=(c.world_contacts + c.self_contacts) if known else -1,
+            contact_substeps=c.substeps_in_contact if known else -1,
+            unsafe_cause=res.unsafe_cause,
+            strategy=res.strategy,
+            planning_time=res.planning_time,
+            driver_error_code=res.driver_error_code,
+            timing={
+                "state_check": res.state_check_time,
+                "path_check": res.path_check_time,
+                "planning": res.planning_time,
+                "execution": res.execution_time,
+            },
+        )
 
     def reset(self, q: "np.ndarray | None") -> ResetResult:
         res = self._reset(self._srv["reset"](positions=[] if q is None else [float(x) for x in q]))
-        return ResetResult(success=res.success, message=res.message,
-                           q=np.array(res.state.position) if res.state.position else None,
-                           stamp=res.state.header.stamp.to_sec(), motion_epoch=res.motion_epoch.to_sec(),
-                           unreachable=res.unreachable)
+        return ResetResult(
+            success=res.success,
+            message=res.message,
+            q=np.array(res.state.position) if res.state.position else None,
+            stamp=res.state.header.stamp.to_sec(),
+            motion_epoch=res.motion_epoch.to_sec(),
+            unreachable=res.unreachable,
+        )
 
     def check_state(self, q: np.ndarray) -> bool:
         from moverl_msgs.srv import CheckStateResponse
@@ -315,8 +344,17 @@ class RosBackend(Backend):
 
 
 def _pose_array(pose) -> np.ndarray:
-    return np.array([pose.position.x, pose.position.y, pose.position.z,
-                     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w])
+    return np.array(
+        [
+            pose.position.x,
+            pose.position.y,
+            pose.position.z,
+            pose.orientation.x,
+            pose.orientation.y,
+            pose.orientation.z,
+            pose.orientation.w,
+        ]
+    )
 
 
 def _world_info(w) -> WorldInfo:
@@ -324,8 +362,15 @@ def _world_info(w) -> WorldInfo:
     obstacles = []
     for o in w.objects:
         m = o.motion
-        motion = (ObjectMotion(axis=tuple(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase)
-                  if m.type != 0 and m.amplitude > 0.0 else None)
+        motion = (
+            ObjectMotion(axis=tuple(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase)
+            if m.type != 0 and m.amplitude > 0.0
+            else None
+        )
         obstacles.append(Obstacle(id=o.id, pose=_pose_array(o.pose), observed=bool(o.observed), motion=motion))
-    return WorldInfo(name=w.name, goal=tuple(w.goal) if len(w.goal) else None, obstacles=tuple(obstacles),
-                     motion_epoch=w.motion_epoch.to_sec())
+    return WorldInfo(
+        name=w.name,
+        goal=tuple(w.goal) if len(w.goal) else None,
+        obstacles=tuple(obstacles),
+        motion_epoch=w.motion_epoch.to_sec(),
+    )

@@ -101,16 +101,28 @@ def load_run(path: Path) -> Run | None:
     config = {}
     if (path / "config.yaml").exists():
         import yaml
+
         config = yaml.safe_load((path / "config.yaml").read_text()) or {}
-    return Run(path=path, algo=m["algo"], scenario=scenario_of(m["env"]), shield=m["shield"], seed=int(m["seed"]),
-               episodes=read_episodes(path / "episodes.csv"), summary=summary, config=config)
+    return Run(
+        path=path,
+        algo=m["algo"],
+        scenario=scenario_of(m["env"]),
+        shield=m["shield"],
+        seed=int(m["seed"]),
+        episodes=read_episodes(path / "episodes.csv"),
+        summary=summary,
+        config=config,
+    )
 
 
 def load_runs(root: Path, finished_only: bool = False) -> list[Run]:
     """Every run folder directly under root, sorted by scenario (paper order), shield, seed."""
     root = Path(root)
-    runs = [r for r in (load_run(p) for p in sorted(root.iterdir()) if p.is_dir()) if r is not None] \
-        if root.exists() else []
+    runs = (
+        [r for r in (load_run(p) for p in sorted(root.iterdir()) if p.is_dir()) if r is not None]
+        if root.exists()
+        else []
+    )
     if finished_only:
         runs = [r for r in runs if r.finished]
     order = {s: i for i, s in enumerate(SCENARIOS)}
@@ -148,8 +160,13 @@ def aggregate_curves(curves) -> dict:
     n = np.sum(~np.isnan(a), axis=0)
     with warnings.catch_warnings():  # all-NaN columns (no seed reached that step yet) stay NaN
         warnings.simplefilter("ignore", RuntimeWarning)
-        return {"mean": np.nanmean(a, axis=0), "std": np.nanstd(a, axis=0), "min": np.nanmin(a, axis=0),
-                "max": np.nanmax(a, axis=0), "n": n}
+        return {
+            "mean": np.nanmean(a, axis=0),
+            "std": np.nanstd(a, axis=0),
+            "min": np.nanmin(a, axis=0),
+            "max": np.nanmax(a, axis=0),
+            "n": n,
+        }
 
 
 def mean_std(values) -> tuple[float, float]:
@@ -188,20 +205,29 @@ def summarize(runs: list[Run], last: int = 200) -> list[dict]:
         sps = [float(r.summary.get("steps_per_second", math.nan)) for r in rs]
         s_mean, s_std = mean_std(succ)
         w_mean, w_std = mean_std(walls)
-        rows.append({
-            "scenario": scenario, "shield": shield, "seeds": " ".join(str(r.seed) for r in rs), "n_runs": len(rs),
-            "success_last_mean": s_mean, "success_last_std": s_std,
-            "success_last_per_seed": " ".join(f"{x:.3f}" for x in succ),
-            "episodes_mean": float(np.mean(episodes)),
-            "contacts_total": int(sum(contacts)), "contacts_per_run": " ".join(str(c) for c in contacts),
-            "contacts_per_episode": float(sum(contacts) / max(sum(episodes), 1)),
-            "runs_with_contacts": int(sum(c > 0 for c in contacts)),
-            "interventions_total": sum(_total(r, "interventions") for r in rs),
-            "replanned_total": sum(_total(r, "replanned") for r in rs),
-            "truncated_total": sum(_total(r, "truncated") for r in rs),
-            "wall_time_mean": w_mean, "wall_time_std": w_std, "wall_time_max": float(np.nanmax(walls)),
-            "steps_per_second_mean": mean_std(sps)[0],
-        })
+        rows.append(
+            {
+                "scenario": scenario,
+                "shield": shield,
+                "seeds": " ".join(str(r.seed) for r in rs),
+                "n_runs": len(rs),
+                "success_last_mean": s_mean,
+                "success_last_std": s_std,
+                "success_last_per_seed": " ".join(f"{x:.3f}" for x in succ),
+                "episodes_mean": float(np.mean(episodes)),
+                "contacts_total": int(sum(contacts)),
+                "contacts_per_run": " ".join(str(c) for c in contacts),
+                "contacts_per_episode": float(sum(contacts) / max(sum(episodes), 1)),
+                "runs_with_contacts": int(sum(c > 0 for c in contacts)),
+                "interventions_total": sum(_total(r, "interventions") for r in rs),
+                "replanned_total": sum(_total(r, "replanned") for r in rs),
+                "truncated_total": sum(_total(r, "truncated") for r in rs),
+                "wall_time_mean": w_mean,
+                "wall_time_std": w_std,
+                "wall_time_max": float(np.nanmax(walls)),
+                "steps_per_second_mean": mean_std(sps)[0],
+            }
+        )
     return rows
 
 
@@ -224,9 +250,11 @@ def _pct(m: float, s: float) -> str:
 
 def markdown_table(rows: list[dict], last: int = 200) -> str:
     """The results table (GitHub markdown)."""
-    head = (f"| scenario | shield | runs (seeds) | success, last {last} episodes (mean ± std over seeds) | "
-            "per seed | episodes per run | ground-truth contacts: total (per run) | contacts / episode | "
-            "shield interventions (discarded) | replanned | truncated | wall-clock per run (s) | steps/s |")
+    head = (
+        f"| scenario | shield | runs (seeds) | success, last {last} episodes (mean ± std over seeds) | "
+        "per seed | episodes per run | ground-truth contacts: total (per run) | contacts / episode | "
+        "shield interventions (discarded) | replanned | truncated | wall-clock per run (s) | steps/s |"
+    )
     sep = "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"
     lines = [head, sep]
     for r in rows:
@@ -236,25 +264,31 @@ def markdown_table(rows: list[dict], last: int = 200) -> str:
             f"{r['episodes_mean']:.0f} | {r['contacts_total']} ({r['contacts_per_run']}) | "
             f"{r['contacts_per_episode']:.2f} | {r['interventions_total']} | {r['replanned_total']} | "
             f"{r['truncated_total']} | {r['wall_time_mean']:.0f} ± {r['wall_time_std']:.0f} (max "
-            f"{r['wall_time_max']:.0f}) | {r['steps_per_second_mean']:.0f} |")
+            f"{r['wall_time_max']:.0f}) | {r['steps_per_second_mean']:.0f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
 def per_run_table(runs: list[Run], last: int = 200) -> str:
     """One markdown row per run (finished or not): episodes, success over the last `last`, contacts,
     interventions, wall-clock and speed (from summary.json, '-' while the run is unfinished)."""
-    lines = [f"| run | finished | episodes | env steps | success, last {last} | contacts | interventions | "
-             "replanned | wall-clock (s) | steps/s |", "|" + "|".join(["---"] * 10) + "|"]
+    lines = [
+        f"| run | finished | episodes | env steps | success, last {last} | contacts | interventions | "
+        "replanned | wall-clock (s) | steps/s |",
+        "|" + "|".join(["---"] * 10) + "|",
+    ]
     for r in runs:
         ts = r.episodes.get("timesteps", np.zeros(0))
         sm = r.summary or {}
         wall = f"{sm['wall_time']:.0f}" if "wall_time" in sm else "-"
         sps = f"{sm['steps_per_second']:.0f}" if "steps_per_second" in sm else "-"
         succ = success_last(r, last)
-        lines.append(f"| {r.path.name} | {'yes' if r.finished else 'no'} | {r.n_episodes} | "
-                     f"{int(ts[-1]) if ts.size else 0} | {'n/a' if not np.isfinite(succ) else f'{100 * succ:.1f} %'} | "
-                     f"{_total(r, 'contacts')} | {_total(r, 'interventions')} | {_total(r, 'replanned')} | "
-                     f"{wall} | {sps} |")
+        lines.append(
+            f"| {r.path.name} | {'yes' if r.finished else 'no'} | {r.n_episodes} | "
+            f"{int(ts[-1]) if ts.size else 0} | {'n/a' if not np.isfinite(succ) else f'{100 * succ:.1f} %'} | "
+            f"{_total(r, 'contacts')} | {_total(r, 'interventions')} | {_total(r, 'replanned')} | "
+            f"{wall} | {sps} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -263,8 +297,14 @@ def settings_groups(runs: list[Run]) -> dict[str, list[str]]:
     one group means the runs are not comparable (the env or the hyper-parameters changed between runs)."""
     groups: dict[str, list[str]] = {}
     for r in runs:
-        key = json.dumps({"task": r.config.get("task"), "hyperparams": r.config.get("hyperparams"),
-                          "n_timesteps": r.config.get("n_timesteps")}, sort_keys=True)
+        key = json.dumps(
+            {
+                "task": r.config.get("task"),
+                "hyperparams": r.config.get("hyperparams"),
+                "n_timesteps": r.config.get("n_timesteps"),
+            },
+            sort_keys=True,
+        )
         groups.setdefault(key, []).append(r.path.name)
     return groups
 
@@ -272,14 +312,20 @@ def settings_groups(runs: list[Run]) -> dict[str, list[str]]:
 def missing_runs(root: Path, scenarios, shields, seeds, algo: str = "ppo") -> list[str]:
     """Names of the planned runs without a summary.json under root."""
     root = Path(root)
-    return [run_name(algo, env_id(sc), sh, sd) for sc in scenarios for sh in shields for sd in seeds
-            if not (root / run_name(algo, env_id(sc), sh, sd) / "summary.json").exists()]
+    return [
+        run_name(algo, env_id(sc), sh, sd)
+        for sc in scenarios
+        for sh in shields
+        for sd in seeds
+        if not (root / run_name(algo, env_id(sc), sh, sd) / "summary.json").exists()
+    ]
 
 
 # -- figures ----------------------------------------------------------------------------------------------
 def _grid_for(runs: list[Run], points: int = 200) -> np.ndarray:
-    tmax = max((float(r.episodes["timesteps"][-1]) for r in runs if r.episodes.get("timesteps", np.zeros(0)).size),
-               default=1.0)
+    tmax = max(
+        (float(r.episodes["timesteps"][-1]) for r in runs if r.episodes.get("timesteps", np.zeros(0)).size), default=1.0
+    )
     return np.linspace(0.0, tmax, points)
 
 
@@ -301,6 +347,7 @@ def _scenarios_present(runs: list[Run]) -> list[str]:
 def plot_contacts(runs: list[Run], path: Path, window: int = 20, title_suffix: str = "") -> Path:
     """Fig. 6: ground-truth contacts per episode vs env steps, shield on vs off, one panel per scenario."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -322,8 +369,12 @@ def plot_contacts(runs: list[Run], path: Path, window: int = 20, title_suffix: s
         ax.grid(alpha=0.3)
         ax.set_ylim(bottom=-0.02 * max(ax.get_ylim()[1], 1.0))
     axes[0][0].set_ylabel(f"contacts per episode\n(ground truth, {window}-episode mean)")
-    _finish(fig, "Fig. 6 (reproduced): ground-truth collisions (contact pairs) per episode, with and without the "
-                 "shield; line = mean over seeds, band = min-max" + title_suffix, axes)
+    _finish(
+        fig,
+        "Fig. 6 (reproduced): ground-truth collisions (contact pairs) per episode, with and without the "
+        "shield; line = mean over seeds, band = min-max" + title_suffix,
+        axes,
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -345,8 +396,15 @@ def _finish(fig, title: str, axes) -> None:
     top = 1.0 - (0.045 * n_lines + (0.06 if labels else 0)) * 4.4 / fig.get_size_inches()[1]
     fig.suptitle(text, fontsize=10, y=0.995)
     if labels:
-        fig.legend([handles[lab] for lab in labels], labels, loc="upper center", ncol=len(labels), fontsize=9,
-                   frameon=False, bbox_to_anchor=(0.5, top + 0.055 * 4.4 / fig.get_size_inches()[1]))
+        fig.legend(
+            [handles[lab] for lab in labels],
+            labels,
+            loc="upper center",
+            ncol=len(labels),
+            fontsize=9,
+            frameon=False,
+            bbox_to_anchor=(0.5, top + 0.055 * 4.4 / fig.get_size_inches()[1]),
+        )
     fig.tight_layout(rect=(0, 0, 1, top))
 
 
@@ -354,13 +412,15 @@ def plot_learning(runs: list[Run], path: Path, window: int = 50, title_suffix: s
     """Fig. 7: episode return (top) and success rate (bottom) vs env steps, shield on vs off, a column per
     scenario; mean over seeds with a min-max band."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     runs = [r for r in runs if r.n_episodes > 0]
     scenarios = _scenarios_present(runs) or ["(no runs)"]
-    fig, axes = plt.subplots(2, len(scenarios), figsize=(max(5.2 * len(scenarios), 8.0), 7.4), squeeze=False,
-                             sharex="col")
+    fig, axes = plt.subplots(
+        2, len(scenarios), figsize=(max(5.2 * len(scenarios), 8.0), 7.4), squeeze=False, sharex="col"
+    )
     grid = _grid_for(runs)
     for j, sc in enumerate(scenarios):
         counts = []
@@ -380,8 +440,12 @@ def plot_learning(runs: list[Run], path: Path, window: int = 50, title_suffix: s
             axes[i][j].grid(alpha=0.3)
     axes[0][0].set_ylabel(f"episode return ({window}-episode mean)")
     axes[1][0].set_ylabel(f"success rate ({window}-episode mean)")
-    _finish(fig, "Fig. 7 (reproduced): PPO learning curves (training episodes) with and without the shield; "
-                 "line = mean over seeds, band = min-max; dotted: 90 % success" + title_suffix, axes)
+    _finish(
+        fig,
+        "Fig. 7 (reproduced): PPO learning curves (training episodes) with and without the shield; "
+        "line = mean over seeds, band = min-max; dotted: 90 % success" + title_suffix,
+        axes,
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -12,9 +12,27 @@ import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[2] / "config" / "hyperparams"
-EPISODE_FIELDS = ["episode", "env", "timesteps", "return", "length", "success", "interventions", "discarded_self",
-                  "discarded_pose", "discarded_path", "discarded_start", "replanned", "contacts",
-                  "contact_substeps", "cost", "wall_time", "truncated", "graph_failure", "graph_restarts"]
+EPISODE_FIELDS = [
+    "episode",
+    "env",
+    "timesteps",
+    "return",
+    "length",
+    "success",
+    "interventions",
+    "discarded_self",
+    "discarded_pose",
+    "discarded_path",
+    "discarded_start",
+    "replanned",
+    "contacts",
+    "contact_substeps",
+    "cost",
+    "wall_time",
+    "truncated",
+    "graph_failure",
+    "graph_restarts",
+]
 
 
 def load_hyperparams(algo: str, env_id: str, path: Path | None = None) -> dict:
@@ -45,7 +63,7 @@ class EpisodeLogger(BaseCallback):
         self.csv_path = Path(csv_path)
         self.rows: list[dict] = []
         self.totals = Counter()
-        self.failures: list[str] = []   # what failed, for every episode a graph failure ended
+        self.failures: list[str] = []  # what failed, for every episode a graph failure ended
         self.restarts: dict[int, int] = {}  # sub-env index -> its graph relaunches so far
         self.failure_counts: dict[int, int] = {}  # sub-env index -> its graph failures so far (steps and resets)
         self._t0 = time.perf_counter()
@@ -72,8 +90,8 @@ class EpisodeLogger(BaseCallback):
             ep["contacts"] += max(info.get("contacts", 0), 0)
             ep["contact_substeps"] += max(info.get("contact_substeps", 0), 0)
             ep["cost"] += info.get("cost", 0.0)
-            ep["graph_restarts"] = info.get("graph_restarts", 0)   # relaunches so far (env recovery)
-            if verdict == "graph_failed":                           # this episode ended because the graph failed
+            ep["graph_restarts"] = info.get("graph_restarts", 0)  # relaunches so far (env recovery)
+            if verdict == "graph_failed":  # this episode ended because the graph failed
                 ep["graph_failure"] = 1
                 self.failures.append(info.get("graph_failure", ""))
             self.restarts[i] = int(ep["graph_restarts"])
@@ -86,13 +104,28 @@ class EpisodeLogger(BaseCallback):
 
     def _finish(self, ep: Counter, env_index: int) -> None:
         row = {k: ep.get(k, 0) for k in EPISODE_FIELDS}
-        row.update(episode=len(self.rows) + 1, env=env_index, timesteps=self.num_timesteps,
-                   wall_time=round(time.perf_counter() - self._t0, 3), **{"return": round(ep["return"], 4)})
+        row.update(
+            episode=len(self.rows) + 1,
+            env=env_index,
+            timesteps=self.num_timesteps,
+            wall_time=round(time.perf_counter() - self._t0, 3),
+            **{"return": round(ep["return"], 4)},
+        )
         self.rows.append(row)
         self._writer.writerow(row)
         self._file.flush()
-        for key in ("interventions", "replanned", "truncated", "contacts", "contact_substeps", "cost",
-                    "discarded_self", "discarded_pose", "discarded_path", "discarded_start"):
+        for key in (
+            "interventions",
+            "replanned",
+            "truncated",
+            "contacts",
+            "contact_substeps",
+            "cost",
+            "discarded_self",
+            "discarded_pose",
+            "discarded_path",
+            "discarded_start",
+        ):
             self.totals[key] += row[key]
         for key in ("return", "length", "success", "interventions", "contacts", "cost", "graph_restarts"):
             self.logger.record(f"episode/{key}", float(row[key]))
@@ -110,11 +143,13 @@ class EpisodeLogger(BaseCallback):
             "interventions": int(self.totals["interventions"]),
             "replanned": int(self.totals["replanned"]),
             "truncated": int(self.totals["truncated"]),
-            "by_type": {k: int(self.totals[k]) for k in ("discarded_self", "discarded_pose", "discarded_path",
-                                                         "discarded_start")},
+            "by_type": {
+                k: int(self.totals[k])
+                for k in ("discarded_self", "discarded_pose", "discarded_path", "discarded_start")
+            },
             "contacts": int(self.totals["contacts"]),
             "contact_substeps": int(self.totals["contact_substeps"]),
-            "graph_failures": int(sum(self.failure_counts.values())),   # incl. those a reset found between episodes
+            "graph_failures": int(sum(self.failure_counts.values())),  # incl. those a reset found between episodes
             "graph_restarts": int(sum(self.restarts.values())),
             "failures": self.failures,
             "steps_per_second": self.num_timesteps / elapsed if elapsed > 0 else float("nan"),

@@ -79,7 +79,7 @@ struct WorldObject {
   /// BOX [x, y, z]; SPHERE [radius]; CYLINDER/CONE [height, radius].
   std::vector<double> dimensions;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< pose of the shape's centre, base frame (at t = 0)
-  ObstacleMotion motion;                                    ///< kNone: static
+  ObstacleMotion motion;                                   ///< kNone: static
 };
 
 /// \brief Verdict of a state or path check.
@@ -94,9 +94,9 @@ struct ContactPair {
 
 /// \brief What to check in one state.
 struct CollisionRequest {
-  bool check_self = true;      ///< self collisions (allowed-collision matrix applied)
-  bool check_world = true;     ///< robot vs (inflated) world objects
-  std::size_t max_pairs = 1;   ///< stop after this many colliding pairs; 0: verdict only (no names filled)
+  bool check_self = true;     ///< self collisions (allowed-collision matrix applied)
+  bool check_world = true;    ///< robot vs (inflated) world objects
+  std::size_t max_pairs = 1;  ///< stop after this many colliding pairs; 0: verdict only (no names filled)
   /// Fill ContactPair::depth from FCL's contact (libccd MPR). Approximate: unreliable for vertex-only convex hulls.
   bool compute_depth = false;
 };
@@ -116,9 +116,9 @@ struct CollisionResult {
 
 /// \brief What to check along a straight joint-space segment.
 struct PathCheckRequest {
-  CollisionRequest state;          ///< per-state request (the pairs reported are those of the first colliding state)
-  bool check_start = true;         ///< also check the start state (t = 0)
-  bool check_goal = true;          ///< also check the goal state (t = 1)
+  CollisionRequest state;   ///< per-state request (the pairs reported are those of the first colliding state)
+  bool check_start = true;  ///< also check the start state (t = 0)
+  bool check_goal = true;   ///< also check the goal state (t = 1)
   /// true: states are checked in order from start to goal, so the reported fraction is the first collision.
   /// false: goal first then bisection order (faster rejection; the fraction is then *a* colliding one).
   bool find_first = true;

@@ -36,8 +36,8 @@ enum class AcmReason : std::uint8_t { kEnabled = 0, kAdjacent, kRigid, kAlways, 
 ///        ones (NaN, -1) are rejected by create().
 struct FclCheckerOptions {
   double padding = kUnset;  ///< world obstacles inflated by this (m)
-  /// Each robot link is inflated by at least this (m) in self-collision checks (a pair: 2x); covers the physics engine's
-  /// collision margins (PyBullet: 1 mm per convex hull) and motion between path samples (path_resolution / 2).
+  /// Each robot link is inflated by at least this (m) in self-collision checks (a pair: 2x); covers the physics
+  /// engine's collision margins (PyBullet: 1 mm per convex hull) and motion between path samples (path_resolution / 2).
   double self_padding = kUnset;
   double path_resolution = kUnset;  ///< max motion of any robot point between checked states (m)
   MeshMode mesh_mode = MeshMode::kConvexHull;
@@ -50,7 +50,7 @@ struct FclCheckerOptions {
 /// \brief One collision geometry of a link as the checker holds it (diagnostics, tests, the parity tool).
 struct LinkGeometry {
   ShapeType type = ShapeType::kBox;
-  std::string piece;  ///< mesh piece (OBJ object/group name), "" otherwise
+  std::string piece;                                         ///< mesh piece (OBJ object/group name), "" otherwise
   Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  ///< shape frame in the link frame
   Eigen::Vector3d dims = Eigen::Vector3d::Zero();            ///< primitives, as CollisionShapeSpec::dims
   /// Meshes: the points (shape frame) whose convex hull is the shape in convex_hull mode (the mesh's vertices in
@@ -78,8 +78,7 @@ class FclCollisionChecker : public CollisionChecker {
   void setMotionWindow(double t0, double t1) override;
   bool hasMovingObstacles() const override { return !moving_.empty(); }
   void checkState(const double* q, const CollisionRequest& request, CollisionResult* result) override;
-  void checkPath(const double* q0, const double* q1, const PathCheckRequest& request,
-                 PathCheckResult* result) override;
+  void checkPath(const double* q0, const double* q1, const PathCheckRequest& request, PathCheckResult* result) override;
   std::size_t interiorStateCount(const double* q0, const double* q1) const override;
 
   /// \brief Sensed obstacles: an occupancy octree in the base frame (occupied cells are obstacles, unknown cells
@@ -136,14 +135,14 @@ class FclCollisionChecker : public CollisionChecker {
 
   const RobotModel& model_;
   FclCheckerOptions options_;
-  std::vector<Geom> geoms_;                   // all robot collision shapes
-  std::vector<std::vector<int>> link_geoms_;  // per link
-  std::vector<AcmReason> acm_;                // n_links x n_links
+  std::vector<Geom> geoms_;                      // all robot collision shapes
+  std::vector<std::vector<int>> link_geoms_;     // per link
+  std::vector<AcmReason> acm_;                   // n_links x n_links
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
   std::shared_ptr<fcl::OcTree<double>> octree_;  // sensed obstacles (may be null)
-  std::vector<std::size_t> moving_;           // indices into world_ of moving obstacles
+  std::vector<std::size_t> moving_;              // indices into world_ of moving obstacles
   double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();
   std::vector<double> joint_radius_;
   double reach_radius_ = 0.0;

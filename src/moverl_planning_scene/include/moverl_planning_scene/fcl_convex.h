@@ -7,8 +7,8 @@
 #include <memory>
 #include <vector>
 
-#include <Eigen/Core>
 #include <fcl/geometry/shape/convex.h>
+#include <Eigen/Core>
 
 namespace moverl_planning_scene {
 

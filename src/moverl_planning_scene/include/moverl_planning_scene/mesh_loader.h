@@ -32,7 +32,7 @@ bool loadMeshPieces(const std::string& path, const Eigen::Vector3d& scale, bool 
                     std::vector<MeshPiece>* pieces, std::string* error);
 
 /// \brief Parses Wavefront OBJ text as loadMeshPieces does for .obj files (`source` names it in errors).
-bool parseObj(const std::string& text, const Eigen::Vector3d& scale, std::vector<MeshPiece>* pieces,
-              std::string* error, const std::string& source = "OBJ text");
+bool parseObj(const std::string& text, const Eigen::Vector3d& scale, std::vector<MeshPiece>* pieces, std::string* error,
+              const std::string& source = "OBJ text");
 
 }  // namespace moverl_planning_scene

@@ -17,11 +17,11 @@ namespace moverl_planning_scene {
 /// \brief Tunables of the planner. Their values live in config/planning_scene.yaml (tunables.h reads them); unset ones
 ///        ("", NaN) are rejected by PlanningScene::create().
 struct PlannerOptions {
-  std::string planner;             ///< default planner name
-  double planning_time = kUnset;   ///< default time limit per call (s)
-  double range = kUnset;           ///< max extension of tree planners (rad); 0: OMPL default
-  bool simplify = true;            ///< shortcut the solution within the remaining time
-  unsigned seed = 0;               ///< OMPL global RNG seed (0: not seeded). Applied once per process.
+  std::string planner;            ///< default planner name
+  double planning_time = kUnset;  ///< default time limit per call (s)
+  double range = kUnset;          ///< max extension of tree planners (rad); 0: OMPL default
+  bool simplify = true;           ///< shortcut the solution within the remaining time
+  unsigned seed = 0;              ///< OMPL global RNG seed (0: not seeded). Applied once per process.
 };
 
 /// \brief Outcome of a planning call (values match moverl_msgs/PlanPath).

@@ -2,14 +2,15 @@
  * \file occupancy_map.h
  * \brief Sensed obstacles: an OctoMap occupancy octree updated from depth-camera point clouds. ROS-free.
  *
- * Update rule (octomap_server's sensor model, discretized insertion): every beam from the sensor origin to a point marks the cells it
- * crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than max_range mark free
- * space up to max_range only (no-return readings at a camera's far plane clear space this way). Points that belong
- * to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear the cells
- * before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when other
- * beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with any
- * robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Cells never observed are unknown and count as free for collision checking (as in MoveIt).
- * Clearing: when an obstacle moves away, beams now pass through its old cells and turn them free.
+ * Update rule (octomap_server's sensor model, discretized insertion): every beam from the sensor origin to a point
+ * marks the cells it crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than
+ * max_range mark free space up to max_range only (no-return readings at a camera's far plane clear space this way).
+ * Points that belong to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear
+ * the cells before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when
+ * other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with
+ * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Cells never observed are unknown
+ * and count as free for collision checking (as in MoveIt). Clearing: when an obstacle moves away, beams now pass
+ * through its old cells and turn them free.
  */
 #pragma once
 
@@ -30,11 +31,11 @@ namespace moverl_planning_scene {
 /// \brief Tunables of the occupancy map. Their values live in config/planning_scene.yaml's octomap: section (tunables.h
 ///        reads them); unset ones (NaN) are rejected by create().
 struct OccupancyMapOptions {
-  double resolution = kUnset;           ///< leaf size (m)
-  double max_range = kUnset;            ///< beams are integrated up to this range (m); longer ones clear space only
-  double prob_hit = kUnset;             ///< occupancy probability of a hit
-  double prob_miss = kUnset;            ///< occupancy probability of a miss
-  double clamp_min = kUnset;            ///< clamping of cell probabilities (lets cells change state quickly)
+  double resolution = kUnset;  ///< leaf size (m)
+  double max_range = kUnset;   ///< beams are integrated up to this range (m); longer ones clear space only
+  double prob_hit = kUnset;    ///< occupancy probability of a hit
+  double prob_miss = kUnset;   ///< occupancy probability of a miss
+  double clamp_min = kUnset;   ///< clamping of cell probabilities (lets cells change state quickly)
   double clamp_max = kUnset;
   double occupancy_threshold = kUnset;  ///< a cell above this probability is an obstacle
   /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Empty: unbounded.
@@ -44,12 +45,12 @@ struct OccupancyMapOptions {
 
 /// \brief What one integration did (logs, tests, the status topic).
 struct MapUpdateStats {
-  std::size_t points = 0;         ///< points in the cloud
-  std::size_t invalid = 0;        ///< non-finite points (skipped)
-  std::size_t robot = 0;          ///< points on the robot (free space before them only)
-  std::size_t beyond_range = 0;   ///< points beyond max_range (free space only)
-  std::size_t hit_cells = 0;      ///< distinct cells marked occupied
-  std::size_t free_cells = 0;     ///< distinct cells marked free
+  std::size_t points = 0;        ///< points in the cloud
+  std::size_t invalid = 0;       ///< non-finite points (skipped)
+  std::size_t robot = 0;         ///< points on the robot (free space before them only)
+  std::size_t beyond_range = 0;  ///< points beyond max_range (free space only)
+  std::size_t hit_cells = 0;     ///< distinct cells marked occupied
+  std::size_t free_cells = 0;    ///< distinct cells marked free
 };
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.

@@ -1,6 +1,6 @@
 /**
  * \file ros_param.h
- * \brief Parameters without code defaults: every tunable is set in one commented YAML file (config/*.yaml) or by its
+ * \brief Parameters without code defaults: every tunable is set in one commented YAML file under config/ or by its
  *        launch file, and a missing one is an error that names where it belongs.
  */
 #pragma once
@@ -20,7 +20,8 @@ template <class T>
 T requiredParam(const ros::NodeHandle& nh, const std::string& name, const std::string& source) {
   T value;
   if (!nh.getParam(name, value)) {
-    throw std::runtime_error("parameter " + nh.resolveName(name) + " is not set or has the wrong type (" + source + ")");
+    throw std::runtime_error("parameter " + nh.resolveName(name) + " is not set or has the wrong type (" + source +
+                             ")");
   }
   return value;
 }

@@ -63,8 +63,8 @@ void readSceneTunables(const Tunables& t, PlanningSceneOptions* o);
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
 
 /// \brief The robot's options from a robot config (config/robots/<robot>.yaml: robot/joints, base_link, ee_link,
-///        fixed_joint_positions), for tools and tests without a ROS parameter server; *urdf_uri gets robot/urdf as written
-///        (the caller resolves it). False with *error naming a missing or malformed key.
+///        fixed_joint_positions), for tools and tests without a ROS parameter server; *urdf_uri gets robot/urdf as
+///        written (the caller resolves it). False with *error naming a missing or malformed key.
 bool loadRobotConfig(const std::string& path, RobotModelOptions* o, std::string* urdf_uri, std::string* error);
 
 }  // namespace moverl_planning_scene

@@ -15,18 +15,18 @@ namespace moverl_shield {
 
 /// Verdicts of one shield step. Values equal the constants of moverl_msgs/ShieldStep.srv.
 enum class Verdict : uint8_t {
-  kSafe = 0,              ///< straight move free: executed directly
-  kReplanned = 1,         ///< straight path collided: a collision-free plan was executed
-  kDiscardedSelf = 2,     ///< target in self collision: held still
-  kDiscardedPose = 3,     ///< target collides with the world: held still
-  kDiscardedPath = 4,     ///< path collided and no plan was found: held still
-  kDiscardedStart = 5,    ///< the current state is not free: held still
-  kUnchecked = 6,         ///< shield disabled: executed straight without checks
-  kTruncated = 7,         ///< unsafe target (last_safe): moved straight to the last safe state before the collision
-  kAborted = 8,           ///< the driver stopped the move on the way (path/goal tolerance): the episode should end
-  kInvalidRequest = 10,   ///< malformed target: nothing moves
-  kSceneUnavailable = 11, ///< planning scene unreachable, failed or late: fail closed
-  kExecutionFailed = 12,  ///< the driver refused the trajectory
+  kSafe = 0,                ///< straight move free: executed directly
+  kReplanned = 1,           ///< straight path collided: a collision-free plan was executed
+  kDiscardedSelf = 2,       ///< target in self collision: held still
+  kDiscardedPose = 3,       ///< target collides with the world: held still
+  kDiscardedPath = 4,       ///< path collided and no plan was found: held still
+  kDiscardedStart = 5,      ///< the current state is not free: held still
+  kUnchecked = 6,           ///< shield disabled: executed straight without checks
+  kTruncated = 7,           ///< unsafe target (last_safe): moved straight to the last safe state before the collision
+  kAborted = 8,             ///< the driver stopped the move on the way (path/goal tolerance): the episode should end
+  kInvalidRequest = 10,     ///< malformed target: nothing moves
+  kSceneUnavailable = 11,   ///< planning scene unreachable, failed or late: fail closed
+  kExecutionFailed = 12,    ///< the driver refused the trajectory
   kDriverUnavailable = 13,  ///< the driver is unreachable or gave no result by the deadline: fail closed
   kStateUnavailable = 14,   ///< no fresh, complete, in-limits joint state: fail closed
 };
@@ -60,9 +60,9 @@ using Waypoints = std::vector<std::vector<double>>;
 /// \brief The planning scene's answer for one move (the fields of ValidateMotion's response the shield uses).
 struct SceneAnswer {
   SceneOutcome outcome = SceneOutcome::kInvalidRequest;
-  bool replanned = false;           ///< PATH_COLLISION: a replacement plan was found
-  Waypoints plan;                   ///< the replacement plan (start..goal) when replanned
-  double last_free_fraction = -1;   ///< t of the last free checked state before the first collision; -1: none
+  bool replanned = false;               ///< PATH_COLLISION: a replacement plan was found
+  Waypoints plan;                       ///< the replacement plan (start..goal) when replanned
+  double last_free_fraction = -1;       ///< t of the last free checked state before the first collision; -1: none
   std::vector<double> last_free_state;  ///< the configuration at last_free_fraction
 };
 

@@ -23,6 +23,7 @@ y = (v + 1 - height/2) / f (z = 1), with f = (height/2) / tan(fov/2) pixels; bot
 use that point (measured; the unit tests check it), so ``principal_point`` is (width/2, height/2 - 1) in pixel
 indices: for even sizes the pixel (width/2, height/2 - 1) looks exactly along the optical axis.
 """
+
 import math
 
 import numpy as np
@@ -77,9 +78,13 @@ def rotation_to_quaternion(R):
 def quaternion_to_rotation(q):
     """Unit quaternion (x, y, z, w) -> 3 x 3 rotation matrix."""
     x, y, z, w = (float(v) for v in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def depth_from_zbuffer(zbuf, near, far):
@@ -100,10 +105,10 @@ class Camera:
         self.frame_id = spec.optical_frame
         self.width, self.height = int(spec.width), int(spec.height)
         self.near, self.far = float(spec.near), float(spec.far)
-        self.period = 1.0 / float(spec.rate)     # simulated seconds between renders
+        self.period = 1.0 / float(spec.rate)  # simulated seconds between renders
         # Pose: world -> optical frame.
         self.position = tuple(float(v) for v in spec.xyz)
-        self.rotation = look_at_rotation(spec.xyz, spec.target, spec.up)   # optical axes in world coordinates
+        self.rotation = look_at_rotation(spec.xyz, spec.target, spec.up)  # optical axes in world coordinates
         self.quaternion = rotation_to_quaternion(self.rotation)
         # PyBullet's view matrix from the same pose. OpenGL camera axes: x right = optical x, y up = -optical y,
         # z backwards = -optical z. View = inverse(camera -> world); PyBullet takes 16 floats, column-major.
@@ -112,15 +117,19 @@ class Camera:
         view[:3, :3] = R_gl.T
         view[:3, 3] = -R_gl.T @ np.asarray(self.position)
         self.view_matrix = [float(v) for v in view.flatten(order="F")]
-        self.projection_matrix = [float(v) for v in pybullet.computeProjectionMatrixFOV(
-            fov=float(spec.fov), aspect=self.width / float(self.height), nearVal=self.near, farVal=self.far)]
+        self.projection_matrix = [
+            float(v)
+            for v in pybullet.computeProjectionMatrixFOV(
+                fov=float(spec.fov), aspect=self.width / float(self.height), nearVal=self.near, farVal=self.far
+            )
+        ]
         # Pinhole model of TinyRenderer's sampling (module docstring).
-        self.focal = 0.5 * self.height / math.tan(math.radians(spec.fov) / 2.0)   # pixels
+        self.focal = 0.5 * self.height / math.tan(math.radians(spec.fov) / 2.0)  # pixels
         self.principal_point = (0.5 * self.width, 0.5 * self.height - 1.0)
         cx, cy = self.principal_point
         rx = (np.arange(self.width, dtype=np.float64) - cx) / self.focal
         ry = (np.arange(self.height, dtype=np.float64) - cy) / self.focal
-        self._rays_x = np.tile(rx, self.height)       # per pixel, row-major
+        self._rays_x = np.tile(rx, self.height)  # per pixel, row-major
         self._rays_y = np.repeat(ry, self.width)
 
     # ------------------------------------------------------------------ geometry
@@ -162,9 +171,15 @@ class Camera:
         """Render the depth buffer (height x width float32, 0 at near .. 1 at far / no return) with PyBullet's
         TinyRenderer in physics client ``client_id`` (e.g. Simulator.client_id)."""
         _, _, _, zbuf, _ = pybullet.getCameraImage(
-            self.width, self.height, viewMatrix=self.view_matrix, projectionMatrix=self.projection_matrix,
-            renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK, shadow=0,
-            physicsClientId=client_id)
+            self.width,
+            self.height,
+            viewMatrix=self.view_matrix,
+            projectionMatrix=self.projection_matrix,
+            renderer=pybullet.ER_TINY_RENDERER,
+            flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            shadow=0,
+            physicsClientId=client_id,
+        )
         return np.asarray(zbuf, dtype=np.float32).reshape(self.height, self.width)
 
     def render_depth(self, client_id):

@@ -7,9 +7,10 @@ restart_motions() (or since the start).
 The Simulator owns its own BulletClient (never the global pybullet connection), so several
 simulators can live in one process. It is not thread safe: callers serialise access.
 """
+
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, NamedTuple, Tuple
+from typing import Dict, NamedTuple, Tuple
 
 import numpy as np
 import pybullet
@@ -21,9 +22,9 @@ from .world import World
 
 __all__ = ["Simulator", "ContactStats", "ExecutionResult", "Motion", "InvalidTrajectory", "LimitViolation"]
 
-POSITION_TOLERANCE = 1e-6       # rad (or m): tolerance on the joint position limits
-VELOCITY_TOLERANCE = 1e-6       # relative tolerance on the velocity limits
-START_TOLERANCE = 1e-4          # a first point at t=0 must be this close to the current state
+POSITION_TOLERANCE = 1e-6  # rad (or m): tolerance on the joint position limits
+VELOCITY_TOLERANCE = 1e-6  # relative tolerance on the velocity limits
+START_TOLERANCE = 1e-4  # a first point at t=0 must be this close to the current state
 
 
 class InvalidTrajectory(ValueError):
@@ -41,11 +42,12 @@ class ContactStats:
     world_pairs: (robot link name, world object id) -> deepest penetration (m, positive).
     self_pairs: (link name, link name), sorted -> deepest penetration (m, positive).
     """
+
     substeps: int = 0
     substeps_in_contact: int = 0
     world_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
     self_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
-    total_contact_substeps: int = 0   # running total since the simulator started
+    total_contact_substeps: int = 0  # running total since the simulator started
 
     @property
     def world_contacts(self):
@@ -61,31 +63,42 @@ class ContactStats:
 
 
 class ExecutionResult(NamedTuple):
-    positions: Tuple[float, ...]   # controlled joints, in the configured order, at the end
+    positions: Tuple[float, ...]  # controlled joints, in the configured order, at the end
     contacts: ContactStats
 
 
 class Motion:
     """A validated trajectory, sampled at every physics substep, being executed."""
-    __slots__ = ("targets", "velocities", "setpoints", "n", "k", "stats", "_counts", "final", "path_tolerance",
-                 "aborted")
+
+    __slots__ = (
+        "targets",
+        "velocities",
+        "setpoints",
+        "n",
+        "k",
+        "stats",
+        "_counts",
+        "final",
+        "path_tolerance",
+        "aborted",
+    )
 
     def __init__(self, targets, velocities, final, path_tolerance=None, stats=None, setpoints=None):
-        self.targets = targets          # list (per substep) of [[q1], [q2], ...]: where the robot is after substep k
-        self.velocities = velocities    # same shape: segment velocities
+        self.targets = targets  # list (per substep) of [[q1], [q2], ...]: where the robot is after substep k
+        self.velocities = velocities  # same shape: segment velocities
         # Dynamic control: the motors' position setpoint of substep k, flat lists. PyBullet's position motor reaches
         # setpoint + velocity * dt within the substep, so the setpoint is the trajectory at the substep's START (the
         # end-of-substep position would put the robot one substep ahead: 4 mrad at 240 Hz, measured).
         # None: the targets' positions (kinematic control never reads them).
         self.setpoints = setpoints
-        self.final = final              # tuple: last setpoint
+        self.final = final  # tuple: last setpoint
         self.n = len(targets)
         self.k = 0
         self.stats = stats if stats is not None else ContactStats()
-        self._counts = [0, 0]           # substeps, substeps in contact
+        self._counts = [0, 0]  # substeps, substeps in contact
         # Dynamic control: per-joint bound on |measured - setpoint| (0: none); exceeding it stops the motion.
         self.path_tolerance = path_tolerance
-        self.aborted = ""               # why the motion was stopped early ("" when it was not)
+        self.aborted = ""  # why the motion was stopped early ("" when it was not)
 
     @property
     def done(self):
@@ -115,8 +128,9 @@ class Simulator:
         "dynamic" (position-controlled motors track the setpoint, full physics).
     """
 
-    def __init__(self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None, *,
-                 physics_hz, control, gui=False):
+    def __init__(
+        self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None, *, physics_hz, control, gui=False
+    ):
         if control not in ("kinematic", "dynamic"):
             raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
         physics_hz = float(physics_hz)
@@ -127,9 +141,9 @@ class Simulator:
         self.dt = 1.0 / physics_hz
         self.world = world if world is not None else World(name="empty")
         self._substeps_total = 0
-        self._motion_epoch = 0         # substeps_total at the last restart_motions()
+        self._motion_epoch = 0  # substeps_total at the last restart_motions()
         self._total_contact_substeps = 0
-        self._q = None                 # cached controlled positions (kinematic mode, at rest)
+        self._q = None  # cached controlled positions (kinematic mode, at rest)
 
         self._p = bullet_client.BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         p = self._p
@@ -151,7 +165,8 @@ class Simulator:
         cid = self._p._client
         self._cid = cid
         self._reset_states = lambda body, idx, q, v: pybullet.resetJointStatesMultiDof(
-            body, idx, q, v, physicsClientId=cid)
+            body, idx, q, v, physicsClientId=cid
+        )
         self.reset_robot([min(max(0.0, lo), hi) for lo, hi in zip(self.lower, self.upper)])
 
     # ------------------------------------------------------------------ setup
@@ -171,22 +186,25 @@ class Simulator:
             parent_of[j] = info[16]
             self._joint_type[j] = info[2]
         self._link_index = {v: k for k, v in self.link_names.items()}
-        movable = [name for name, info in joint_info.items()
-                   if info[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)]
+        movable = [
+            name for name, info in joint_info.items() if info[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)
+        ]
         if not joints:
             raise ValueError("no controlled joints configured")
         if len(set(joints)) != len(joints):
             raise ValueError("controlled joints are listed twice: %s" % joints)
         for name in joints:
             if name not in joint_info:
-                raise ValueError("joint %r is not in the URDF; its movable joints are: %s"
-                                 % (name, ", ".join(movable)))
+                raise ValueError("joint %r is not in the URDF; its movable joints are: %s" % (name, ", ".join(movable)))
             if name not in movable:
-                raise ValueError("joint %r is not a revolute or prismatic joint; movable joints are: %s"
-                                 % (name, ", ".join(movable)))
+                raise ValueError(
+                    "joint %r is not a revolute or prismatic joint; movable joints are: %s" % (name, ", ".join(movable))
+                )
         if base_link not in self._link_index:
-            raise ValueError("base link %r is not in the URDF; its links are: %s"
-                             % (base_link, ", ".join(self.link_names[i] for i in sorted(self.link_names))))
+            raise ValueError(
+                "base link %r is not in the URDF; its links are: %s"
+                % (base_link, ", ".join(self.link_names[i] for i in sorted(self.link_names)))
+            )
         self.joint_names = tuple(joints)
         self.base_link = base_link
         self.joint_indices = [joint_info[name][0] for name in joints]
@@ -202,8 +220,10 @@ class Simulator:
         # Uncontrolled movable joints: held at fixed_joint_positions (default 0 clipped to the limits).
         for name in fixed:
             if name not in joint_info:
-                raise ValueError("fixed_joint_positions names joint %r, which is not in the URDF; its "
-                                 "movable joints are: %s" % (name, ", ".join(movable)))
+                raise ValueError(
+                    "fixed_joint_positions names joint %r, which is not in the URDF; its "
+                    "movable joints are: %s" % (name, ", ".join(movable))
+                )
             if name in joints:
                 raise ValueError("joint %r is both controlled and in fixed_joint_positions" % name)
         self.fixed_joint_names, self.fixed_joint_indices, fixed_values = [], [], []
@@ -228,14 +248,23 @@ class Simulator:
         if self.control == "dynamic":
             # Motors hold the uncontrolled joints; PyBullet's default velocity motors are replaced.
             if self.fixed_joint_indices:
-                p.setJointMotorControlArray(robot, self.fixed_joint_indices, pybullet.POSITION_CONTROL,
-                                            targetPositions=fixed_values,
-                                            forces=[max(float(joint_info[nm][10]), 1.0) for nm in self.fixed_joint_names])
+                p.setJointMotorControlArray(
+                    robot,
+                    self.fixed_joint_indices,
+                    pybullet.POSITION_CONTROL,
+                    targetPositions=fixed_values,
+                    forces=[max(float(joint_info[nm][10]), 1.0) for nm in self.fixed_joint_names],
+                )
         else:
             # Nothing is stepped in kinematic mode, but disable the default motors anyway.
             all_movable = [joint_info[nm][0] for nm in movable]
-            p.setJointMotorControlArray(robot, all_movable, pybullet.VELOCITY_CONTROL,
-                                        targetVelocities=[0.0] * len(all_movable), forces=[0.0] * len(all_movable))
+            p.setJointMotorControlArray(
+                robot,
+                all_movable,
+                pybullet.VELOCITY_CONTROL,
+                targetVelocities=[0.0] * len(all_movable),
+                forces=[0.0] * len(all_movable),
+            )
 
         # Rigid groups: links joined by fixed joints move together.
         group = {i: i for i in self.link_names}
@@ -252,8 +281,7 @@ class Simulator:
         self._group = {i: find(i) for i in self.link_names}
         root_group = self._group[-1]
         if self._group[self._link_index[base_link]] != root_group:
-            raise ValueError("base link %r is not rigidly attached to the URDF root link %r"
-                             % (base_link, root_name))
+            raise ValueError("base link %r is not rigidly attached to the URDF root link %r" % (base_link, root_name))
         self._base_fixed_links = frozenset(i for i in self.link_names if self._group[i] == root_group)
         self._has_geometry = {i: len(p.getCollisionShapeData(robot, i)) > 0 for i in self.link_names}
 
@@ -279,7 +307,7 @@ class Simulator:
                 adjacent_groups.add((g, q))
                 adjacent_groups.add((q, g))
         geom_links = [i for i in self.link_names if self._has_geometry[i]]
-        self.adjacent_pairs = set()   # (link index, link index) pairs whose contacts are ignored
+        self.adjacent_pairs = set()  # (link index, link index) pairs whose contacts are ignored
         for a in geom_links:
             for b in geom_links:
                 if a < b:
@@ -306,13 +334,19 @@ class Simulator:
                 vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=[0.2, 0.4, 0.8, 1])
             else:  # World validation makes this unreachable
                 raise ValueError("object %r: unknown shape %r" % (obj.id, obj.shape))
-            body = p.createMultiBody(baseMass=0, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis,
-                                     basePosition=list(obj.xyz), baseOrientation=list(obj.quaternion))
+            body = p.createMultiBody(
+                baseMass=0,
+                baseCollisionShapeIndex=col,
+                baseVisualShapeIndex=vis,
+                basePosition=list(obj.xyz),
+                baseOrientation=list(obj.quaternion),
+            )
             self._object_bodies[obj.id] = body
             self._body_object[body] = obj.id
         # Moving obstacles: (body, centre xyz, quaternion, motion)
-        self._movers = [(self._object_bodies[o.id], o, list(o.quaternion))
-                        for o in self.world.objects if o.motion is not None]
+        self._movers = [
+            (self._object_bodies[o.id], o, list(o.quaternion)) for o in self.world.objects if o.motion is not None
+        ]
         self._place_movers(0.0)
 
     def _place_movers(self, t):
@@ -390,7 +424,7 @@ class Simulator:
 
     def joint_positions(self):
         """Controlled joint positions, in the configured order."""
-        if self._q is not None:      # kinematic mode: the joints are exactly where we put them
+        if self._q is not None:  # kinematic mode: the joints are exactly where we put them
             return self._q
         return tuple(s[0] for s in self._p.getJointStates(self.robot, self.joint_indices))
 
@@ -427,8 +461,10 @@ class Simulator:
         bad = ~((q >= self._lower_np - POSITION_TOLERANCE) & (q <= self._upper_np + POSITION_TOLERANCE))
         if bad.any():
             j = int(np.argmax(bad))
-            raise LimitViolation("%s: joint %s = %.6g outside its limits [%.6g, %.6g]"
-                                 % (what, self.joint_names[j], q[j], self.lower[j], self.upper[j]))
+            raise LimitViolation(
+                "%s: joint %s = %.6g outside its limits [%.6g, %.6g]"
+                % (what, self.joint_names[j], q[j], self.lower[j], self.upper[j])
+            )
 
     def reset_robot(self, q):
         """Teleport the controlled joints to q (velocity 0). No contacts counted, sim time unchanged."""
@@ -438,8 +474,9 @@ class Simulator:
             raise InvalidTrajectory("positions must be numbers, got %r" % (q,)) from None
         n = len(self.joint_indices)
         if arr.shape[0] != n:
-            raise InvalidTrajectory("expected %d positions (%s), got %d"
-                                    % (n, ", ".join(self.joint_names), arr.shape[0]))
+            raise InvalidTrajectory(
+                "expected %d positions (%s), got %d" % (n, ", ".join(self.joint_names), arr.shape[0])
+            )
         if not np.all(np.isfinite(arr)):
             raise InvalidTrajectory("positions contain NaN or inf: %s" % arr.tolist())
         self._check_positions(arr, "reset")
@@ -450,8 +487,13 @@ class Simulator:
         if self.control == "kinematic":
             self._q = tuple(arr.tolist())
         else:
-            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
-                                              targetPositions=arr.tolist(), forces=self._effort)
+            self._p.setJointMotorControlArray(
+                self.robot,
+                self.joint_indices,
+                pybullet.POSITION_CONTROL,
+                targetPositions=arr.tolist(),
+                forces=self._effort,
+            )
         return self.joint_positions()
 
     def prepare(self, times, positions, path_tolerance=None, velocities=None, accelerations=None):
@@ -478,8 +520,10 @@ class Simulator:
         if t.shape[0] == 0:
             raise InvalidTrajectory("empty trajectory")
         if P.ndim != 2 or P.shape[0] != t.shape[0] or P.shape[1] != n:
-            raise InvalidTrajectory("expected %d points x %d joints (%s), got positions of shape %s"
-                                    % (t.shape[0], n, ", ".join(self.joint_names), P.shape))
+            raise InvalidTrajectory(
+                "expected %d points x %d joints (%s), got positions of shape %s"
+                % (t.shape[0], n, ", ".join(self.joint_names), P.shape)
+            )
         # A finite sum means every value is finite (a NaN or inf makes it NaN or inf): one reduction on the hot path.
         if not math.isfinite(t.sum()) and not np.all(np.isfinite(t)):
             raise InvalidTrajectory("times contain NaN or inf")
@@ -492,8 +536,9 @@ class Simulator:
             dts = t[1:] - t[:-1]
             if dts.min() <= 0:
                 i = int(np.argmax(dts <= 0))
-                raise InvalidTrajectory("times must be strictly increasing: point %d at %g s, point %d at %g s"
-                                        % (i, t[i], i + 1, t[i + 1]))
+                raise InvalidTrajectory(
+                    "times must be strictly increasing: point %d at %g s, point %d at %g s" % (i, t[i], i + 1, t[i + 1])
+                )
         if (P < self._lower_np - POSITION_TOLERANCE).any() or (P > self._upper_np + POSITION_TOLERANCE).any():
             bad = (P < self._lower_np - POSITION_TOLERANCE) | (P > self._upper_np + POSITION_TOLERANCE)
             i = int(np.argmax(bad.any(axis=1)))
@@ -503,16 +548,19 @@ class Simulator:
         if path_tolerance is not None and len(path_tolerance) > 0:
             tolerance = np.asarray(path_tolerance, dtype=float).reshape(-1)
             if tolerance.shape != (n,) or not np.all(np.isfinite(tolerance)) or np.any(tolerance < 0):
-                raise InvalidTrajectory("path_tolerance must have %d finite values >= 0, got %s"
-                                        % (n, tolerance.tolist()))
+                raise InvalidTrajectory(
+                    "path_tolerance must have %d finite values >= 0, got %s" % (n, tolerance.tolist())
+                )
             if not np.any(tolerance > 0) or self.control == "kinematic":
                 tolerance = None
         if t[0] == 0.0:
             dev = np.abs(P[0] - current)
             if dev.max() > START_TOLERANCE:
                 j = int(np.argmax(dev))
-                raise InvalidTrajectory("the point at t=0 must be the current state: joint %s is %.6g, "
-                                        "currently %.6g" % (self.joint_names[j], P[0, j], current[j]))
+                raise InvalidTrajectory(
+                    "the point at t=0 must be the current state: joint %s is %.6g, "
+                    "currently %.6g" % (self.joint_names[j], P[0, j], current[j])
+                )
             P = P.copy()
             P[0] = current
         else:
@@ -528,9 +576,10 @@ class Simulator:
         over = np.abs(vel) > self._vmax_np * (1.0 + VELOCITY_TOLERANCE)
         if over.max():
             s, j = np.unravel_index(int(np.argmax(over)), over.shape)
-            raise LimitViolation("segment %.3g s -> %.3g s: joint %s moves at %.6g rad/s, above its velocity "
-                                 "limit %.6g" % (t[s], t[s + 1], self.joint_names[j], abs(vel[s, j]),
-                                                 self.velocity_limits[j]))
+            raise LimitViolation(
+                "segment %.3g s -> %.3g s: joint %s moves at %.6g rad/s, above its velocity "
+                "limit %.6g" % (t[s], t[s + 1], self.joint_names[j], abs(vel[s, j]), self.velocity_limits[j])
+            )
         ts = np.minimum(np.arange(1, nsub + 1, dtype=float) * self.dt, T)
         seg = t.searchsorted(ts, side="left") - 1
         np.clip(seg, 0, len(dts) - 1, out=seg)
@@ -540,7 +589,7 @@ class Simulator:
         velocity, setpoints = vel[seg], None
         if self.control == "dynamic":
             V, A = self._spline_data(velocities, accelerations, len(positions), t.shape[0], n)
-            if V is not None:   # the controller's spline through the points
+            if V is not None:  # the controller's spline through the points
                 q, _ = spline_at(t, P, V, A, ts)
                 q[-1] = P[-1]
             # Motor setpoints: the trajectory at each substep's start (see Motion.setpoints).
@@ -548,13 +597,15 @@ class Simulator:
             setpoints = sp.tolist()
             if V is not None:
                 velocity = sv
-        return Motion(q[:, :, None].tolist(), velocity[:, :, None].tolist(), tuple(P[-1].tolist()), tolerance,
-                      setpoints=setpoints)
+        return Motion(
+            q[:, :, None].tolist(), velocity[:, :, None].tolist(), tuple(P[-1].tolist()), tolerance, setpoints=setpoints
+        )
 
     @staticmethod
     def _spline_data(velocities, accelerations, points, rows, n):
         """Velocities / accelerations as arrays with one row per trajectory row (a prepended current state is at
         rest), or None when not every point has them."""
+
         def table(values):
             if values is None or len(values) != points or any(len(r) != n for r in values):
                 return None
@@ -562,6 +613,7 @@ class Simulator:
             if not np.all(np.isfinite(arr)):
                 raise InvalidTrajectory("velocities / accelerations contain NaN or inf")
             return np.vstack((np.zeros((1, n)), arr)) if rows == points + 1 else arr
+
         V = table(velocities)
         return V, (table(accelerations) if V is not None else None)
 
@@ -596,7 +648,7 @@ class Simulator:
         movers = self._movers
         if movers:
             place = self._place_movers
-            t_base = self._substeps_total - self._motion_epoch - k0 + 1   # substep k runs at motion time (t_base + k)/hz
+            t_base = self._substeps_total - self._motion_epoch - k0 + 1  # substep k runs at motion time (t_base + k)/hz
             hz = self.physics_hz
         tolerance = motion.path_tolerance
         k = k0
@@ -607,8 +659,15 @@ class Simulator:
                 reset(robot, idx, targets[k], vels[k])
                 detect(physicsClientId=cid)
             else:
-                motor(robot, idx, mode, targetPositions=setpoints[k],
-                      targetVelocities=[v[0] for v in vels[k]], forces=effort, physicsClientId=cid)
+                motor(
+                    robot,
+                    idx,
+                    mode,
+                    targetPositions=setpoints[k],
+                    targetVelocities=[v[0] for v in vels[k]],
+                    forces=effort,
+                    physicsClientId=cid,
+                )
                 step(physicsClientId=cid)
             pts = get_contacts(robot, physicsClientId=cid)
             if pts and accumulate(pts, stats):
@@ -618,9 +677,11 @@ class Simulator:
                 err = np.abs(np.array(self.joint_positions()) - np.array([v[0] for v in targets[k - 1]]))
                 if np.any(err > tolerance):
                     j = int(np.argmax(err - tolerance))
-                    motion.aborted = ("joint %s left its path tolerance: %.6g from its setpoint, tolerance %.6g "
-                                      "(stopped %.3f s into the motion)"
-                                      % (self.joint_names[j], err[j], tolerance[j], k / self.physics_hz))
+                    motion.aborted = (
+                        "joint %s left its path tolerance: %.6g from its setpoint, tolerance %.6g "
+                        "(stopped %.3f s into the motion)"
+                        % (self.joint_names[j], err[j], tolerance[j], k / self.physics_hz)
+                    )
                     break
         k1 = k
         ran = k1 - k0
@@ -641,16 +702,22 @@ class Simulator:
         else:
             # An aborted motion stops where the robot is; a finished one holds its last setpoint.
             hold = list(self.joint_positions()) if motion.aborted else list(motion.final)
-            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
-                                              targetPositions=hold, forces=self._effort)
+            self._p.setJointMotorControlArray(
+                self.robot, self.joint_indices, pybullet.POSITION_CONTROL, targetPositions=hold, forces=self._effort
+            )
         motion.stats.total_contact_substeps = self._total_contact_substeps
         return ExecutionResult(self.joint_positions(), motion.stats)
 
     def stop(self):
         """Hold where the robot is now (dynamic control: the motors' setpoint becomes the measured position)."""
         if self.control == "dynamic":
-            self._p.setJointMotorControlArray(self.robot, self.joint_indices, pybullet.POSITION_CONTROL,
-                                              targetPositions=list(self.joint_positions()), forces=self._effort)
+            self._p.setJointMotorControlArray(
+                self.robot,
+                self.joint_indices,
+                pybullet.POSITION_CONTROL,
+                targetPositions=list(self.joint_positions()),
+                forces=self._effort,
+            )
         return self.joint_positions()
 
     def servo(self, q, v, stats, q_end=None):
@@ -658,8 +725,7 @@ class Simulator:
         are the trajectory at the substep's start, q_end at its end (kinematic control puts the robot there exactly;
         dynamic control's motors track (q, v)). Contacts are added to stats."""
         q_end = q if q_end is None else q_end
-        motion = Motion([[[x] for x in q_end]], [[[x] for x in v]], tuple(q_end), stats=stats,
-                        setpoints=[list(q)])
+        motion = Motion([[[x] for x in q_end]], [[[x] for x in v]], tuple(q_end), stats=stats, setpoints=[list(q)])
         self.advance(motion, 1)
         if self.control == "kinematic":
             self._q = tuple(float(x) for x in q_end)

@@ -16,6 +16,7 @@ the camera (default 3.0 m, the planning scene's OctoMap max_range: longer beams 
 the camera (at most 81 deg from head-on), and the rendered depth at its pixel is not in front of it by more
 than 1 cm plus one pixel's depth slope (nothing, the robot included, occludes it).
 """
+
 import math
 from dataclasses import dataclass
 from typing import Dict, Tuple
@@ -24,24 +25,31 @@ import numpy as np
 
 from .camera import quaternion_to_rotation
 
-__all__ = ["SurfaceSamples", "surface_samples", "reachable_mask", "visible_mask", "coverage_report",
-           "SHOULDER", "REACH"]
+__all__ = [
+    "SurfaceSamples",
+    "surface_samples",
+    "reachable_mask",
+    "visible_mask",
+    "coverage_report",
+    "SHOULDER",
+    "REACH",
+]
 
-SHOULDER = (0.0, 0.0, 0.333)   # Panda joint 2 axis above the base
-REACH = 0.95                   # 0.855 m Panda reach + the hand
-PROBE = 0.03                   # radius of the ball that must get to a surface (m)
-VOXEL = 0.02                   # free-space grid (m)
-BASE_RADIUS = 0.15             # table top under the robot base
-MIN_FACING_COS = 0.15          # surfaces seen more obliquely than ~81 deg do not count
-DEPTH_TOL = 0.01               # m
-MAX_RANGE = 3.0                # the planning scene's OctoMap max_range (config/planning_scene.yaml)
+SHOULDER = (0.0, 0.0, 0.333)  # Panda joint 2 axis above the base
+REACH = 0.95  # 0.855 m Panda reach + the hand
+PROBE = 0.03  # radius of the ball that must get to a surface (m)
+VOXEL = 0.02  # free-space grid (m)
+BASE_RADIUS = 0.15  # table top under the robot base
+MIN_FACING_COS = 0.15  # surfaces seen more obliquely than ~81 deg do not count
+DEPTH_TOL = 0.01  # m
+MAX_RANGE = 3.0  # the planning scene's OctoMap max_range (config/planning_scene.yaml)
 
 
 @dataclass
 class SurfaceSamples:
-    points: np.ndarray     # N x 3, world frame
-    normals: np.ndarray    # N x 3, outward unit normals
-    objects: np.ndarray    # N, index into ids
+    points: np.ndarray  # N x 3, world frame
+    normals: np.ndarray  # N x 3, outward unit normals
+    objects: np.ndarray  # N, index into ids
     ids: Tuple[str, ...]
 
 
@@ -89,10 +97,10 @@ def _cylinder(height, radius, spacing):
 
 
 def _sphere(radius, spacing):
-    n = max(20, int(math.ceil(4 * math.pi * radius ** 2 / spacing ** 2)))
+    n = max(20, int(math.ceil(4 * math.pi * radius**2 / spacing**2)))
     i = np.arange(n) + 0.5
     phi = np.arccos(1 - 2 * i / n)
-    th = math.pi * (1 + 5 ** 0.5) * i
+    th = math.pi * (1 + 5**0.5) * i
     nrm = np.column_stack((np.cos(th) * np.sin(phi), np.sin(th) * np.sin(phi), np.cos(phi)))
     return radius * nrm, nrm
 
@@ -179,7 +187,7 @@ def reachable_mask(samples, world, t=0.0, shoulder=SHOULDER, reach=REACH, probe=
     q = p + (probe + VOXEL) * n
     ok = lookup(q) & (q[:, 2] >= 0.0)
     ok &= ~((np.hypot(p[:, 0], p[:, 1]) < BASE_RADIUS) & (np.abs(p[:, 2]) < 1e-3) & (n[:, 2] > 0.5))
-    just_out = p + 0.002 * n            # covered by another object (the table top under the case floor)
+    just_out = p + 0.002 * n  # covered by another object (the table top under the case floor)
     for k, obj in enumerate(world.objects):
         other = np.flatnonzero(ok & (samples.objects != k))
         ok[other] &= _distance(obj, just_out[other], t) > 0.0
@@ -206,7 +214,7 @@ def visible_mask(camera, depth, samples, max_range=MAX_RANGE, max_spacing=None):
     zf = z[front]
     rendered = np.full(len(zf), -np.inf)
     rendered[ok] = depth[vi[ok], ui[ok]]
-    tan = np.sqrt(np.maximum(0.0, 1.0 - cos ** 2)) / np.maximum(cos, MIN_FACING_COS)
+    tan = np.sqrt(np.maximum(0.0, 1.0 - cos**2)) / np.maximum(cos, MIN_FACING_COS)
     tol = DEPTH_TOL + zf / camera.focal * tan
     ok &= rendered >= zf - tol
     if max_spacing is not None:

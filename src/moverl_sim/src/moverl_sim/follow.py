@@ -62,8 +62,9 @@ class Tolerances:
 
     @classmethod
     def defaults(cls, n: int, path=0.0, goal=0.0, stopped_velocity=0.01, goal_time=0.0) -> "Tolerances":
-        return cls(np.full(n, float(path)), np.full(n, float(goal)), np.full(n, float(stopped_velocity)),
-                   float(goal_time))
+        return cls(
+            np.full(n, float(path)), np.full(n, float(goal)), np.full(n, float(stopped_velocity)), float(goal_time)
+        )
 
     def merged(self, joints, path_tolerance, goal_tolerance, goal_time: float) -> "Tolerances":
         """The goal's tolerances over these defaults (control_msgs/JointTolerance: > 0 set, -1 off, 0 keep).
@@ -71,8 +72,12 @@ class Tolerances:
         path_tolerance / goal_tolerance: iterables of objects with name, position, velocity. Unknown names are
         INVALID_GOAL."""
         index = {j: i for i, j in enumerate(joints)}
-        out = Tolerances(self.path.copy(), self.goal.copy(), self.goal_velocity.copy(),
-                         goal_time if goal_time > 0 else self.goal_time)
+        out = Tolerances(
+            self.path.copy(),
+            self.goal.copy(),
+            self.goal_velocity.copy(),
+            goal_time if goal_time > 0 else self.goal_time,
+        )
 
         def apply(target, value, name):
             if name not in index:
@@ -154,9 +159,21 @@ def spline_at(times, P, V, A, ts):
     return q, v
 
 
-def accept(joints, lower, upper, goal_joint_names, points, start: float, now: float, hold,
-           defaults: Tolerances, path_tolerance=(), goal_tolerance=(), goal_time: float = 0.0,
-           velocity_limits=None) -> Trajectory:
+def accept(
+    joints,
+    lower,
+    upper,
+    goal_joint_names,
+    points,
+    start: float,
+    now: float,
+    hold,
+    defaults: Tolerances,
+    path_tolerance=(),
+    goal_tolerance=(),
+    goal_time: float = 0.0,
+    velocity_limits=None,
+) -> Trajectory:
     """Validate a goal and turn it into a Trajectory in the controller's joint order, or raise GoalRejected.
 
     points: iterables of objects with positions, velocities, accelerations and time_from_start (seconds, float).
@@ -168,8 +185,10 @@ def accept(joints, lower, upper, goal_joint_names, points, start: float, now: fl
     if len(names) != len(joints) or set(names) != set(joints) or len(set(names)) != len(names):
         missing = [j for j in joints if j not in names]
         unknown = [j for j in names if j not in joints]
-        raise GoalRejected(INVALID_JOINTS, f"the goal's joints {names} do not match the controller's {joints} "
-                                           f"(missing {missing}, unknown {unknown})")
+        raise GoalRejected(
+            INVALID_JOINTS,
+            f"the goal's joints {names} do not match the controller's {joints} (missing {missing}, unknown {unknown})",
+        )
     tol = defaults.merged(joints, path_tolerance, goal_tolerance, goal_time)
     hold = np.asarray(hold, dtype=float)
     if not points:
@@ -190,12 +209,16 @@ def accept(joints, lower, upper, goal_joint_names, points, start: float, now: fl
         if not all(math.isfinite(v) for v in row) or not math.isfinite(p.time_from_start):
             raise GoalRejected(INVALID_GOAL, f"point {i} is not finite")
         if velocity_limits is not None and len(p.velocities):
-            over = [j for j, k in enumerate(order)
-                    if abs(p.velocities[k]) > velocity_limits[j] * (1.0 + VELOCITY_TOLERANCE)]
+            over = [
+                j for j, k in enumerate(order) if abs(p.velocities[k]) > velocity_limits[j] * (1.0 + VELOCITY_TOLERANCE)
+            ]
             if over:
                 j = over[0]
-                raise GoalRejected(INVALID_GOAL, f"point {i}: {joints[j]} velocity {p.velocities[order[j]]:.6g} "
-                                                 f"above its limit {velocity_limits[j]:.6g}")
+                raise GoalRejected(
+                    INVALID_GOAL,
+                    f"point {i}: {joints[j]} velocity {p.velocities[order[j]]:.6g} "
+                    f"above its limit {velocity_limits[j]:.6g}",
+                )
         times.append(float(p.time_from_start))
         rows.append(row)
         vel_rows.append([float(p.velocities[k]) for k in order] if len(p.velocities) else None)
@@ -212,23 +235,28 @@ def accept(joints, lower, upper, goal_joint_names, points, start: float, now: fl
     bad = (P < np.asarray(lower) - LIMIT_TOLERANCE) | (P > np.asarray(upper) + LIMIT_TOLERANCE)
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise GoalRejected(INVALID_GOAL, f"point {i}: {joints[j]} = {P[i, j]:.6g} outside its limits "
-                                         f"[{lower[j]:.6g}, {upper[j]:.6g}]")
+        raise GoalRejected(
+            INVALID_GOAL, f"point {i}: {joints[j]} = {P[i, j]:.6g} outside its limits [{lower[j]:.6g}, {upper[j]:.6g}]"
+        )
     if velocity_limits is not None:
         vmax = np.asarray(velocity_limits, dtype=float) * (1.0 + VELOCITY_TOLERANCE)
         if len(t) > 1:
             speed = np.abs(np.diff(P, axis=0)) / np.diff(t)[:, None]
             if (speed > vmax).any():
                 i, j = np.argwhere(speed > vmax)[0]
-                raise GoalRejected(INVALID_GOAL, f"points {i}-{i + 1}: {joints[j]} moves at {speed[i, j]:.6g}, above "
-                                                 f"its velocity limit {velocity_limits[j]:.6g}")
+                raise GoalRejected(
+                    INVALID_GOAL,
+                    f"points {i}-{i + 1}: {joints[j]} moves at {speed[i, j]:.6g}, above "
+                    f"its velocity limit {velocity_limits[j]:.6g}",
+                )
 
     zero_stamp = start == 0.0
     t0 = now if zero_stamp else start
     abs_t = t0 + t
     if abs_t[-1] <= now:
-        raise GoalRejected(INVALID_GOAL, f"every point of the trajectory is in the past (the last by "
-                                         f"{now - abs_t[-1]:.3f} s)")
+        raise GoalRejected(
+            INVALID_GOAL, f"every point of the trajectory is in the past (the last by {now - abs_t[-1]:.3f} s)"
+        )
     ahead = abs_t > now
     if zero_stamp and t[0] == 0.0:
         ahead[0] = False  # a first point at time 0 with no start time: replaced by the bridge from where we are
@@ -255,8 +283,9 @@ def check(traj: Trajectory, t: float, q, v):
             over = (tol.path > 0) & (err > tol.path)
             if over.any():
                 j = int(np.argmax(over))
-                return PATH_TOLERANCE_VIOLATED, (f"joint {j} path error {err[j]:.6g} exceeds its tolerance "
-                                                 f"{tol.path[j]:.6g}")
+                return PATH_TOLERANCE_VIOLATED, (
+                    f"joint {j} path error {err[j]:.6g} exceeds its tolerance {tol.path[j]:.6g}"
+                )
         return None
     err = np.abs(q - traj.positions[-1]) if len(traj.times) else np.zeros_like(q)
     verr = np.abs(np.asarray(v))
@@ -266,6 +295,8 @@ def check(traj: Trajectory, t: float, q, v):
     if t < traj.end + tol.goal_time:
         return None
     j = int(np.argmax(over))
-    return GOAL_TOLERANCE_VIOLATED, (f"joint {j} goal error {err[j]:.6g} (tolerance {tol.goal[j]:.6g}), velocity "
-                                     f"{verr[j]:.6g} (tolerance {tol.goal_velocity[j]:.6g}) "
-                                     f"{t - traj.end:.3f} s after the end")
+    return GOAL_TOLERANCE_VIOLATED, (
+        f"joint {j} goal error {err[j]:.6g} (tolerance {tol.goal[j]:.6g}), velocity "
+        f"{verr[j]:.6g} (tolerance {tol.goal_velocity[j]:.6g}) "
+        f"{t - traj.end:.3f} s after the end"
+    )

@@ -2,9 +2,13 @@
 
 Imports message modules only (no roscore needed), so it is unit-testable.
 """
+
 import rospy
 from geometry_msgs.msg import Pose
-from moverl_msgs.msg import CollisionPair, ContactReport, World as WorldMsg, WorldObject as WorldObjectMsg
+
+from moverl_msgs.msg import CollisionPair, ContactReport
+from moverl_msgs.msg import World as WorldMsg
+from moverl_msgs.msg import WorldObject as WorldObjectMsg
 
 try:  # added with moving obstacles
     from moverl_msgs.msg import ObstacleMotion
@@ -31,7 +35,7 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
     msg.header.stamp = sim_stamp(stamp_sec)
     msg.motion_epoch = sim_stamp(motion_epoch_sec)
     msg.name = world.name
-    if "goal" in WorldMsg.__slots__:   # float64[] goal, added to World.msg after the first contract
+    if "goal" in WorldMsg.__slots__:  # float64[] goal, added to World.msg after the first contract
         msg.goal = list(world.goal) if world.goal is not None else []
     for obj in world.objects:
         o = WorldObjectMsg()
@@ -47,8 +51,9 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
             if ObstacleMotion is None:
                 raise ValueError("object %r has a motion but moverl_msgs has no ObstacleMotion: rebuild" % obj.id)
             m = obj.motion
-            o.motion = ObstacleMotion(type=ObstacleMotion.OSCILLATE, axis=list(m.axis), amplitude=m.amplitude,
-                                      period=m.period, phase=m.phase)
+            o.motion = ObstacleMotion(
+                type=ObstacleMotion.OSCILLATE, axis=list(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase
+            )
         msg.objects.append(o)
     return msg
 
@@ -83,10 +88,12 @@ def points_to_msg(points, width, height, frame_id, stamp_sec):
     """(height * width) x 3 float32 points (row-major image order, moverl_sim.camera) -> an organised
     sensor_msgs/PointCloud2 with float32 fields x, y, z (12 bytes per point, little endian, no NaN)."""
     import numpy as np
+
     pts = np.ascontiguousarray(points, dtype="<f4")
     if pts.shape != (width * height, 3):
-        raise ValueError("expected %d x 3 points for a %d x %d image, got shape %s"
-                         % (width * height, width, height, pts.shape))
+        raise ValueError(
+            "expected %d x 3 points for a %d x %d image, got shape %s" % (width * height, width, height, pts.shape)
+        )
     msg = PointCloud2()
     msg.header.frame_id = frame_id
     msg.header.stamp = sim_stamp(stamp_sec)

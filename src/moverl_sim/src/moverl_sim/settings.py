@@ -10,8 +10,9 @@ import yaml
 
 # src/moverl_sim/src/moverl_sim/settings.py -> the repository root is four levels up (MOVERL_ROOT overrides, as in
 # moverl_gym.paths).
-_ROOT = os.environ.get("MOVERL_ROOT") or os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(
-    os.path.dirname(os.path.realpath(__file__))))))
+_ROOT = os.environ.get("MOVERL_ROOT") or os.path.dirname(
+    os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.realpath(__file__)))))
+)
 
 
 def sim_settings(path: str | None = None) -> dict:

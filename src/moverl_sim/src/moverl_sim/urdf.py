@@ -2,13 +2,24 @@
 
 ROS-free except for the optional ``rospkg`` lookup of ``package://`` URIs.
 """
+
 import math
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-__all__ = ["UrdfError", "JointLimits", "CONTINUOUS_JOINT_LIMIT", "resolve_uri", "rewrite_mesh_paths",
-           "robot_description"]
+if TYPE_CHECKING:  # numpy is imported where it is used: robot_description runs under a python without it
+    import numpy as np
+
+__all__ = [
+    "UrdfError",
+    "JointLimits",
+    "CONTINUOUS_JOINT_LIMIT",
+    "resolve_uri",
+    "rewrite_mesh_paths",
+    "robot_description",
+]
 
 #: Position limits (rad) given to continuous joints, as the planning scene's RobotModel::kContinuousJointLimit does.
 CONTINUOUS_JOINT_LIMIT = 2.0 * math.pi
@@ -50,15 +61,15 @@ def resolve_uri(uri, base_dir=None):
         raise UrdfError("empty URI")
     uri = uri.strip()
     if uri.startswith("file://"):
-        path = uri[len("file://"):]
+        path = uri[len("file://") :]
         if not os.path.isabs(path):
             raise UrdfError("file:// URI must hold an absolute path: %r" % uri)
         return os.path.normpath(path)
     if uri.startswith("pybullet_data://"):
-        rel = uri[len("pybullet_data://"):].lstrip("/")
+        rel = uri[len("pybullet_data://") :].lstrip("/")
         return os.path.normpath(os.path.join(_pybullet_data_path(), rel))
     if uri.startswith("package://"):
-        rest = uri[len("package://"):]
+        rest = uri[len("package://") :]
         pkg, _, rel = rest.partition("/")
         if not pkg or not rel:
             raise UrdfError("malformed package:// URI (expected package://<pkg>/<path>): %r" % uri)
@@ -94,7 +105,7 @@ class JointLimits:
             ValueError: the URDF does not parse, a joint is missing, not revolute, prismatic or continuous, or has no
                 usable <limit> (finite lower < upper for revolute and prismatic joints, velocity > 0).
         """
-        import numpy as np   # here: robot_description runs this module under a python without numpy
+        import numpy as np  # here: robot_description runs this module under a python without numpy
 
         try:
             root = ET.fromstring(urdf_xml)

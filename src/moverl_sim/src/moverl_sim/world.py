@@ -5,6 +5,7 @@ that a typo never goes unnoticed; new optional keys are dataclass fields with a 
 existing world file valid. An object's optional ``motion:`` makes it a moving obstacle (ObjectMotion); the
 optional top-level ``cameras:`` list declares simulated depth cameras (WorldCamera, rendered by moverl_sim.camera).
 """
+
 import math
 import os
 import re
@@ -13,8 +14,19 @@ from typing import Optional, Tuple
 
 import yaml
 
-__all__ = ["WorldFileError", "WorldObject", "World", "ObjectMotion", "WorldCamera", "load_world", "parse_world",
-           "rpy_to_quaternion", "SHAPE_SIZES", "MOTION_TYPES", "OPTICAL_FRAME_SUFFIX"]
+__all__ = [
+    "WorldFileError",
+    "WorldObject",
+    "World",
+    "ObjectMotion",
+    "WorldCamera",
+    "load_world",
+    "parse_world",
+    "rpy_to_quaternion",
+    "SHAPE_SIZES",
+    "MOTION_TYPES",
+    "OPTICAL_FRAME_SUFFIX",
+]
 
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
@@ -25,9 +37,9 @@ MOTION_TYPES = ("oscillate",)
 _MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
 _CAMERA_KEYS = {"id", "xyz", "target", "up", "width", "height", "fov", "near", "far", "rate"}
 _CAMERA_REQUIRED = ("id", "xyz", "target", "width", "height", "fov", "near", "far", "rate")
-_CAMERA_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")   # becomes part of a TF frame name
+_CAMERA_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")  # becomes part of a TF frame name
 OPTICAL_FRAME_SUFFIX = "_optical_frame"
-MIN_UP_ANGLE_SIN = 1e-3   # up must be at least ~0.06 deg away from the view direction
+MIN_UP_ANGLE_SIN = 1e-3  # up must be at least ~0.06 deg away from the view direction
 
 
 class WorldFileError(Exception):
@@ -38,10 +50,12 @@ def rpy_to_quaternion(rpy):
     """Fixed-axis roll, pitch, yaw (URDF/ROS convention) -> quaternion (x, y, z, w)."""
     r, p, y = (0.5 * float(a) for a in rpy)
     cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return (sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
 
 
 @dataclass(frozen=True)
@@ -53,11 +67,12 @@ class ObjectMotion:
     Python code (the simulator, the messages, the env); the planning scene's C++ twin is ObstacleMotion::displacement
     (collision_checker.h), and both are checked on the same cases (moverl_sim/test/fixtures/obstacle_motion_cases.txt).
     """
+
     type: str = "oscillate"
-    axis: Tuple[float, float, float] = (1.0, 0.0, 0.0)   # unit vector (normalised by the parser)
-    amplitude: float = 0.0                                # m
-    period: float = 1.0                                   # s
-    phase: float = 0.0                                    # rad
+    axis: Tuple[float, float, float] = (1.0, 0.0, 0.0)  # unit vector (normalised by the parser)
+    amplitude: float = 0.0  # m
+    period: float = 1.0  # s
+    phase: float = 0.0  # rad
 
     def displacement(self, t):
         """Scalar displacement along the axis at motion time t from the pose at t = 0 (moverl_msgs/ObstacleMotion
@@ -78,12 +93,12 @@ class ObjectMotion:
 @dataclass(frozen=True)
 class WorldObject:
     id: str
-    shape: str                        # "box" | "sphere" | "cylinder"
-    size: Tuple[float, ...]           # box (x, y, z); sphere (radius,); cylinder (height, radius)
-    xyz: Tuple[float, float, float]   # centre, world frame
+    shape: str  # "box" | "sphere" | "cylinder"
+    size: Tuple[float, ...]  # box (x, y, z); sphere (radius,); cylinder (height, radius)
+    xyz: Tuple[float, float, float]  # centre, world frame
     rpy: Tuple[float, float, float] = (0.0, 0.0, 0.0)
     observed: bool = True
-    motion: Optional[ObjectMotion] = None   # None: static
+    motion: Optional[ObjectMotion] = None  # None: static
 
     @property
     def quaternion(self):
@@ -115,16 +130,17 @@ class WorldCamera:
     Its TF frame is ``optical_frame`` (REP 103 optical: z forward, x right, y down); moverl_sim.camera
     computes the pose and renders it.
     """
+
     id: str
-    xyz: Tuple[float, float, float]      # optical centre, world frame (m)
-    target: Tuple[float, float, float]   # look-at point, world frame (m); the optical axis passes through it
-    width: int                           # pixels
-    height: int                          # pixels
-    fov: float                           # vertical field of view (degrees), 0 < fov < 180
-    near: float                          # clip distances (m, along the optical axis), 0 < near < far
+    xyz: Tuple[float, float, float]  # optical centre, world frame (m)
+    target: Tuple[float, float, float]  # look-at point, world frame (m); the optical axis passes through it
+    width: int  # pixels
+    height: int  # pixels
+    fov: float  # vertical field of view (degrees), 0 < fov < 180
+    near: float  # clip distances (m, along the optical axis), 0 < near < far
     far: float
-    rate: float                          # renders per simulated second
-    up: Tuple[float, float, float] = (0.0, 0.0, 1.0)   # world direction that appears "up" in the image
+    rate: float  # renders per simulated second
+    up: Tuple[float, float, float] = (0.0, 0.0, 1.0)  # world direction that appears "up" in the image
 
     @property
     def optical_frame(self):
@@ -138,7 +154,7 @@ class World:
     frame: str = "world"
     goal: Optional[Tuple[float, float, float]] = None
     objects: Tuple[WorldObject, ...] = ()
-    source: str = field(default="<memory>", compare=False)   # file it was read from
+    source: str = field(default="<memory>", compare=False)  # file it was read from
     cameras: Tuple[WorldCamera, ...] = ()
 
     @property
@@ -208,8 +224,11 @@ def _number(value, source, key):
 def _parse_motion(raw, source, where):
     """Validate an object's ``motion:`` mapping -> ObjectMotion."""
     if not isinstance(raw, dict):
-        _fail(source, where, "expected a mapping like {type: oscillate, axis: [0, 1, 0], amplitude: 0.1, "
-                             "period: 4.0}, got %r" % (raw,))
+        _fail(
+            source,
+            where,
+            "expected a mapping like {type: oscillate, axis: [0, 1, 0], amplitude: 0.1, period: 4.0}, got %r" % (raw,),
+        )
     mtype = raw.get("type")
     if mtype is None:
         _fail(source, where + ".type", "missing required key (allowed: %s)" % ", ".join(MOTION_TYPES))
@@ -218,8 +237,11 @@ def _parse_motion(raw, source, where):
     allowed = _MOTION_KEYS[mtype]
     unknown = set(map(str, raw)) - allowed
     if unknown:
-        _fail(source, "%s.%s" % (where, sorted(unknown)[0]),
-              "unknown key for a %s motion (allowed: %s)" % (mtype, ", ".join(sorted(allowed))))
+        _fail(
+            source,
+            "%s.%s" % (where, sorted(unknown)[0]),
+            "unknown key for a %s motion (allowed: %s)" % (mtype, ", ".join(sorted(allowed))),
+        )
     for key in ("axis", "amplitude", "period"):
         if key not in raw:
             _fail(source, "%s.%s" % (where, key), "missing required key")
@@ -259,15 +281,22 @@ def _parse_cameras(raw_cameras, source):
             where = "cameras[%d] (id %s)" % (i, raw["id"])
         unknown = set(map(str, raw)) - _CAMERA_KEYS
         if unknown:
-            _fail(source, "%s.%s" % (where, sorted(unknown)[0]),
-                  "unknown key (allowed: %s)" % ", ".join(sorted(_CAMERA_KEYS)))
+            _fail(
+                source,
+                "%s.%s" % (where, sorted(unknown)[0]),
+                "unknown key (allowed: %s)" % ", ".join(sorted(_CAMERA_KEYS)),
+            )
         for key in _CAMERA_REQUIRED:
             if key not in raw:
                 _fail(source, "%s.%s" % (where, key), "missing required key")
         cid = _string(raw["id"], source, where + ".id")
         if not _CAMERA_ID.match(cid):
-            _fail(source, where + ".id", "must start with a letter and contain only letters, digits and '_' "
-                                         "(it names the TF frame <id>%s), got %r" % (OPTICAL_FRAME_SUFFIX, cid))
+            _fail(
+                source,
+                where + ".id",
+                "must start with a letter and contain only letters, digits and '_' "
+                "(it names the TF frame <id>%s), got %r" % (OPTICAL_FRAME_SUFFIX, cid),
+            )
         if cid in seen:
             _fail(source, where + ".id", "duplicate camera id %r" % cid)
         seen.add(cid)
@@ -276,17 +305,27 @@ def _parse_cameras(raw_cameras, source):
         view = [t - x for t, x in zip(target, xyz)]
         view_norm = math.sqrt(sum(v * v for v in view))
         if view_norm < 1e-6:
-            _fail(source, where + ".target", "must differ from xyz (the view direction is target - xyz), got %r"
-                  % (list(target),))
+            _fail(
+                source,
+                where + ".target",
+                "must differ from xyz (the view direction is target - xyz), got %r" % (list(target),),
+            )
         up = _numbers(raw.get("up", [0.0, 0.0, 1.0]), source, where + ".up", 3)
         up_norm = math.sqrt(sum(u * u for u in up))
         if up_norm < 1e-9:
             _fail(source, where + ".up", "must be a non-zero vector, got %r" % (list(up),))
-        cross = (view[1] * up[2] - view[2] * up[1], view[2] * up[0] - view[0] * up[2],
-                 view[0] * up[1] - view[1] * up[0])
+        cross = (
+            view[1] * up[2] - view[2] * up[1],
+            view[2] * up[0] - view[0] * up[2],
+            view[0] * up[1] - view[1] * up[0],
+        )
         if math.sqrt(sum(c * c for c in cross)) < MIN_UP_ANGLE_SIN * view_norm * up_norm:
-            _fail(source, where + ".up", "must not be parallel to the view direction target - xyz = %r, got %r"
-                  % ([round(v, 6) for v in view], list(up)))
+            _fail(
+                source,
+                where + ".up",
+                "must not be parallel to the view direction target - xyz = %r, got %r"
+                % ([round(v, 6) for v in view], list(up)),
+            )
         width = _positive_int(raw["width"], source, where + ".width")
         height = _positive_int(raw["height"], source, where + ".height")
         fov = _number(raw["fov"], source, where + ".fov")
@@ -301,16 +340,30 @@ def _parse_cameras(raw_cameras, source):
         rate = _number(raw["rate"], source, where + ".rate")
         if rate <= 0.0:
             _fail(source, where + ".rate", "must be > 0 (renders per simulated second), got %r" % (rate,))
-        cameras.append(WorldCamera(id=cid, xyz=xyz, target=target, up=up, width=width, height=height, fov=fov,
-                                   near=near, far=far, rate=rate))
+        cameras.append(
+            WorldCamera(
+                id=cid,
+                xyz=xyz,
+                target=target,
+                up=up,
+                width=width,
+                height=height,
+                fov=fov,
+                near=near,
+                far=far,
+                rate=rate,
+            )
+        )
     return tuple(cameras)
 
 
 def parse_world(data, source="<memory>"):
     """Validate an already-loaded YAML document (a dict) and build a World."""
     if not isinstance(data, dict):
-        raise WorldFileError("%s: expected a mapping with keys %s at the top level, got %s"
-                             % (source, sorted(_TOP_KEYS), type(data).__name__))
+        raise WorldFileError(
+            "%s: expected a mapping with keys %s at the top level, got %s"
+            % (source, sorted(_TOP_KEYS), type(data).__name__)
+        )
     unknown = set(map(str, data)) - _TOP_KEYS
     if unknown:
         _fail(source, sorted(unknown)[0], "unknown key (allowed: %s)" % ", ".join(sorted(_TOP_KEYS)))
@@ -335,8 +388,11 @@ def parse_world(data, source="<memory>"):
             where = "objects[%d] (id %s)" % (i, raw["id"])
         unknown = set(map(str, raw)) - _OBJECT_KEYS
         if unknown:
-            _fail(source, "%s.%s" % (where, sorted(unknown)[0]),
-                  "unknown key (allowed: %s)" % ", ".join(sorted(_OBJECT_KEYS)))
+            _fail(
+                source,
+                "%s.%s" % (where, sorted(unknown)[0]),
+                "unknown key (allowed: %s)" % ", ".join(sorted(_OBJECT_KEYS)),
+            )
         for key in ("id", "shape", "size", "xyz"):
             if key not in raw:
                 _fail(source, "%s.%s" % (where, key), "missing required key")
@@ -362,7 +418,6 @@ def parse_world(data, source="<memory>"):
         motion = None
         if raw.get("motion") is not None:
             motion = _parse_motion(raw["motion"], source, where + ".motion")
-        objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed,
-                                   motion=motion))
+        objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed, motion=motion))
     cameras = _parse_cameras(data.get("cameras"), source)
     return World(name=name, frame=frame, goal=goal, objects=tuple(objects), source=source, cameras=cameras)

@@ -153,11 +153,15 @@ def worker(
         inner = env.unwrapped
         policy = PushingPolicy(targets, inner.scaler.max_delta, rng, noise=noise, switch=switch)
         env.reset(seed=seed)
-        contacts_total = contact_steps = episodes = unsensed = unsensed_moves = 0
+        contacts_total = contact_steps = episodes = unsensed = unsensed_moves = at_limit = 0
+        lower, upper = inner.scaler.limits.lower, inner.scaler.limits.upper
         verdicts: dict[str, int] = {}
         t0 = time.perf_counter()
         for _ in range(steps):
-            _, _, term, trunc, info = env.step(policy.act(inner.q))
+            action = policy.act(inner.q)
+            target = inner.scaler.command(inner.q, action)
+            at_limit += bool(np.any((target <= lower) | (target >= upper)))  # motors overshoot there (dynamic)
+            _, _, term, trunc, info = env.step(action)
             if info["contacts"] < 0:  # the driver has not reported contacts yet (no motion since the start)
                 unsensed += 1
                 unsensed_moves += not info["discarded"]
@@ -183,6 +187,7 @@ def worker(
         "steps_with_contact": contact_steps,
         "unsensed_steps": unsensed,
         "unsensed_moves": unsensed_moves,
+        "steps_at_limit": at_limit,
         "steps_per_s": round(rate, 1),
         "verdicts": verdicts,
         "targets": per_object,
@@ -301,21 +306,20 @@ def main(argv=None) -> int:
         f"{args.switch} steps. contacts = distinct robot contact pairs the physics engine saw during each step's "
         "motion, summed over the steps (must be 0 with the shield on). Steps before the first executed motion "
         "of a run report no contact information (the driver has not reported yet); they did not move "
-        "(unsensed moves must be 0).",
+        "(unsensed moves must be 0). at limit = steps whose command put a joint onto its URDF limit (with dynamic "
+        "control the motors overshoot there; the env must not raise).",
         "",
         "| robot | world | control | shield | steps | episodes | contacts | steps with contact | unsensed moves | "
-        "verdicts | targets per object | steps/s |",
-        "|---|---|---|---|---:|---:|---:|---:|---:|---|---|---:|",
+        "at limit | verdicts | targets per object | steps/s |",
+        "|---|---|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|",
     ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
         t = ", ".join(f"{k} {n}" for k, n in sorted(r["targets"].items()))
         lines.append(
             f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {'on' if r['shield'] else 'off'} | "
-            f"{r['steps']} | "
-            f"{r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | {r['unsensed_moves']} | "
-            f"{v} | {t} | "
-            f"{r['steps_per_s']} |"
+            f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | "
+            f"{r['unsensed_moves']} | {r['steps_at_limit']} | {v} | {t} | {r['steps_per_s']} |"
         )
     (out / "audit.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {out / 'audit.md'}")

@@ -15,7 +15,8 @@ per id).
 
 --control dynamic drives the simulator's position-controlled motors (config/sim.yaml, the mode closest to
 hardware): the arm lags and overshoots its commands, and the reported states can lie a little beyond the joint
-limits. The table's "beyond limit" column is the largest such excursion the env saw (it must not raise).
+limits (the shield clamps states within config/shield.yaml's limit_tolerance and refuses those beyond it). The
+"at limit" column counts the steps that commanded a joint onto its limit, where that happens; no run may raise.
 --world replaces every id's world (a name in worlds/ or a YAML path), e.g. the live tests' moving wall; --start
 fixes every episode's start configuration (reset option "start"), e.g. one clear of that wall's swing:
 
@@ -57,18 +58,19 @@ def worker(
         kwargs["world"] = world
     env = gym.make(env_id, shield=shield, graph="launch", **kwargs)
     try:
-        limits = env.unwrapped.scaler.limits
+        scaler = env.unwrapped.scaler
         env.action_space.seed(seed)
         options = {"start": start} if start else None
         env.reset(seed=seed, options=options)
         contacts = contact_steps = episodes = 0
-        beyond = 0.0  # largest reported excursion beyond a joint limit (rad)
+        at_limit = 0  # steps that commanded a joint onto its limit (where position-controlled motors overshoot)
         verdicts: dict[str, int] = {}
         t0 = time.perf_counter()
         for _ in range(steps):
-            _, _, term, trunc, info = env.step(env.action_space.sample())
-            q = env.unwrapped.q
-            beyond = max(beyond, float(np.max(np.maximum(limits.lower - q, q - limits.upper))))
+            action = env.action_space.sample()
+            target = scaler.command(env.unwrapped.q, action)
+            at_limit += bool(np.any((target <= scaler.limits.lower) | (target >= scaler.limits.upper)))
+            _, _, term, trunc, info = env.step(action)
             contacts += max(info["contacts"], 0)
             contact_steps += info["contacts"] > 0
             verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
@@ -88,7 +90,7 @@ def worker(
         "episodes": episodes,
         "contacts": contacts,
         "steps_with_contact": contact_steps,
-        "beyond_limit_mrad": round(1000 * max(beyond, 0.0), 2),
+        "steps_at_limit": at_limit,
         "steps_per_s": round(rate, 1),
         "verdicts": verdicts,
     }
@@ -148,7 +150,7 @@ def main(argv=None) -> int:
             r = rows[-1]
             print(
                 f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
-                f"beyond limit {r['beyond_limit_mrad']} mrad; {r['steps_per_s']} steps/s",
+                f"{r['steps_at_limit']} steps at a limit; {r['steps_per_s']} steps/s",
                 flush=True,
             )
     args.out.mkdir(parents=True, exist_ok=True)
@@ -175,11 +177,11 @@ def main(argv=None) -> int:
         f"    {cmd}",
         "",
         "Uniformly random actions, episodes reset as usual; contacts = distinct robot contact pairs the physics "
-        "engine saw during each step's motion, summed over the steps. beyond limit = the largest excursion of a "
-        "reported joint position beyond its URDF limit during the run (the env must not raise for it).",
+        "engine saw during each step's motion, summed over the steps. at limit = steps whose command put a joint "
+        "onto its URDF limit (with dynamic control the motors overshoot there; the env must not raise).",
         "",
         "| env id | world | control | shield | steps | episodes | contacts | steps with contact | "
-        "beyond limit (mrad) | verdicts | steps/s |",
+        "at limit | verdicts | steps/s |",
         "|---|---|---|---|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
@@ -188,7 +190,7 @@ def main(argv=None) -> int:
             f"| `{r['env_id']}` | {Path(r['world']).stem if r['world'] else 'its own'} | "
             f"{r['control'] or 'sim.yaml'} | "
             f"{'on' if r['shield'] else 'off'} | {r['steps']} | {r['episodes']} | **{r['contacts']}** | "
-            f"{r['steps_with_contact']} | {r['beyond_limit_mrad']} | {v} | {r['steps_per_s']} |"
+            f"{r['steps_with_contact']} | {r['steps_at_limit']} | {v} | {r['steps_per_s']} |"
         )
     (args.out / "audit.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out / 'audit.md'}")

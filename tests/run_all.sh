@@ -33,7 +33,8 @@ done
 # Tier 2: Python cores.
 suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/test src/moverl_sim/test \
   src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
-  src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py
+  src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py \
+  src/moverl_gym/test/test_goal_render_core.py
 suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
   src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.
@@ -53,6 +54,8 @@ if [ "$live" = 1 ]; then
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_soak_short.py
   suite "pytest train.py smoke (PPO, SAC, TD3, PPO with 2 envs + evaluate), study --quick" python -m pytest -q -p no:cacheprovider \
     src/moverl_gym/test/test_train_smoke.py src/moverl_gym/test/test_study.py
+  suite "pytest goal-conditioned ids live (SAC + HER, shield on; relabelled rewards with discarded steps; rendering)" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_goal_live.py
   suite "pytest RLlib on a 2-node local Ray cluster (runners on different nodes; resumed with a simulator and a runner killed)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_rllib_live.py
   suite "rostest shield_live" live_rostest shield_live.test

@@ -10,6 +10,15 @@ final model and config.yaml (the resolved configuration). Prints a summary with 
 Parallel envs (`--n-envs N`, or `n_envs` in the hyper-parameter file, RL Zoo style): N envs, each in its own process
 (SB3's SubprocVecEnv) with its own ROS graph on its own free port; env i is seeded with seed + i. As in RL Zoo,
 PPO's n_steps is per env (a rollout is n_steps * N steps).
+
+Goal-conditioned ids (MoveRL/PandaReach<Scenario>Goal[Dense]-v0) train with SAC or TD3 and HER as in RL Zoo: the
+hyper-parameter file names the buffer (`replay_buffer_class: HerReplayBuffer`, `replay_buffer_kwargs`) and the policy
+(`MultiInputPolicy`), e.g. config/hyperparams/sac.yml:
+
+    ./run.sh train --env MoveRL/PandaReachTableGoal-v0 --algo sac -n 40000
+
+--video N records N evaluation episodes of the trained policy (deterministic actions, a fresh env with
+render_mode="rgb_array", Gymnasium's RecordVideo) to <run>/videos/.
 """
 
 from __future__ import annotations
@@ -68,6 +77,9 @@ def parse_args(argv=None):
     p.add_argument("--checkpoint-freq", type=int, default=10000, help="steps between checkpoints (0: none)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--device", default="cpu")
+    p.add_argument(
+        "--video", type=int, default=0, metavar="N", help="record N evaluation episodes to <run>/videos (mp4)"
+    )
     return p.parse_args(argv)
 
 
@@ -90,6 +102,13 @@ def main(argv=None) -> int:
         print(f"--n-envs must be at least 1, got {n_envs}", file=sys.stderr)
         return 2
     policy = hp.pop("policy", "MlpPolicy")
+    if isinstance(hp.get("replay_buffer_class"), str):  # RL Zoo style: the class by name
+        import stable_baselines3
+
+        hp["replay_buffer_class"] = getattr(stable_baselines3, hp["replay_buffer_class"])
+    if args.video < 0:
+        print(f"--video must be >= 0, got {args.video}", file=sys.stderr)
+        return 2
     shield = args.shield == "on"
     run = Path(args.log_folder) / f"{args.algo}_{args.env.split('/')[-1]}_{args.shield}_s{args.seed}"
     run.mkdir(parents=True, exist_ok=True)
@@ -121,7 +140,7 @@ def main(argv=None) -> int:
             "shield": shield,
             "obstacles": args.obstacles,
             "policy": policy,
-            "hyperparams": hp,
+            "hyperparams": {k: getattr(v, "__name__", v) for k, v in hp.items()},
             "task": vars(env.get_attr("config", [0])[0]),
             "world": env.get_attr("world_name", [0])[0],
             "recover": env.get_attr("recover", [0])[0],
@@ -140,6 +159,8 @@ def main(argv=None) -> int:
         model.save(run / "model")
     finally:
         env.close()
+    if args.video:
+        record_videos(model, args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args), run, args)
 
     s = episodes.summary(last=200)
     s.update(wall_time=wall, steps_per_second=n_timesteps / wall, run=str(run), shield=shield)
@@ -162,6 +183,32 @@ def main(argv=None) -> int:
         )
     print(f"outputs: {run}/episodes.csv, TensorBoard in {run}, model {run}/model.zip")
     return 0
+
+
+def record_videos(model, env_id: str, kwargs: dict, run: Path, args) -> None:
+    """args.video evaluation episodes of the trained policy (deterministic), recorded by Gymnasium's RecordVideo."""
+    import gymnasium as gym
+    from gymnasium.wrappers import RecordVideo
+
+    folder = run / "videos"
+    env = RecordVideo(
+        gym.make(env_id, render_mode="rgb_array", **kwargs),
+        str(folder),
+        episode_trigger=lambda _: True,
+        name_prefix="eval",
+        disable_logger=True,
+    )
+    try:
+        for episode in range(args.video):
+            obs, _ = env.reset(seed=args.seed + 10_000 + episode)
+            done = False
+            while not done:
+                action, _ = model.predict(obs, deterministic=True)
+                obs, _, terminated, truncated, _ = env.step(action)
+                done = terminated or truncated
+    finally:
+        env.close()
+    print(f"videos: {args.video} evaluation episodes in {folder}")
 
 
 def _env_factory(env_id: str, kwargs: dict):

@@ -68,13 +68,16 @@ class ResetResult:
 class Backend(ABC):
     """A robot the env drives. Attributes set by every implementation:
 
-    joints (names, configured order), urdf (URDF text), home (configuration), ee_link, shield_enabled, world
+    joints (names, configured order), urdf (URDF text), home (configuration), ee_link, robot_config (the robot config's
+    robot: mapping: urdf URI, joints, base_link, ...), shield_enabled, world
     (WorldInfo), restartable (True when restart() can relaunch a failed backend: a simulated graph the env launched).
     """
 
     joints: list
     urdf: str
     home: list
+    ee_link: str
+    robot_config: dict
     shield_enabled: bool
     world: WorldInfo
     restartable: bool = False

@@ -41,6 +41,7 @@ class BulletBackend(Backend):
         self.joints = list(rc["joints"])
         self.home = list(rc["home"])
         self.ee_link = rc["ee_link"]
+        self.robot_config = rc
         self.shield_enabled = False
         self.restartable = True
         wf = world_file(world)

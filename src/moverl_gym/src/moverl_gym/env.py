@@ -25,7 +25,7 @@ from .backend import Backend
 from .errors import MoveRLError
 from .graph import GraphError
 from .paths import config_file
-from .robot import ActionScaler, JointLimits
+from .robot import ActionScaler, JointLimits, chain_reach
 from .task import ReachTask, TaskConfig
 
 #: Shield verdicts by code, named as in moverl_msgs/ShieldStep (the generated class is the one source of the codes).
@@ -107,7 +107,9 @@ class MoveRLReachEnv(gym.Env):
             this env launched the graph with the simulator.
     """
 
-    metadata = {"render_modes": []}
+    # render_fps (1 / dt) is set per instance from config/env.yaml; render_mode="human" is Gymnasium's HumanRendering
+    # wrapper around rgb_array (gym.make applies it).
+    metadata = {"render_modes": ["rgb_array"]}
 
     def __init__(
         self,
@@ -125,12 +127,19 @@ class MoveRLReachEnv(gym.Env):
     ):
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type must be one of {OBS_TYPES}, got {obs_type!r}")
-        if render_mode is not None:
-            raise ValueError("rendering is done by the simulator (launch with gui:=true), not by the env")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']} (\"human\": gym.make wraps "
+                f"rgb_array in Gymnasium's HumanRendering), got {render_mode!r}"
+            )
+        self.render_mode = render_mode
+        self._view = None  # the renderer, made at the first render() (no cost when not rendering)
+        self._world_arg = world
         if recover not in (True, False, "auto"):
             raise ValueError(f"recover must be True, False or 'auto', got {recover!r}")
         self.obs_type = obs_type
         self.config = TaskConfig.from_yaml(config_file("env.yaml"), **(task or {}))
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.config.dt}
         self.graph_restarts = 0  # relaunches so far (reported in every info)
         self.graph_failures = 0  # failures found so far, at a step or a reset (reported in every info)
         self._failure = None  # what failed, until the next reset relaunches the graph
@@ -190,7 +199,8 @@ class MoveRLReachEnv(gym.Env):
             raise GraphError(f"the attached graph runs world '{w.name}', the env was asked for '{world}'")
         if goal is None and w.goal is None:
             raise ValueError(f"world '{w.name}' has no goal: give one (goal=[x, y, z])")
-        self.task = ReachTask(self.config, goal if goal is not None else list(w.goal))
+        self.reach = chain_reach(b.urdf, b.ee_link)  # positions the end effector can reach: within +-reach of the base
+        self.task = self._make_task(goal if goal is not None else list(w.goal))
         observed = [o for o in w.obstacles if o.observed]
         self._obstacles0 = np.concatenate([o.pose for o in observed]) if observed else np.zeros(0)  # at motion time 0
         self._obstacles = self._obstacles0
@@ -200,11 +210,31 @@ class MoveRLReachEnv(gym.Env):
         ]
         self._motion_epoch = w.motion_epoch
         n = self.limits.size
-        size = (n if obs_type_has_joints(self.obs_type) else 0) + 7 + 3 + 7 * len(observed)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(size,), dtype=np.float32)
+        # Bounded spaces: joint angles within the URDF limits (a reported state a hair beyond one is clipped onto it
+        # in the observation), positions within the robot's reach of its base (end effector, goal), observed obstacles
+        # within their motion's envelope, quaternions in [-1, 1].
+        self._goal_low, self._goal_high = np.full(3, -self.reach), np.full(3, self.reach)
+        ee_low = np.concatenate([self._goal_low, -np.ones(4)])
+        ee_high = np.concatenate([self._goal_high, np.ones(4)])
+        ob_low, ob_high = _obstacle_bounds(observed)
+        low = ([self.limits.lower] if obs_type_has_joints(self.obs_type) else []) + [ee_low, self._goal_low, ob_low]
+        high = ([self.limits.upper] if obs_type_has_joints(self.obs_type) else []) + [ee_high, self._goal_high, ob_high]
+        self._obs_low, self._obs_high = np.concatenate(low), np.concatenate(high)
+        self.observation_space = gym.spaces.Box(
+            self._obs_low.astype(np.float32), self._obs_high.astype(np.float32), dtype=np.float32
+        )
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         self.q = None
         self.last_timing = {}
+
+    def _make_task(self, goal) -> ReachTask:
+        task = ReachTask(self.config, goal)
+        if np.any(np.abs(task.goal) > self.reach):
+            raise ValueError(
+                f"goal {task.goal.tolist()} is out of the robot's reach: each coordinate must lie within "
+                f"{self.reach:.3f} m of its base"
+            )
+        return task
 
     def _obstacles_at(self, stamp: float) -> np.ndarray:
         """Observed obstacle poses at the state stamp `stamp` (motion time = stamp - the motion epoch)."""
@@ -265,13 +295,14 @@ class MoveRLReachEnv(gym.Env):
 
     def _reset(self, options):
         if "goal" in options:
-            self.task = ReachTask(self.config, options["goal"])
+            self.task = self._make_task(options["goal"])
         elif self.config.goal_noise > 0:
-            self.task = ReachTask(self.config, self._sample_goal())
+            self.task = self._make_task(self._sample_goal())
         res = self._reset_robot(options.get("start"))
         self._episode_steps = 0
         self.q = res.q
         self._motion_epoch = res.motion_epoch  # a simulator reset restarts the obstacles' motions; a move does not
+        self._stamp = res.stamp
         self._obstacles = self._obstacles_at(res.stamp)
         self.ee = self._backend.ee_pose(self.q)
         self.distance = self.task.distance(self.ee[:3])
@@ -367,6 +398,7 @@ class MoveRLReachEnv(gym.Env):
         self._steps_since_restart += 1
         self.q = res.q
         self.ee = res.ee
+        self._stamp = res.stamp
         if self._movers:
             self._obstacles = self._obstacles_at(res.stamp)
         d = self.task.distance(self.ee[:3])
@@ -404,11 +436,43 @@ class MoveRLReachEnv(gym.Env):
     def _observation(self) -> np.ndarray:
         parts = [self.q] if obs_type_has_joints(self.obs_type) else []
         parts += [self.ee, self.task.goal, self._obstacles]
-        return np.concatenate(parts).astype(np.float32)
+        # Within the space: joints a hair beyond a limit (PyBullet, encoders) and float rounding of unit quaternions.
+        return np.clip(np.concatenate(parts), self._obs_low, self._obs_high).astype(np.float32)
+
+    def render(self):
+        """render_mode "rgb_array": an (H, W, 3) uint8 picture of the current state (the robot as observed, every
+        world object where its motion has it now, the goal as a red sphere), drawn in this process from the state and
+        the world file (moverl_sim.scene_view; camera and size in config/render.yaml), so it works with a real robot
+        too. None when the env was made without a render_mode."""
+        if self.render_mode is None:
+            gym.logger.warn('render() without a render_mode: make the env with render_mode="rgb_array"')
+            return None
+        if self.q is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        if self._view is None:
+            self._view = self._make_view()
+        self._view.pose(self.q, self._stamp - self._motion_epoch, self.task.goal)
+        return self._view.image()
+
+    def _make_view(self):
+        from moverl_sim.scene_view import SceneView
+        from moverl_sim.world import load_world
+
+        from .paths import world_file
+
+        path = world_file(self._world_arg or self.world_name)
+        if not path.exists():
+            path = world_file(self.world_name)
+        if not path.exists():
+            raise FileNotFoundError(f"render(): the world file of world '{self.world_name}' is not at {path}")
+        return SceneView(self._backend.robot_config, load_world(str(path)))
 
     def close(self):
         """Close the backend: a graph this env launched is gone, every process of it, when close() returns (see
         moverl_gym.graph.LaunchedGraph.close)."""
+        view, self._view = getattr(self, "_view", None), None
+        if view is not None:
+            view.close()
         if self._backend is not None:
             backend, self._backend = self._backend, None
             backend.close()
@@ -416,3 +480,20 @@ class MoveRLReachEnv(gym.Env):
 
 def obs_type_has_joints(obs_type: str) -> bool:
     return obs_type == "joints"
+
+
+def _obstacle_bounds(observed) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of the observed obstacles' poses (7 numbers each): the positions over their whole motion (oscillate:
+    displacement in [-A (1 + sin phase), A (1 - sin phase)] along the axis from the pose at motion time 0), 1 mm
+    wider for float32 rounding; quaternions in [-1, 1]."""
+    low, high = [], []
+    for o in observed:
+        p = np.asarray(o.pose[:3], dtype=np.float64)
+        lo = hi = p
+        if o.motion is not None:
+            m, axis = o.motion, np.asarray(o.motion.axis, dtype=np.float64)
+            ends = [p + axis * m.amplitude * (s - np.sin(m.phase)) for s in (-1.0, 1.0)]
+            lo, hi = np.minimum(*ends), np.maximum(*ends)
+        low += [lo - 1e-3, -np.ones(4)]
+        high += [hi + 1e-3, np.ones(4)]
+    return (np.concatenate(low), np.concatenate(high)) if low else (np.zeros(0), np.zeros(0))

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from moverl_sim.urdf import JointLimits
+from moverl_sim.urdf import JointLimits, chain_reach
 
-__all__ = ["JointLimits", "ActionScaler"]
+__all__ = ["JointLimits", "ActionScaler", "chain_reach"]
 
 
 class ActionScaler:

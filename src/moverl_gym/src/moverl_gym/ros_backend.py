@@ -263,6 +263,8 @@ class RosBackend(Backend):
         self.urdf = rospy.get_param("/robot_description")
         self.joints = list(rospy.get_param("/robot/joints"))
         self.home = list(rospy.get_param("/robot/home"))
+        self.robot_config = dict(rospy.get_param("/robot"))  # the robot config's robot: section, as launched
+        self.ee_link = self.robot_config["ee_link"]
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
         self.world = _world_info(self._world(GetWorld._request_class()).world)
         simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"

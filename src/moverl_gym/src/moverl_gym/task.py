@@ -67,3 +67,24 @@ class ReachTask:
         if discarded:
             r += c.safety_penalty
         return float(r)
+
+
+def goal_reward(achieved_goal, desired_goal, discarded, config: TaskConfig, sparse: bool) -> np.ndarray:
+    """Reward of the goal-conditioned ids (panda-gym's convention, plus the shield's penalty), vectorised over a batch.
+
+    A function of (achieved, desired, discarded) alone, so HER can recompute it for relabelled goals:
+        sparse: -1 until the end effector is within goal_tolerance of the goal, 0 there (success);
+        dense:  -d, the distance to the goal;
+    plus safety_penalty where the shield discarded the action (`discarded`, 0/1 per sample, read from info).
+
+    Args:
+        achieved_goal, desired_goal: (..., 3) positions.
+        discarded: scalar or (...) flags.
+    Returns:
+        float32 array of shape (...).
+    """
+    d = np.linalg.norm(
+        np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64), axis=-1
+    )
+    r = -(d >= config.goal_tolerance).astype(np.float64) if sparse else -d
+    return (r + config.safety_penalty * np.asarray(discarded, dtype=np.float64)).astype(np.float32)

@@ -349,6 +349,10 @@ class Simulator:
         ]
         self._place_movers(0.0)
 
+    def place_obstacles(self, t):
+        """Put every moving obstacle where it is at motion time t (for pictures: a motion places them as it runs)."""
+        self._place_movers(t)
+
     def _place_movers(self, t):
         """Put every moving obstacle at its pose at motion time t."""
         cid = self._cid if hasattr(self, "_cid") else self._p._client

@@ -15,6 +15,7 @@ if TYPE_CHECKING:  # numpy is imported where it is used: robot_description runs 
 __all__ = [
     "UrdfError",
     "JointLimits",
+    "chain_reach",
     "CONTINUOUS_JOINT_LIMIT",
     "resolve_uri",
     "rewrite_mesh_paths",
@@ -135,6 +136,41 @@ class JointLimits:
     @property
     def size(self) -> int:
         return len(self.names)
+
+
+def chain_reach(urdf_xml: str, tip_link: str) -> float:
+    """An upper bound (m) of how far the origin of `tip_link` can get from the origin of any of its ancestor links (the
+    robot's base among them), in any configuration: the lengths of the joint origins' offsets on the chain from the URDF
+    root to the tip, summed (triangle inequality), plus the largest travel of every prismatic joint on it.
+
+    The env bounds its observation space with it (end-effector and goal positions within +-reach of the base).
+
+    Raises:
+        ValueError: the URDF does not parse, or it has no link `tip_link`.
+    """
+    try:
+        root = ET.fromstring(urdf_xml)
+    except ET.ParseError as exc:
+        raise ValueError(f"the robot description is not valid XML: {exc}") from exc
+    if tip_link not in {link.get("name") for link in root.iter("link")}:
+        raise ValueError(f"link '{tip_link}' is not in the URDF")
+    parent_joint = {}
+    for joint in root.iter("joint"):
+        child = joint.find("child")
+        if child is not None:
+            parent_joint[child.get("link")] = joint
+    reach, link, seen = 0.0, tip_link, set()
+    while link in parent_joint and link not in seen:
+        seen.add(link)
+        joint = parent_joint[link]
+        origin = joint.find("origin")
+        xyz = [float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()]
+        reach += math.sqrt(sum(v * v for v in xyz))
+        limit = joint.find("limit")
+        if joint.get("type") == "prismatic" and limit is not None:
+            reach += max(abs(float(limit.get("lower", "0"))), abs(float(limit.get("upper", "0"))))
+        link = joint.find("parent").get("link")
+    return reach
 
 
 def _parse_urdf(text, source):

@@ -8,7 +8,7 @@ import pytest
 from moverl_gym import ENV_IDS
 from moverl_gym.graph import free_port, master_alive
 from moverl_gym.paths import config_file, world_file
-from moverl_gym.robot import ActionScaler, JointLimits
+from moverl_gym.robot import ActionScaler, JointLimits, chain_reach
 from moverl_gym.task import ReachTask, TaskConfig
 from moverl_gym.training import load_hyperparams
 
@@ -26,6 +26,23 @@ def test_limits_come_from_the_urdf():
     np.testing.assert_array_equal(lim.lower, [-3.0, -1.0])
     np.testing.assert_array_equal(lim.upper, [0.0, 2.0])
     np.testing.assert_array_equal(lim.velocity, [1.0, 2.0])
+
+
+def test_transmissions_do_not_hide_the_joints():
+    """ros_control URDFs name every joint again inside a <transmission>: only the <robot>'s own joints count."""
+    tr = '<transmission name="t1"><joint name="j1"><hardwareInterface>x</hardwareInterface></joint></transmission>'
+    lim = JointLimits.from_urdf(URDF.replace("</robot>", tr + "</robot>"), ["j1"])
+    np.testing.assert_array_equal(lim.upper, [2.0])
+
+
+def test_chain_reach_bounds_the_tip():
+    urdf = URDF.replace(
+        '<parent link="b"/><child link="c"/>', '<parent link="b"/><child link="c"/><origin xyz="0.3 0.4 0"/>'
+    )
+    assert chain_reach(urdf, "c") == pytest.approx(0.5)
+    assert chain_reach(urdf, "a") == 0.0
+    with pytest.raises(ValueError, match="'nope' is not in the URDF"):
+        chain_reach(urdf, "nope")
 
 
 @pytest.mark.parametrize(

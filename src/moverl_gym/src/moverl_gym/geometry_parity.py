@@ -66,7 +66,7 @@ def scene_geometry_binary() -> str:
 def urdf_movable_joints(urdf_path) -> list[str]:
     """Revolute and prismatic joints of a URDF, in file order (the fixtures control all of them)."""
     root = ET.parse(urdf_path).getroot()
-    return [j.get("name") for j in root.iter("joint") if j.get("type") in ("revolute", "prismatic")]
+    return [j.get("name") for j in root.findall("joint") if j.get("type") in ("revolute", "prismatic")]
 
 
 def _run_scene(urdf_path, joints, base_link, fixed, commands: list[str]) -> list[str]:

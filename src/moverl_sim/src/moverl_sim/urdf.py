@@ -112,7 +112,8 @@ class JointLimits:
             root = ET.fromstring(urdf_xml)
         except ET.ParseError as exc:
             raise ValueError(f"the robot description is not valid XML: {exc}") from exc
-        by_name = {j.get("name"): j for j in root.iter("joint")}
+        # Only the <robot>'s own joints: a <transmission> also holds <joint name=...> elements (ros_control).
+        by_name = {j.get("name"): j for j in root.findall("joint")}
         lower, upper, velocity = [], [], []
         for name in joints:
             joint = by_name.get(name)
@@ -152,10 +153,10 @@ def chain_reach(urdf_xml: str, tip_link: str) -> float:
         root = ET.fromstring(urdf_xml)
     except ET.ParseError as exc:
         raise ValueError(f"the robot description is not valid XML: {exc}") from exc
-    if tip_link not in {link.get("name") for link in root.iter("link")}:
+    if tip_link not in {link.get("name") for link in root.findall("link")}:
         raise ValueError(f"link '{tip_link}' is not in the URDF")
     parent_joint = {}
-    for joint in root.iter("joint"):
+    for joint in root.findall("joint"):  # not the <joint> elements inside <transmission>s
         child = joint.find("child")
         if child is not None:
             parent_joint[child.get("link")] = joint

@@ -40,6 +40,20 @@ def parse_args(argv=None):
     p.add_argument("--shields", nargs="+", default=["on", "off"], choices=("on", "off"))
     p.add_argument("-n", "--n-timesteps", type=int, default=None, help="steps per run (default 40000)")
     p.add_argument("--algo", default="ppo", choices=("ppo", "sac", "td3"))
+    p.add_argument(
+        "--variant",
+        default="",
+        choices=("", "EE", "Goal", "GoalDense"),
+        help="which id of each scenario: MoveRL/PandaReach<Scenario><variant>-v0 (Goal: the goal-conditioned ids, "
+        "for SAC or TD3 with HER as config/hyperparams says)",
+    )
+    p.add_argument(
+        "--task",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="passed to train.py: override a key of config/env.yaml, e.g. --task start_noise=0",
+    )
     p.add_argument("--jobs", type=int, default=2, help="trainings at once (one per core)")
     p.add_argument("--out", type=Path, default=None, help="run folders (default runs/study)")
     p.add_argument("--docs", type=Path, default=None, help="figures and tables (default docs/study)")
@@ -83,7 +97,7 @@ def run_all(args, argv) -> int:
     (out / "logs").mkdir(parents=True, exist_ok=True)
     todo = []
     for sc, sh, sd in planned(args):
-        name = study.run_name(args.algo, study.env_id(sc), sh, sd)
+        name = study.run_name(args.algo, study.env_id(sc, args.variant), sh, sd)
         folder = out / name
         if (folder / "summary.json").exists():
             print(f"skip {name} (finished)", flush=True)
@@ -108,7 +122,7 @@ def run_all(args, argv) -> int:
             sys.executable,
             str(TRAIN),
             "--env",
-            study.env_id(sc),
+            study.env_id(sc, args.variant),
             "--algo",
             args.algo,
             "--seed",
@@ -120,6 +134,7 @@ def run_all(args, argv) -> int:
             "--log-folder",
             str(out),
             "--no-progress",
+            *[a for t in args.task for a in ("--task", t)],
         ]
         log = out / "logs" / f"{name}.log"
         t0 = time.perf_counter()
@@ -166,10 +181,11 @@ def run_all(args, argv) -> int:
 def report(args, argv) -> int:
     runs = study.load_runs(args.out)
     wanted = {(sc, sh, sd) for sc, sh, sd in planned(args)}
-    runs = [r for r in runs if r.algo == args.algo and (r.scenario, r.shield, r.seed) in wanted]
+    names = {study.run_name(args.algo, study.env_id(sc, args.variant), sh, sd) for sc, sh, sd in wanted}
+    runs = [r for r in runs if r.path.name in names]
     finished = [r for r in runs if r.finished]
     partial = [r for r in runs if not r.finished and r.n_episodes > 0]
-    missing = study.missing_runs(args.out, args.scenarios, args.shields, args.seeds, args.algo)
+    missing = study.missing_runs(args.out, args.scenarios, args.shields, args.seeds, args.algo, args.variant)
     args.docs.mkdir(parents=True, exist_ok=True)
     trained_with = (args.out / "command.txt").read_text().strip() if (args.out / "command.txt").exists() else None
     suffix = "" if not missing else f"\n({len(finished)} of {len(wanted)} runs finished)"

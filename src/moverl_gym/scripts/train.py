@@ -58,6 +58,14 @@ def parse_args(argv=None):
         help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
         "from the world's depth cameras, or both",
     )
+    p.add_argument(
+        "--task",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a key of config/env.yaml for this run, e.g. --task start_noise=0 (starts uniform over the whole "
+        "joint range); repeatable",
+    )
     p.add_argument("--log-folder", default="runs")
     p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: config/hyperparams)")
     p.add_argument(
@@ -114,6 +122,13 @@ def main(argv=None) -> int:
     run.mkdir(parents=True, exist_ok=True)
 
     launch_args = {} if args.obstacles == "objects" else {"obstacles": args.obstacles}
+    task = {}
+    for item in args.task:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            print(f"--task takes KEY=VALUE, got {item!r}", file=sys.stderr)
+            return 2
+        task[key] = yaml.safe_load(value)
     recover = {"auto": "auto", "on": True, "off": False}[args.recover]
     if n_envs > 1 and args.graph == "attach":
         print(
@@ -122,7 +137,9 @@ def main(argv=None) -> int:
         )
         return 2
     make = [
-        _env_factory(args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, recover=recover))
+        _env_factory(
+            args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, recover=recover, task=task)
+        )
         for _ in range(n_envs)
     ]
     # One env: in this process, as before. More: one process each (rospy allows one ROS master per process).
@@ -160,7 +177,9 @@ def main(argv=None) -> int:
     finally:
         env.close()
     if args.video:
-        record_videos(model, args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args), run, args)
+        record_videos(
+            model, args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, task=task), run, args
+        )
 
     s = episodes.summary(last=200)
     s.update(wall_time=wall, steps_per_second=n_timesteps / wall, run=str(run), shield=shield)

@@ -309,15 +309,15 @@ def settings_groups(runs: list[Run]) -> dict[str, list[str]]:
     return groups
 
 
-def missing_runs(root: Path, scenarios, shields, seeds, algo: str = "ppo") -> list[str]:
-    """Names of the planned runs without a summary.json under root."""
+def missing_runs(root: Path, scenarios, shields, seeds, algo: str = "ppo", variant: str = "") -> list[str]:
+    """Names of the planned runs without a summary.json under root (variant: the id suffix, e.g. "Goal")."""
     root = Path(root)
     return [
-        run_name(algo, env_id(sc), sh, sd)
+        run_name(algo, env_id(sc, variant), sh, sd)
         for sc in scenarios
         for sh in shields
         for sd in seeds
-        if not (root / run_name(algo, env_id(sc), sh, sd) / "summary.json").exists()
+        if not (root / run_name(algo, env_id(sc, variant), sh, sd) / "summary.json").exists()
     ]
 
 

@@ -21,7 +21,7 @@ import rostest
 from live_helpers import LiveAssertions
 
 import moverl_gym  # noqa: F401
-from moverl_gym.registration import OBSERVATIONS, ROBOT, SCENARIOS, VERSION
+from moverl_gym.registration import OBSERVATIONS, SCENARIOS, env_id
 from moverl_msgs.srv import (
     CheckPath,
     CheckState,
@@ -151,9 +151,9 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
 
         scenario = {w: s for s, w in SCENARIOS.items()}[self.world]
         for suffix in OBSERVATIONS:
-            env_id = f"MoveRL/{ROBOT}Reach{scenario}{suffix}-{VERSION}"
-            with self.subTest(env_id=env_id):
-                env = gym.make(env_id, graph="attach")
+            name = env_id(rospy.get_param("/robot/name"), scenario, suffix)
+            with self.subTest(env_id=name):
+                env = gym.make(name, graph="attach")
                 try:
                     check_env(env.unwrapped, skip_render_check=True)
                     # Seeding is deterministic, moving obstacles (the walking person) included.
@@ -187,7 +187,7 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
                     counts = self.random_rollout_without_contact(env, RANDOM_STEPS, near)
                     rospy.loginfo(
                         "%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts",
-                        env_id,
+                        name,
                         t_reset,
                         RANDOM_STEPS,
                         time.monotonic() - t0,
@@ -195,7 +195,7 @@ class ScenarioLive(LiveAssertions, unittest.TestCase):
                     )
                     print(
                         "%s: reset %.3f s; %d random steps in %.1f s, verdicts %s, zero contacts"
-                        % (env_id, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts)
+                        % (name, t_reset, RANDOM_STEPS, time.monotonic() - t0, counts)
                     )
                 finally:
                     env.close()

@@ -1,0 +1,50 @@
+"""Every shipped robot in every scenario, against the live graph with the shield on (each case launches its own graph
+on a free port): Gymnasium's and SB3's check_env, seed determinism (the walking person included), and a random policy
+with zero ground-truth contacts. Robots come from config/robots/*.yaml; nothing here names one."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import moverl_gym  # noqa: F401
+from moverl_gym.registration import ROBOTS, SCENARIOS, env_id
+
+RANDOM_STEPS = 500
+CASES = [(robot, scenario) for robot in ROBOTS.values() for scenario in SCENARIOS]
+
+
+@pytest.mark.parametrize("robot, scenario", CASES)
+def test_check_env_determinism_and_random_policy_without_contact(robot, scenario):
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(env_id(robot, scenario))
+    try:
+        u = env.unwrapped
+        assert env.action_space.shape == (u.limits.size,)
+        check_env(u, skip_render_check=True)
+        sb3_check_env(u, warn=True)
+        actions = np.random.default_rng(1).uniform(-1, 1, (25, u.limits.size)).astype(np.float32)
+        traces = []
+        for _ in range(2):
+            obs, _ = env.reset(seed=7)
+            trace = [obs]
+            for a in actions:
+                trace.append(env.step(a)[0])
+            traces.append(trace)
+        for a, b in zip(*traces):
+            np.testing.assert_array_equal(a, b)
+        env.reset(seed=3)
+        env.action_space.seed(3)
+        verdicts, contacts = {}, 0
+        for _ in range(RANDOM_STEPS):
+            obs, _, term, trunc, info = env.step(env.action_space.sample())
+            assert env.observation_space.contains(obs)
+            verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+            contacts += info["contacts"]
+            if term or trunc:
+                env.reset()
+        print(f"\n{env_id(robot, scenario)}: {RANDOM_STEPS} random steps, verdicts {verdicts}, {contacts} contacts")
+        assert contacts == 0, verdicts
+    finally:
+        env.close()

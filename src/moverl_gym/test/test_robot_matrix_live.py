@@ -48,3 +48,36 @@ def test_check_env_determinism_and_random_policy_without_contact(robot, scenario
         assert contacts == 0, verdicts
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("robot", sorted(ROBOTS.values()))
+def test_planning_across_the_whole_span_of_wide_joints(robot):
+    """Joints that turn more than a full turn (limits of +-2 pi): the planner plans in the joint limits as given, no
+    wrap-around, from one end of their span to the other (the base joint when a robot has none)."""
+    import rospy
+
+    from moverl_msgs.srv import CheckPath, PlanPath
+
+    env = gym.make(env_id(robot, "Case"))
+    try:
+        u = env.unwrapped
+        lo, hi = u.limits.lower, u.limits.upper
+        wide = [j for j in range(u.limits.size) if hi[j] - lo[j] > 2 * np.pi] or [0]
+        start, goal = np.array(u._backend.home, dtype=float), np.array(u._backend.home, dtype=float)
+        start[wide], goal[wide] = hi[wide] - 0.2, lo[wide] + 0.2
+        assert u._backend.check_state(start) and u._backend.check_state(goal)
+        plan = rospy.ServiceProxy("/planning_scene/plan", PlanPath)(
+            start=list(start), goal=list(goal), planner="", time_limit=2.0
+        )
+        assert plan.outcome == PlanPath._response_class.SUCCESS, plan.message
+        points = np.array([p.positions for p in plan.path.points])
+        assert np.all(points >= lo - 1e-9) and np.all(points <= hi + 1e-9)
+        np.testing.assert_allclose(points[0], start)
+        np.testing.assert_allclose(points[-1], goal)
+        check = rospy.ServiceProxy("/planning_scene/check_path", CheckPath)
+        for a, b in zip(points[:-1], points[1:]):
+            assert check(start=list(a), goal=list(b)).outcome == CheckPath._response_class.VALID
+        span = points[:, wide].max(axis=0) - points[:, wide].min(axis=0)
+        assert np.all(span >= (hi[wide] - lo[wide]) - 0.5), span  # crossed the span, not a wrap to a near angle
+    finally:
+        env.close()

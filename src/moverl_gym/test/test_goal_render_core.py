@@ -36,6 +36,26 @@ def test_every_observation_of_1000_random_steps_is_in_the_space(env_id):
         env.close()
 
 
+@pytest.mark.parametrize("env_id", moverl_gym.ENV_IDS)
+def test_both_env_checkers_pass_on_every_id_without_a_warning(env_id):
+    import warnings
+
+    from gymnasium.utils.env_checker import check_env
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = make(env_id)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_env(env.unwrapped, skip_render_check=True)
+            sb3_check_env(env.unwrapped, warn=True)
+        messages = [str(w.message) for w in caught]
+        # The one message allowed: SB3 telling that it recognised a goal env by its compute_reward.
+        assert not [m for m in messages if "GoalEnv" not in m], messages
+    finally:
+        env.close()
+
+
 def test_a_goal_out_of_reach_is_refused():
     env = make("MoveRL/PandaReachTable-v0")
     try:

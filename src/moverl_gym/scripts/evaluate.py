@@ -4,10 +4,11 @@
     python src/moverl_gym/scripts/evaluate.py runs/study/ppo_PandaReachTable-v0_on_s0 --episodes 50 --deterministic
     python src/moverl_gym/scripts/evaluate.py runs/rllib_ppo_PandaReachTable-v0_on_s0   # an RLlib run (rllib_train.py)
 
-Reads config.yaml of the run (algo, env, shield), prints and writes JSON (default <run>/eval.json): success rate, mean
-return and length, ground-truth contacts (total and per episode), shield interventions. The model is an SB3 run
-folder or .zip (train.py, any --n-envs), or an RLlib run folder or checkpoint folder (rllib_train.py: its RLModule is
-restored without starting Ray).
+Reads config.yaml of the run (algo, env, shield, the task settings it trained with), prints and writes JSON (default
+<run>/eval.json): success rate, mean return and length, ground-truth contacts (total and per episode), shield
+interventions. The model is an SB3 run folder or .zip (train.py, any --n-envs), or an RLlib run folder or checkpoint
+folder (rllib_train.py: its RLModule is restored without starting Ray). --video N records the first N episodes to
+<run>/videos (Gymnasium's RecordVideo).
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ def parse_args(argv=None):
     p.add_argument("--shield", choices=("on", "off"), default=None, help="default: as in training")
     p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"))
     p.add_argument("--out", type=Path, default=None, help="JSON file (default <run>/eval.json)")
+    p.add_argument(
+        "--video", type=int, default=0, metavar="N", help="record the first N episodes to <run>/videos (mp4)"
+    )
     return p.parse_args(argv)
 
 
@@ -72,7 +76,21 @@ def main(argv=None) -> int:
         return 2
     algo = config["algo"]
     shield = config["shield"] if args.shield is None else args.shield == "on"
-    env = gym.make(config["env"], shield=shield, graph=args.graph)
+    # The task as trained (config/env.yaml then, with the run's --task overrides: e.g. whole-range starts).
+    from dataclasses import fields
+
+    from moverl_gym.task import TaskConfig
+
+    known = {f.name for f in fields(TaskConfig)}  # a run of an older version may have recorded keys since removed
+    kwargs = dict(
+        shield=shield, graph=args.graph, task={k: v for k, v in (config.get("task") or {}).items() if k in known}
+    )
+    if args.video > 0:
+        from moverl_gym.training import recording_env
+
+        env = recording_env(config["env"], kwargs, model_path.parent / "videos", args.video)
+    else:
+        env = gym.make(config["env"], **kwargs)
     try:
         if config.get("framework") == "rllib":
             from moverl_gym.rllib import CheckpointPolicy
@@ -81,7 +99,8 @@ def main(argv=None) -> int:
         else:
             from stable_baselines3 import PPO, SAC, TD3
 
-            model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(str(model_path), device="cpu")
+            # With the env: a HerReplayBuffer model needs one to load.
+            model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(str(model_path), env=env, device="cpu")
     except BaseException:
         env.close()
         raise

@@ -206,17 +206,10 @@ def main(argv=None) -> int:
 
 def record_videos(model, env_id: str, kwargs: dict, run: Path, args) -> None:
     """args.video evaluation episodes of the trained policy (deterministic), recorded by Gymnasium's RecordVideo."""
-    import gymnasium as gym
-    from gymnasium.wrappers import RecordVideo
+    from moverl_gym.training import recording_env
 
     folder = run / "videos"
-    env = RecordVideo(
-        gym.make(env_id, render_mode="rgb_array", **kwargs),
-        str(folder),
-        episode_trigger=lambda _: True,
-        name_prefix="eval",
-        disable_logger=True,
-    )
+    env = recording_env(env_id, kwargs, folder, args.video)
     try:
         for episode in range(args.video):
             obs, _ = env.reset(seed=args.seed + 10_000 + episode)

@@ -155,3 +155,18 @@ class EpisodeLogger(BaseCallback):
             "steps_per_second": self.num_timesteps / elapsed if elapsed > 0 else float("nan"),
             "wall_time": elapsed,
         }
+
+
+def recording_env(env_id: str, kwargs: dict, folder: Path, episodes: int, name_prefix: str = "eval"):
+    """gym.make(env_id, render_mode="rgb_array", **kwargs) wrapped in Gymnasium's RecordVideo: the first `episodes`
+    episodes are written to folder as mp4 (moviepy); later ones are not recorded."""
+    import gymnasium as gym
+    from gymnasium.wrappers import RecordVideo
+
+    return RecordVideo(
+        gym.make(env_id, render_mode="rgb_array", **kwargs),
+        str(folder),
+        episode_trigger=lambda episode: episode < episodes,
+        name_prefix=name_prefix,
+        disable_logger=True,
+    )

@@ -208,7 +208,10 @@ def report(args, argv) -> int:
         ),
         "",
         f"{args.algo.upper()} (config/hyperparams/{args.algo}.yml), {args.n_timesteps} env steps per run, "
-        f"scenarios {', '.join(args.scenarios)}, seeds {' '.join(map(str, args.seeds))}, shield on and off; "
+        f"ids MoveRL/PandaReach<Scenario>{args.variant}-v0, scenarios {', '.join(args.scenarios)}, "
+        f"seeds {' '.join(map(str, args.seeds))}, shield {' and '.join(args.shields)}"
+        + (f", task settings {', '.join(args.task)}" if args.task else "")
+        + "; "
         f"run folders in `{args.out}`. Contacts are the simulator's ground-truth contact pairs along every step's "
         "motion (not the shield's own check). Success = the last "
         f"{args.last} training episodes (stochastic policy) that reached the goal. "

@@ -177,3 +177,19 @@ def test_study_quick(tmp_path):
         [sys.executable, str(STUDY), "--quick", "--out", str(out)], capture_output=True, text=True, timeout=60
     )
     assert again.returncode == 0 and "every run is finished" in again.stdout, again.stdout + again.stderr
+
+
+def test_study_hard_starts_tiny(tmp_path):
+    """Live, CI size of the hard-start study (docs/study/hard_starts): SAC + HER on the table's goal id, starts uniform
+    over the whole joint range (--task start_noise=0), shield on; the run records the setting, the report is written."""
+    out = tmp_path / "h"
+    cmd = [sys.executable, str(STUDY), "--quick", "--algo", "sac", "--variant", "Goal", "--task", "start_noise=0"]
+    cmd += ["--shields", "on", "-n", "300", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=170)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    run = out / "sac_PandaReachTableGoal-v0_on_s0"
+    config = (run / "config.yaml").read_text()
+    assert "start_noise: 0" in config and "HerReplayBuffer" in config
+    rows = list(csv.DictReader(open(out / "results.csv")))
+    assert len(rows) == 1 and rows[0]["contacts_total"] == "0"
+    assert "--variant Goal --task start_noise=0" in (out / "results.md").read_text()

@@ -74,7 +74,9 @@ class TreeWatch:
         """Add the processes below root now; returns them."""
         now = descendants(self.root, proc_table())
         for p in now:
-            self.seen.setdefault((p.pid, p.start), p)
+            # The latest view: a process seen between its fork and its exec had its parent's name then (a raylet
+            # caught that early on a busy machine was not counted as one).
+            self.seen[(p.pid, p.start)] = p
             line = cmdline(p.pid)
             if line:
                 self.cmdlines[(p.pid, p.start)] = line

@@ -98,3 +98,35 @@ def test_relabelled_rewards_with_discarded_steps_match_the_formula():
         assert (got[1::2] == 0).any() or (got[1::2] == c.safety_penalty).any()  # relabelled successes exist
     finally:
         vec.close()
+
+
+ZOO_HYPERPARAMS = """
+MoveRL/PandaReachTableGoal-v0:
+  n_timesteps: 300
+  policy: 'MultiInputPolicy'
+  buffer_size: 2000
+  batch_size: 64
+  learning_starts: 100
+  replay_buffer_class: HerReplayBuffer
+  replay_buffer_kwargs: "dict(goal_selection_strategy='future', n_sampled_goal=4, copy_info_dict=True)"
+  policy_kwargs: "dict(net_arch=[64, 64])"
+"""
+
+
+def test_rl_zoo_trains_and_records_a_video(tmp_path):
+    (tmp_path / "sac.yml").write_text(ZOO_HYPERPARAMS)
+    env_id = "MoveRL/PandaReachTableGoal-v0"
+    train = [sys.executable, "-m", "rl_zoo3.train", "--algo", "sac", "--env", env_id, "--gym-packages", "moverl_gym"]
+    train += ["--conf-file", "sac.yml", "-f", "logs", "--eval-freq", "-1", "--seed", "0"]
+    proc = subprocess.run(train, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    # record_video has no --gym-packages: the ids are registered by importing moverl_gym first.
+    record = (
+        "import runpy, sys; import moverl_gym; sys.argv = ['record_video', '--algo', 'sac', '--env', "
+        f"'{env_id}', '-f', 'logs', '--exp-id', '1', '-n', '60', '--deterministic']; "
+        "runpy.run_module('rl_zoo3.record_video', run_name='__main__')"
+    )
+    proc = subprocess.run([sys.executable, "-c", record], capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    videos = list((tmp_path / "logs").rglob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 10_000, videos

@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""Where the CPU of one env step goes: CPU milliseconds per step of each process of the env and of the graph it
+launched (the env's own process, the simulator, the shield hosting the planning scene, ...), for several ids in one
+run, interleaved (this VM varies by 30 % between runs: compare ids within one run).
+
+    python src/moverl_gym/scripts/step_cost.py --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 --reps 2
+
+Random actions from a fixed seed, episodes reset as usual (resets included); 200 warm-up steps first. Each id runs in
+its own process (rospy allows one ROS master per process).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from moverl_gym.workers import run_json_worker
+
+
+def worker(env_id: str, steps: int, seed: int) -> dict:
+    import gymnasium as gym
+
+    import moverl_gym  # noqa: F401
+    from moverl_gym.proctree import cmdline, cpu_seconds, tree
+
+    env = gym.make(env_id)
+    try:
+        env.reset(seed=seed)
+        env.action_space.seed(seed)
+
+        def run(n):
+            for _ in range(n):
+                _, _, term, trunc, _ = env.step(env.action_space.sample())
+                if term or trunc:
+                    env.reset()
+
+        run(200)
+        procs = tree(os.getpid())
+        names = {}
+        for p in procs:
+            line = cmdline(p.pid)
+            name = "env" if p.pid == os.getpid() else next((w for w in line.split() if w.startswith("__name:=")), "")
+            names[(p.pid, p.start)] = name.replace("__name:=", "/") or os.path.basename(
+                line.split()[0] if line else "?"
+            )
+        c0 = cpu_seconds(procs)
+        t0 = time.perf_counter()
+        run(steps)
+        wall = time.perf_counter() - t0
+        c1 = cpu_seconds(procs)
+    finally:
+        env.close()
+    per = {}
+    for key, t in c1.items():
+        if key in c0:
+            per[names[key]] = per.get(names[key], 0.0) + 1000.0 * (t - c0[key]) / steps
+    return {"env_id": env_id, "steps_per_s": steps / wall, "ms_per_step": per, "total_ms": sum(per.values())}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--ids", nargs="+", default=["MoveRL/PandaReachTable-v0", "MoveRL/PandaReachHuman-v0"])
+    p.add_argument("--steps", type=int, default=2000)
+    p.add_argument("--reps", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--worker", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        print(json.dumps(worker(args.worker, args.steps, args.seed)))
+        return 0
+    results: dict[str, list] = {i: [] for i in args.ids}
+    for rep in range(args.reps):
+        for env_id in args.ids:
+            r = run_json_worker(__file__, ["--worker", env_id, "--steps", args.steps, "--seed", args.seed], env_id)
+            results[env_id].append(r)
+            print(
+                f"rep {rep}: {env_id}: {r['steps_per_s']:.0f} steps/s, {r['total_ms']:.2f} ms CPU per step", flush=True
+            )
+    print("\nCPU ms per env step, mean over reps (processes under 0.02 ms left out):")
+    names = sorted({n for rs in results.values() for r in rs for n in r["ms_per_step"]})
+    print("process".ljust(24) + "".join(i.split("/")[-1].rjust(28) for i in args.ids))
+    for n in names:
+        vals = [sum(r["ms_per_step"].get(n, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
+        if max(vals) >= 0.02:
+            print(n.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
+    totals = [sum(r["total_ms"] for r in results[i]) / len(results[i]) for i in args.ids]
+    print("total".ljust(24) + "".join(f"{v:28.3f}" for v in totals))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

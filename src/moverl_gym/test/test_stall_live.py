@@ -32,6 +32,16 @@ def node_pid(name: str) -> int:
     return pid
 
 
+def all_threads_stopped(pid: int) -> bool:
+    """True when every thread of pid is stopped (state T in /proc/<pid>/task/*/stat)."""
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
+            data = f.read()
+        if data[data.rindex(b")") + 2 : data.rindex(b")") + 3] != b"T":
+            return False
+    return True
+
+
 def robot_state(joints) -> np.ndarray:
     """The robot's configuration from its joint states (the simulator's, latched in lockstep, streamed in real
     time)."""
@@ -60,6 +70,12 @@ def test_a_stalled_component(node, graph_args, driver):
         before = robot_state(joints)
         pid = node_pid(node)
         os.kill(pid, signal.SIGSTOP)
+        # kill() returns before the stop takes effect: a node whose threads were busy could still serve the next
+        # request. Step only once the kernel reports the whole process stopped.
+        deadline = time.monotonic() + 5.0
+        while not all_threads_stopped(pid):
+            assert time.monotonic() < deadline, f"{node} (pid {pid}) did not stop"
+            time.sleep(0.01)
         t0 = time.monotonic()
         with pytest.raises(MoveRLError) as err:
             env.step(ACTION)

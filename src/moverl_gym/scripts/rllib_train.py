@@ -133,6 +133,8 @@ def flatten(d: dict, prefix: str = "") -> dict:
 
 def summarize(result: dict, wall: float) -> dict:
     """The figures of one iteration that progress.jsonl keeps."""
+    from moverl_gym.rllib import LIFETIME_COUNTERS
+
     runners = result.get("env_runners", {})
     m = runners.get("moverl", {})
     return {
@@ -141,24 +143,8 @@ def summarize(result: dict, wall: float) -> dict:
         "episodes": int(runners.get("num_episodes_lifetime", 0)),
         "episode_return_mean": runners.get("episode_return_mean"),
         "success_rate": m.get("success_rate"),
-        **{
-            k: int(m.get(k, 0))
-            for k in (
-                "contacts",
-                "contact_substeps",
-                "interventions",
-                "discarded_self",
-                "discarded_pose",
-                "discarded_path",
-                "discarded_start",
-                "replanned",
-                "truncated",
-                "graph_failures",
-                "graph_restarts",
-                "envs_created",
-                "steps_without_ground_truth",
-            )
-        },
+        # The run's lifetime counters (moverl_gym.rllib, their one list), as integers; cost below, as a float.
+        **{k: int(m.get(k, 0)) for k in LIFETIME_COUNTERS if k != "cost"},
         "cost": float(m.get("cost", 0.0)),
         "env_runner_restarts": int(result.get("moverl", {}).get("env_runner_restarts", 0)),
         "healthy_env_runners": int(result.get("moverl", {}).get("healthy_env_runners", 0)),

@@ -45,6 +45,8 @@ def test_both_env_checkers_pass_on_every_id_without_a_warning(env_id):
 
     env = make(env_id)
     try:
+        if env_id in moverl_gym.GOAL_ENV_IDS:
+            assert set(env.observation_space.spaces) == {"observation", "achieved_goal", "desired_goal"}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             check_env(env.unwrapped, skip_render_check=True)
@@ -61,20 +63,6 @@ def test_a_goal_out_of_reach_is_refused():
     try:
         with pytest.raises(ValueError, match="out of the robot's reach"):
             env.reset(seed=0, options={"goal": [5.0, 0.0, 0.3]})
-    finally:
-        env.close()
-
-
-@pytest.mark.parametrize("env_id", moverl_gym.GOAL_ENV_IDS)
-def test_goal_ids_pass_both_env_checkers(env_id):
-    from gymnasium.utils.env_checker import check_env
-    from stable_baselines3.common.env_checker import check_env as sb3_check_env
-
-    env = make(env_id)
-    try:
-        assert set(env.observation_space.spaces) == {"observation", "achieved_goal", "desired_goal"}
-        check_env(env.unwrapped, skip_render_check=True)
-        sb3_check_env(env.unwrapped, warn=True)
     finally:
         env.close()
 

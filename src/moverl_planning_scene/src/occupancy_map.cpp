@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iterator>
+#include <limits>
 #include <unordered_map>
 
 namespace moverl_planning_scene {
@@ -25,6 +26,9 @@ octomap::point3d toOcto(const Eigen::Vector3d& p) {
 }
 
 bool probability(double p) { return std::isfinite(p) && p > 0.0 && p < 1.0; }
+
+/// The dense grid's largest size (cells): 8 bytes each.
+constexpr std::int64_t kMaxCells = 64 * 1024 * 1024;
 
 }  // namespace
 
@@ -52,6 +56,31 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->tree_->setClampingThresMin(o.clamp_min);
   m->tree_->setClampingThresMax(o.clamp_max);
   m->tree_->setOccupancyThres(o.occupancy_threshold);
+  if (o.bounds.isEmpty() || !o.bounds.min().allFinite() || !o.bounds.max().allFinite()) {
+    return bad("bounds (the mapped box) must be set");
+  }
+  octomap::OcTreeKey lo, hi;
+  if (!m->tree_->coordToKeyChecked(toOcto(o.bounds.min()), lo) ||
+      !m->tree_->coordToKeyChecked(toOcto(o.bounds.max()), hi)) {
+    return bad("bounds lie beyond the octree's extent at this resolution");
+  }
+  std::int64_t cells = 1;
+  for (int i = 0; i < 3; ++i) {
+    m->key_min_[i] = lo[i];
+    m->size_[i] = static_cast<std::int64_t>(hi[i]) - lo[i] + 1;
+    cells *= m->size_[i];
+  }
+  if (cells > kMaxCells) {
+    return bad("bounds hold " + std::to_string(cells) + " cells at this resolution (at most " +
+               std::to_string(kMaxCells) + ")");
+  }
+  m->value_.assign(static_cast<std::size_t>(cells), std::numeric_limits<float>::quiet_NaN());
+  m->seen_.assign(static_cast<std::size_t>((cells + 63) / 64), 0);
+  m->hit_.assign(m->seen_.size(), 0);
+  m->log_hit_ = m->tree_->getProbHitLog();
+  m->log_miss_ = m->tree_->getProbMissLog();
+  m->clamp_min_ = m->tree_->getClampingThresMinLog();
+  m->clamp_max_ = m->tree_->getClampingThresMaxLog();
   return m;
 }
 
@@ -64,7 +93,6 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
                double* t1) {
   *t0 = 0.0;
   *t1 = 1.0;
-  if (box.isEmpty()) return true;  // unbounded map
   const Eigen::Vector3d d = b - a;
   for (int i = 0; i < 3; ++i) {
     if (std::fabs(d[i]) < 1e-12) {
@@ -81,12 +109,16 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
 }
 
 constexpr std::uint8_t kHit = 1, kRobot = 2;
+/// apply: beyond this many changed cells, update lazily and fix the inner nodes once.
+constexpr std::size_t kLazyAbove = 20000;
+/// octomap's key of coordinate x is floor(x / resolution) + this (its tree_max_val for 16 levels).
+constexpr std::int64_t kKeyOffset = 32768;
 
 }  // namespace
 
 void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
                                  const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
-                                 MapUpdate* out) const {
+                                 MapUpdate* out) {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();
@@ -94,8 +126,12 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   const bool masked = robot_mask.size() == points.size();
   // 1. End points (beyond max_range: cut there, free space only), grouped by cell as octomap's discretized
   //    insertion does: one beam per end cell. A cell with any robot point marks nothing.
+  // ends: each end cell's flags; order: the end cells in the order of their first point (neighbouring pixels cast
+  // neighbouring beams one after another, which keeps the grid's cells in cache).
   std::unordered_map<std::uint64_t, std::uint8_t> ends;
+  std::vector<std::uint64_t> order;
   ends.reserve(points.size());
+  order.reserve(points.size());
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
     if (!p.allFinite()) {
@@ -116,40 +152,121 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     }
     octomap::OcTreeKey key;
     if (!tree_->coordToKeyChecked(toOcto(end), key)) continue;
-    ends[pack(key)] |= flag;
+    const auto slot = ends.emplace(pack(key), 0);
+    if (slot.second) order.push_back(pack(key));
+    slot.first->second |= flag;
   }
-  // 2. Beams from the origin to each end cell's centre, clipped to the map bounds.
-  std::vector<std::uint64_t> misses;
-  octomap::KeyRay ray;
-  for (const auto& e : ends) {
-    const octomap::point3d c = tree_->keyToCoord(unpack(e.first));
+  // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit" (small enough to stay in cache).
+  std::fill(seen_.begin(), seen_.end(), 0);
+  std::fill(hit_.begin(), hit_.end(), 0);
+  auto test = [](const std::vector<std::uint64_t>& bits, std::int64_t k) { return (bits[k >> 6] >> (k & 63)) & 1u; };
+  auto set = [](std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); };
+  // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it); only ends inside
+  // the bounds mark anything.
+  std::size_t hit_cells = 0;
+  for (std::uint64_t packed : order) {
+    if (ends[packed] != kHit) continue;
+    const std::int64_t c = cell(packed);
+    if (c < 0) continue;
+    set(&hit_, c);
+    ++hit_cells;
+    if (updated(value_[c], log_hit_) != value_[c]) out->hits.push_back(packed);
+  }
+  // 3. Beams from the origin to each end cell's centre, clipped to the map bounds: the cells from the first one up
+  //    to, excluding, the end cell (as octomap's computeRayKeys), each counted once per cloud. A 3D DDA over the
+  //    grid's indices (Amanatides & Woo).
+  std::size_t free_cells = 0;
+  const double inv = 1.0 / options_.resolution;
+  const std::int64_t stride[3] = {size_[1] * size_[2], size_[2], 1};
+  for (std::uint64_t packed_end : order) {
+    const octomap::point3d c = tree_->keyToCoord(unpack(packed_end));
     const Eigen::Vector3d end(c.x(), c.y(), c.z());
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
-    const Eigen::Vector3d a = origin + t0 * (end - origin), b = origin + t1 * (end - origin);
-    // computeRayKeys: the cells from a's up to, excluding, b's cell.
-    if (tree_->computeRayKeys(toOcto(a), toOcto(b), ray)) {
-      for (const octomap::OcTreeKey& key : ray) misses.push_back(pack(key));
+    const Eigen::Vector3d a = origin + t0 * (end - origin), b = origin + t1 * (end - origin), d = b - a;
+    std::int64_t at[3], last[3], step[3];
+    double t_max[3], t_delta[3];
+    bool inside = true;
+    for (int i = 0; i < 3; ++i) {
+      // The grid index of a coordinate, as octomap's coordToKey computes keys.
+      const double fa = std::floor(a[i] * inv), fb = std::floor(b[i] * inv);
+      at[i] = static_cast<std::int64_t>(fa) + kKeyOffset - key_min_[i];
+      last[i] = static_cast<std::int64_t>(fb) + kKeyOffset - key_min_[i];
+      inside = inside && at[i] >= 0 && at[i] < size_[i];
+      if (d[i] > 0.0) {
+        step[i] = 1;
+        t_max[i] = ((fa + 1.0) * options_.resolution - a[i]) / d[i];
+        t_delta[i] = options_.resolution / d[i];
+      } else if (d[i] < 0.0) {
+        step[i] = -1;
+        t_max[i] = (fa * options_.resolution - a[i]) / d[i];
+        t_delta[i] = -options_.resolution / d[i];
+      } else {
+        step[i] = 0;
+        t_max[i] = t_delta[i] = std::numeric_limits<double>::infinity();
+      }
     }
-    if (e.second == kHit && t1 >= 1.0) out->hits.push_back(e.first);
+    if (!inside) continue;
+    std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+    while (at[0] != last[0] || at[1] != last[1] || at[2] != last[2]) {
+      if (!test(seen_, k) && !test(hit_, k)) {
+        set(&seen_, k);
+        ++free_cells;
+        // A free cell already clamped at clamp_min does not change: the tree is not touched.
+        if (updated(value_[k], log_miss_) != value_[k]) out->misses.push_back(packAt(at));
+      }
+      const int axis = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+      if (t_max[axis] > 1.0) break;  // rounding: b's cell was not reached exactly
+      at[axis] += step[axis];
+      if (at[axis] < 0 || at[axis] >= size_[axis]) break;
+      k += step[axis] * stride[axis];
+      t_max[axis] += t_delta[axis];
+    }
   }
-  std::sort(out->hits.begin(), out->hits.end());
-  std::sort(misses.begin(), misses.end());
-  misses.erase(std::unique(misses.begin(), misses.end()), misses.end());
-  // Occupied wins: a cell hit by one beam stays occupied even when others cross it.
-  std::set_difference(misses.begin(), misses.end(), out->hits.begin(), out->hits.end(),
-                      std::back_inserter(out->misses));
-  out->stats.hit_cells = out->hits.size();
-  out->stats.free_cells = out->misses.size();
+  out->stats.hit_cells = hit_cells;
+  out->stats.free_cells = free_cells;
+  out->stats.changed_cells = out->hits.size() + out->misses.size();
+}
+
+std::uint64_t OccupancyMap::packAt(const std::int64_t* at) const {
+  return (static_cast<std::uint64_t>(at[0] + key_min_[0]) << 32) |
+         (static_cast<std::uint64_t>(at[1] + key_min_[1]) << 16) | static_cast<std::uint64_t>(at[2] + key_min_[2]);
+}
+
+std::int64_t OccupancyMap::cell(std::uint64_t packed) const {
+  const std::int64_t i = static_cast<std::int64_t>((packed >> 32) & 0xffff) - key_min_[0];
+  const std::int64_t j = static_cast<std::int64_t>((packed >> 16) & 0xffff) - key_min_[1];
+  const std::int64_t k = static_cast<std::int64_t>(packed & 0xffff) - key_min_[2];
+  if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
+  return (i * size_[1] + j) * size_[2] + k;
+}
+
+// As octomap's updateNode: a new node starts at log-odds 0, then the update is added and clamped.
+float OccupancyMap::updated(float v, float update) const {
+  const float base = std::isnan(v) ? 0.0f : v;
+  return std::min(std::max(base + update, clamp_min_), clamp_max_);
 }
 
 void OccupancyMap::apply(const MapUpdate& update) {
-  for (std::uint64_t h : update.hits) tree_->updateNode(unpack(h), true, /*lazy_eval=*/true);
-  for (std::uint64_t m : update.misses) tree_->updateNode(unpack(m), false, /*lazy_eval=*/true);
-  tree_->updateInnerOccupancy();  // inner nodes hold their children's maximum (FCL prunes free subtrees by it)
+  // Few changes (the usual cloud once the scene is known): each update fixes its parents on the way (and prunes).
+  // Many (the first views): lazy updates, then one pass over the inner nodes.
+  const bool lazy = update.hits.size() + update.misses.size() > kLazyAbove;
+  for (const auto* keys : {&update.hits, &update.misses}) {
+    const float u = keys == &update.hits ? log_hit_ : log_miss_;
+    for (std::uint64_t packed : *keys) {
+      const std::int64_t c = cell(packed);
+      if (c < 0) continue;
+      value_[c] = updated(value_[c], u);
+      tree_->setNodeValue(unpack(packed), value_[c], lazy);
+    }
+  }
+  if (lazy) tree_->updateInnerOccupancy();  // inner nodes hold their children's maximum (FCL prunes free subtrees)
 }
 
-void OccupancyMap::clear() { tree_->clear(); }
+void OccupancyMap::clear() {
+  tree_->clear();
+  std::fill(value_.begin(), value_.end(), std::numeric_limits<float>::quiet_NaN());
+}
 
 std::shared_ptr<const octomap::OcTree> OccupancyMap::tree() const { return tree_; }
 

@@ -11,6 +11,12 @@
  * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Cells never observed are unknown
  * and count as free for collision checking (as in MoveIt). Clearing: when an obstacle moves away, beams now pass
  * through its old cells and turn them free.
+ *
+ * Cost: a dense grid over `bounds` mirrors the tree's leaves (one log-odds value per cell). It deduplicates the cells
+ * that a cloud's beams cross without sorting, and it tells which of them the update would change: a cell already
+ * clamped at clamp_min stays where it is when seen free again, so the tree only receives the cells that change. Once
+ * the static scene has been seen, a cloud changes the few thousand cells around what moved instead of the ~800,000
+ * cells its beams cross (`rosrun moverl_planning_scene map_benchmark`).
  */
 #pragma once
 
@@ -38,31 +44,33 @@ struct OccupancyMapOptions {
   double clamp_min = kUnset;   ///< clamping of cell probabilities (lets cells change state quickly)
   double clamp_max = kUnset;
   double occupancy_threshold = kUnset;  ///< a cell above this probability is an obstacle
-  /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Empty: unbounded.
-  /// The node sets it to the robot's reach (nothing outside can ever touch the robot).
+  /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Required (the dense
+  /// grid covers it). The node sets it to the robot's reach (nothing outside can ever touch the robot).
   Eigen::AlignedBox3d bounds;
 };
 
 /// \brief What one integration did (logs, tests, the status topic).
 struct MapUpdateStats {
-  std::size_t points = 0;        ///< points in the cloud
-  std::size_t invalid = 0;       ///< non-finite points (skipped)
-  std::size_t robot = 0;         ///< points on the robot (free space before them only)
-  std::size_t beyond_range = 0;  ///< points beyond max_range (free space only)
-  std::size_t hit_cells = 0;     ///< distinct cells marked occupied
-  std::size_t free_cells = 0;    ///< distinct cells marked free
+  std::size_t points = 0;         ///< points in the cloud
+  std::size_t invalid = 0;        ///< non-finite points (skipped)
+  std::size_t robot = 0;          ///< points on the robot (free space before them only)
+  std::size_t beyond_range = 0;   ///< points beyond max_range (free space only)
+  std::size_t hit_cells = 0;      ///< distinct cells marked occupied
+  std::size_t free_cells = 0;     ///< distinct cells marked free
+  std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
 };
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.
 struct MapUpdate {
-  std::vector<std::uint64_t> hits;    ///< packed octomap keys
-  std::vector<std::uint64_t> misses;  ///< packed octomap keys (hits removed)
+  std::vector<std::uint64_t> hits;    ///< packed octomap keys of the hit cells the update changes
+  std::vector<std::uint64_t> misses;  ///< packed octomap keys of the free cells it changes (hits removed)
   MapUpdateStats stats;
 };
 
 /// \brief Occupancy octree in the robot base frame.
-///        computeUpdate is const and may run concurrently with collision checks that read tree();
-///        apply and clear modify the tree and must be serialized with every reader by the caller.
+///        computeUpdate reads the map (not the tree) and may run concurrently with collision checks that read tree(),
+///        but not with apply or clear; apply and clear modify the tree and must be serialized with every reader by
+///        the caller. One thread integrates clouds (computeUpdate uses the map's scratch space).
 class OccupancyMap {
  public:
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).
@@ -72,7 +80,7 @@ class OccupancyMap {
   /// \brief Beams from origin to every point (all in the map frame). robot_mask: empty, or one flag per point
   ///        (non-zero: the point is on the robot).
   void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
-                     const Eigen::Vector3d& origin, MapUpdate* out) const;
+                     const Eigen::Vector3d& origin, MapUpdate* out);
   /// \brief Apply an update to the tree (hits, then misses).
   void apply(const MapUpdate& update);
   /// \brief Forget everything (all cells unknown).
@@ -89,8 +97,21 @@ class OccupancyMap {
 
  private:
   OccupancyMap() = default;
+  /// Index of a packed key in the dense grid, or -1 outside it.
+  std::int64_t cell(std::uint64_t packed) const;
+  /// The packed key of grid cell (at[0], at[1], at[2]).
+  std::uint64_t packAt(const std::int64_t* at) const;
+  /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
+  float updated(float v, float update) const;
+
   OccupancyMapOptions options_;
   std::shared_ptr<octomap::OcTree> tree_;
+  // Dense mirror of the tree's leaves inside bounds: cell (i, j, k) holds the key key_min_ + (i, j, k).
+  std::uint16_t key_min_[3] = {0, 0, 0};
+  std::int64_t size_[3] = {0, 0, 0};
+  std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed (no node in the tree)
+  std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
+  float log_hit_ = 0.0f, log_miss_ = 0.0f, clamp_min_ = 0.0f, clamp_max_ = 0.0f;
 };
 
 }  // namespace moverl_planning_scene

@@ -7,6 +7,7 @@
  */
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -35,6 +36,10 @@ struct FclCollisionChecker::Geom {
   double padded_radius = 0.0;
   // The same shape inflated by >= padding, checked against the sensed octree (whose cells cannot be inflated).
   std::shared_ptr<fcl::CollisionGeometry<double>> octo;
+  // The shape inflated by a given amount (m), as octo is by padding: builds the sensed margin's levels.
+  std::function<std::shared_ptr<fcl::CollisionGeometry<double>>(double)> inflate;
+  // octo_levels[k]: the shape inflated by padding + k * kMarginStep (built when first needed; [0] unused).
+  std::vector<std::shared_ptr<fcl::CollisionGeometry<double>>> octo_levels;
 };
 
 struct FclCollisionChecker::Obstacle {

@@ -155,7 +155,7 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
     if (g.link == last_link) continue;
     fcl::CollisionRequestd req(1, false);
     fcl::CollisionResultd res;
-    fcl::collide(g.octo.get(), g.world_tf, octree_.get(), Eigen::Isometry3d::Identity(), req, res);
+    fcl::collide(octoGeom(geoms_[gi]).get(), g.world_tf, octree_.get(), Eigen::Isometry3d::Identity(), req, res);
     if (!res.isCollision()) continue;
     result->status = CollisionStatus::kWorld;
     if (request.max_pairs == 0) return;
@@ -163,6 +163,23 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
     last_link = g.link;
     if (result->pairs.size() >= request.max_pairs) return;
   }
+}
+
+bool FclCollisionChecker::setOctreeMargin(double margin) {
+  if (!(margin >= 0.0 && margin <= kMaxMargin)) return false;
+  octo_level_ = static_cast<int>(std::ceil(margin / kMarginStep - 1e-9));
+  return true;
+}
+
+const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octoGeom(Geom& g) {
+  if (octo_level_ == 0 || !g.inflate) return g.octo;
+  if (g.octo_levels.size() <= static_cast<std::size_t>(octo_level_)) g.octo_levels.resize(octo_level_ + 1);
+  auto& level = g.octo_levels[octo_level_];
+  if (!level) {
+    level = g.inflate(options_.padding + octo_level_ * kMarginStep);
+    level->computeLocalAABB();
+  }
+  return level;
 }
 
 void FclCollisionChecker::setOctree(std::shared_ptr<const octomap::OcTree> tree) {

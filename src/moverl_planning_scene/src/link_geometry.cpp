@@ -117,26 +117,39 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
       g.type = s.type;
       g.dims = s.dims;
       g.padded_radius = -1.0;  // primitives: radius + 2 * sp (set by add); meshes compute it exactly
+      const Eigen::Vector3d d = s.dims;
       switch (s.type) {
         case ShapeType::kBox:
+          g.inflate = [d](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+            return std::make_shared<fcl::Boxd>(d.x() + 2 * pad, d.y() + 2 * pad, d.z() + 2 * pad);
+          };
           g.geom = std::make_shared<fcl::Boxd>(s.dims.x(), s.dims.y(), s.dims.z());
           g.radius = 0.5 * s.dims.norm();
           g.padded = std::make_shared<fcl::Boxd>(s.dims.x() + 2 * sp, s.dims.y() + 2 * sp, s.dims.z() + 2 * sp);
           g.octo = std::make_shared<fcl::Boxd>(s.dims.x() + 2 * wp, s.dims.y() + 2 * wp, s.dims.z() + 2 * wp);
           break;
         case ShapeType::kSphere:
+          g.inflate = [d](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+            return std::make_shared<fcl::Sphered>(d.x() + pad);
+          };
           g.geom = std::make_shared<fcl::Sphered>(s.dims.x());
           g.radius = s.dims.x();
           g.padded = std::make_shared<fcl::Sphered>(s.dims.x() + sp);
           g.octo = std::make_shared<fcl::Sphered>(s.dims.x() + wp);
           break;
         case ShapeType::kCylinder:
+          g.inflate = [d](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+            return std::make_shared<fcl::Cylinderd>(d.x() + pad, d.y() + 2 * pad);
+          };
           g.geom = std::make_shared<fcl::Cylinderd>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
           g.padded = std::make_shared<fcl::Cylinderd>(s.dims.x() + sp, s.dims.y() + 2 * sp);
           g.octo = std::make_shared<fcl::Cylinderd>(s.dims.x() + wp, s.dims.y() + 2 * wp);
           break;
         case ShapeType::kCone:
+          g.inflate = [d](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+            return std::make_shared<fcl::Coned>(d.x() + pad, d.y() + 2 * pad);
+          };
           g.geom = std::make_shared<fcl::Coned>(s.dims.x(), s.dims.y());
           g.radius = std::hypot(s.dims.x(), 0.5 * s.dims.y());
           g.padded = std::make_shared<fcl::Coned>(s.dims.x() + sp, s.dims.y() + 2 * sp);
@@ -157,10 +170,16 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
               base = hull.vertices;
               padded = inflateHull(hull, sp);
               octo = inflateHull(hull, wp);
+              pg.inflate = [hull](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+                return makeFclConvex(inflateHull(hull, pad));
+              };
             } else {
               base = piece.vertices;
               padded = inflateTriangles(piece, sp);
               octo = inflateTriangles(piece, wp);
+              pg.inflate = [piece](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {
+                return bvhGeometry(inflateTriangles(piece, pad), piece.triangles);
+              };
             }
             if (base.empty()) continue;
             Eigen::Vector3d lo = base.front(), hi = lo;

@@ -47,7 +47,13 @@ std::string cloudLayoutError(const sensor_msgs::PointCloud2& c) {
 }
 
 OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex)
-    : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex) {}
+    : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex) {
+  speed_bound_ = -1.0;  // until init or the world sets it
+}
+
+void OctomapMonitor::setWorldSpeedBound(double speed_bound) {
+  if (speed_bound >= 0.0 && std::isfinite(speed_bound)) speed_bound_ = speed_bound;
+}
 
 OctomapMonitor::~OctomapMonitor() {
   // Stop the threads before the members they use go.
@@ -70,6 +76,11 @@ bool OctomapMonitor::init(std::string* error) {
     queue = requiredParam<int>(pnh_, "octomap/queue_size", kYaml);
     startup_clouds = requiredParam<int>(pnh_, "octomap/startup_clouds", kYaml);
     startup_timeout = requiredParam<double>(pnh_, "octomap/startup_timeout", kYaml);
+    yaml_speed_bound_ = requiredParam<double>(pnh_, "octomap/speed_bound", kYaml);
+    latency_ = requiredParam<double>(pnh_, "octomap/latency", kYaml);
+    plan_horizon_ = requiredParam<double>(pnh_, "octomap/plan_horizon", kYaml);
+    max_age_ = requiredParam<double>(pnh_, "octomap/max_age", kYaml);
+    stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
   } catch (const std::exception& e) {
     *error = e.what();
     return false;
@@ -78,6 +89,18 @@ bool OctomapMonitor::init(std::string* error) {
     *error = "octomap/self_filter_padding must be >= 0";
     return false;
   }
+  for (const auto& p : {std::make_pair("speed_bound", yaml_speed_bound_), std::make_pair("latency", latency_),
+                        std::make_pair("plan_horizon", plan_horizon_), std::make_pair("stale_wait", stale_wait_)}) {
+    if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
+      *error = std::string("octomap/") + p.first + " must be finite and >= 0";
+      return false;
+    }
+  }
+  if (!(max_age_ > 0.0)) {  // inf: no age limit
+    *error = "octomap/max_age must be > 0 (.inf: no limit)";
+    return false;
+  }
+  if (speed_bound_ < 0.0) speed_bound_ = yaml_speed_bound_;  // the world did not give one
   // Map only what the robot can reach (padded): beams are clipped there, which keeps integration fast.
   const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + 2 * mo.resolution;
   mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
@@ -108,8 +131,9 @@ bool OctomapMonitor::init(std::string* error) {
   publishStatus(ros::Time(0), "");
   ROS_INFO(
       "planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
-      "mapped within +-%.2f m of the base)",
-      cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach);
+      "mapped within +-%.2f m of the base; speed bound %.2f m/s, max age %.2f s)",
+      cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach, speed_bound_.load(),
+      max_age_);
   // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
   while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {
@@ -196,6 +220,12 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     map_->apply(update_);
   }
   ++clouds_;
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    ros::Time& seen = frame_stamps_[msg->header.frame_id];
+    seen = std::max(seen, msg->header.stamp);  // clouds of one camera may arrive out of order
+  }
+  stamps_cv_.notify_all();
   last_integration_ = (ros::WallTime::now() - t0).toSec();
   last_cloud_stamp_ = msg->header.stamp;
   last_cloud_frame_ = msg->header.frame_id;
@@ -203,11 +233,48 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
+bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why) {
+  // The oldest camera's last view decides: a region only one camera sees is as old as that camera's last cloud.
+  auto age = [&] {
+    double oldest = std::numeric_limits<double>::infinity();
+    for (const auto& f : frame_stamps_) oldest = std::min(oldest, f.second.toSec());
+    return std::max(0.0, stamp.toSec() - oldest);  // inf before the first cloud (or after a clear)
+  };
+  std::unique_lock<std::mutex> lock(stamps_mutex_);
+  out->map_age = age();
+  if (out->map_age > max_age_ && stale_wait_ > 0.0) {
+    stamps_cv_.wait_for(lock, std::chrono::duration<double>(stale_wait_), [&] { return age() <= max_age_; });
+    out->map_age = age();
+  }
+  lock.unlock();
+  if (out->map_age > max_age_) {
+    *why = "the sensed map is " + std::to_string(out->map_age) + " s old at the state's stamp (octomap/max_age " +
+           std::to_string(max_age_) + " s): a camera stopped publishing or integration fell behind";
+    return false;
+  }
+  const double horizon = std::isfinite(duration) ? duration : plan_horizon_;
+  out->start = speed_bound_ * (out->map_age + latency_);
+  out->end = speed_bound_ * (out->map_age + horizon + latency_);
+  out->plan = speed_bound_ * (out->map_age + plan_horizon_ + latency_);
+  out->plan_horizon = plan_horizon_;
+  if (std::max(out->end, out->plan) > FclCollisionChecker::kMaxMargin) {
+    *why = "the sensed margin would be " + std::to_string(std::max(out->end, out->plan)) + " m (speed bound " +
+           std::to_string(speed_bound_) + " m/s, map age " + std::to_string(out->map_age) +
+           " s): beyond the largest the checker builds";
+    return false;
+  }
+  return true;
+}
+
 bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->clear();
+  }
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    frame_stamps_.clear();  // nothing seen: blind until the cameras' next clouds
   }
   clouds_ = 0;
   update_.stats = MapUpdateStats();

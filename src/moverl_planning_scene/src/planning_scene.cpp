@@ -230,8 +230,15 @@ void PlanningScene::findLastFree(bool goal_checked, MotionCheck* out) {
 
 void PlanningScene::validateMotion(const std::vector<double>& start, const std::vector<double>& goal,
                                    bool plan_on_path_collision, MotionCheck* out, bool find_last_free,
-                                   double start_time, double duration) {
+                                   double start_time, double duration, const SensedMargins* sensed) {
   auto t0 = Clock::now();
+  // Sensed obstacles: each check with the margin of the time it covers; back to none when done.
+  const SensedMargins none;
+  const SensedMargins& margin = sensed != nullptr ? *sensed : none;
+  struct Reset {
+    FclCollisionChecker* checker;
+    ~Reset() { checker->setOctreeMargin(0.0); }
+  } reset{checker_.get()};
   const bool moving = checker_->hasMovingObstacles();
   out->moving_obstacles = moving;
   out->replanned = false;
@@ -254,6 +261,7 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   }
   // Moving obstacles are their whole motion envelope here (the checker's default), except for the straight path.
   // Goal: self then world (one state check), then the start.
+  checker_->setOctreeMargin(margin.end);
   checker_->checkState(goal_.data(), all_pairs_, &state_result_);
   if (state_result_.status == CollisionStatus::kSelf) {
     out->outcome = MotionOutcome::kSelfCollision;
@@ -262,7 +270,9 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
     out->outcome = MotionOutcome::kPoseCollision;
     out->message = "goal collides with the world: " + describe(state_result_.pairs);
   } else {
+    checker_->setOctreeMargin(margin.start);
     checker_->checkState(start_.data(), all_pairs_, &state_result_);
+    checker_->setOctreeMargin(margin.end);
     if (state_result_.collision()) {
       out->outcome = MotionOutcome::kStartInCollision;
       out->message = std::string("start state not free (") +
@@ -314,6 +324,7 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   }
   if (plan_on_path_collision) {
     t0 = Clock::now();
+    checker_->setOctreeMargin(margin.plan);
     planner_->plan(start_, goal_, "", 0.0, &plan_result_, /*try_straight=*/false);
     out->planning_time = since(t0);
     out->replanned = plan_result_.status == PlanStatus::kSuccess;

@@ -49,7 +49,8 @@ static_assert(code(MotionOutcome::kValid) == MotionRes::VALID &&
                   code(MotionOutcome::kPoseCollision) == MotionRes::POSE_COLLISION &&
                   code(MotionOutcome::kPathCollision) == MotionRes::PATH_COLLISION &&
                   code(MotionOutcome::kStartInCollision) == MotionRes::START_IN_COLLISION &&
-                  code(MotionOutcome::kInvalidRequest) == MotionRes::INVALID_REQUEST,
+                  code(MotionOutcome::kInvalidRequest) == MotionRes::INVALID_REQUEST &&
+                  code(MotionOutcome::kMapStale) == MotionRes::MAP_STALE,
               "MotionOutcome differs from moverl_msgs/ValidateMotion");
 
 constexpr double kQuaternionEpsilon = 1e-9;
@@ -207,6 +208,7 @@ bool SceneServer::init(std::string* error) {
   }
   if (obstacles_ != "objects") {
     monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_);
+    monitor_->setWorldSpeedBound(get_world.response.world.sensed_speed_bound);
     if (!monitor_->init(error)) return false;
   }
   world_sub_ = nh_.subscribe(world_topic, 1, &SceneServer::onWorld, this);
@@ -262,6 +264,7 @@ void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
   if (!applyWorld(*msg, &error)) {
     ROS_ERROR("planning_scene: world update '%s' rejected, previous world kept: %s", msg->name.c_str(), error.c_str());
   } else {
+    if (monitor_) monitor_->setWorldSpeedBound(msg->sensed_speed_bound);
     ROS_DEBUG("planning_scene: world '%s' with %zu objects", msg->name.c_str(), msg->objects.size());
   }
 }
@@ -340,10 +343,27 @@ bool SceneServer::fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Respo
 bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
                                  moverl_msgs::ValidateMotion::Response& res) {
   try {
+    // Sensed obstacles: the margins from the map's age at the state's stamp (may wait for clouds: before the lock,
+    // which integration needs).
+    SensedMargins sensed;
+    std::string blind;
+    if (monitor_ &&
+        !monitor_->margins(req.stamp.isZero() ? ros::Time::now() : req.stamp, req.duration, &sensed, &blind)) {
+      res.outcome = moverl_msgs::ValidateMotion::Response::MAP_STALE;
+      res.moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
+      res.message = blind + ": failing closed";
+      res.map_age = sensed.map_age;
+      res.last_free_fraction = -1.0;
+      ROS_WARN_THROTTLE(5.0, "planning_scene: %s", res.message.c_str());
+      return true;
+    }
+    res.map_age = sensed.map_age;
+    res.sensed_margin = sensed.end;
+    res.plan_horizon = sensed.plan_horizon;
     std::lock_guard<std::mutex> lock(mutex_);
     scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free,
-                           req.start_time, req.duration);
-    res.moving_obstacles = motion_.moving_obstacles;
+                           req.start_time, req.duration, monitor_ ? &sensed : nullptr);
+    res.moving_obstacles = motion_.moving_obstacles || monitor_ != nullptr;  // sensed obstacles may move
     res.outcome = static_cast<uint8_t>(motion_.outcome);
     res.replanned = motion_.replanned;
     if (motion_.replanned) toTrajectory(motion_.path, scene_->model().jointNames(), &res.path);

@@ -292,6 +292,57 @@ TEST_F(PandaOctomap, SensedTableBlocksTheRobot) {
   EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << "octree removed: " << sc.message;
 }
 
+/// The predictive margin: a sensed wall 6 cm beyond the hand's reach at the goal. The goal is free without a margin,
+/// collides once the margin covers the gap; the start's own margin decides START_IN_COLLISION apart from the goal's.
+TEST_F(PandaOctomap, SensedMarginInflatesTheRobotAgainstTheMap) {
+  auto map = makeMap();
+  // A wall x = 0.75 (y -0.4 .. 0.4, z 0 .. 0.8) seen from behind the robot.
+  std::vector<Eigen::Vector3d> wall;
+  for (double y = -0.4; y <= 0.4; y += 0.01) {
+    for (double z = 0.0; z <= 0.8; z += 0.01) wall.emplace_back(0.75, y, z);
+  }
+  integrate(map.get(), wall, Eigen::Vector3d(-0.5, 0.0, 0.6));
+  scene_->checker().setOctree(map->tree());
+  std::vector<double> goal = kHome;
+  goal[1] = 0.2;  // leans towards the wall
+  mps::StateCheck sc;
+  // The smallest margin at which the goal collides, in steps of kMarginStep.
+  double hit_at = -1.0;
+  for (double m = 0.0; m <= 0.5 + 1e-9; m += mps::FclCollisionChecker::kMarginStep) {
+    ASSERT_TRUE(scene_->checker().setOctreeMargin(m));
+    scene_->checkState(goal, &sc);
+    if (sc.outcome == mps::CheckOutcome::kWorldCollision) {
+      hit_at = m;
+      break;
+    }
+  }
+  ASSERT_GT(hit_at, 0.02) << "the goal must be free without a margin";
+  EXPECT_FALSE(scene_->checker().setOctreeMargin(-0.01));
+  EXPECT_FALSE(scene_->checker().setOctreeMargin(mps::FclCollisionChecker::kMaxMargin + 0.01));
+  ASSERT_TRUE(scene_->checker().setOctreeMargin(0.004));  // rounded up to one step
+  EXPECT_DOUBLE_EQ(scene_->checker().octreeMargin(), mps::FclCollisionChecker::kMarginStep);
+  ASSERT_TRUE(scene_->checker().setOctreeMargin(0.0));
+
+  mps::MotionCheck mc;
+  mps::SensedMargins sm;
+  sm.start = sm.end = sm.plan = hit_at - mps::FclCollisionChecker::kMarginStep;
+  scene_->validateMotion(kHome, goal, false, &mc, false, 0.0, 0.05, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  sm.end = hit_at;  // where the robot will be by the end of the move, the wall may have come
+  scene_->validateMotion(kHome, goal, false, &mc, false, 0.0, 0.05, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  sm.start = 0.0;
+  sm.end = hit_at - mps::FclCollisionChecker::kMarginStep;
+  // Resting at the goal: the start's margin alone decides whether the robot may leave.
+  scene_->validateMotion(goal, kHome, false, &mc, false, 0.0, 0.05, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  sm.start = hit_at;
+  scene_->validateMotion(goal, kHome, false, &mc, false, 0.0, 0.05, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision) << mc.message;
+  EXPECT_DOUBLE_EQ(scene_->checker().octreeMargin(), 0.0) << "validateMotion leaves no margin behind";
+  scene_->checker().setOctree(nullptr);
+}
+
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();

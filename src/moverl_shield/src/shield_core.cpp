@@ -32,6 +32,8 @@ std::string verdictName(Verdict verdict) {
       return "execution_failed";
     case Verdict::kAborted:
       return "aborted";
+    case Verdict::kDiscardedUnseen:
+      return "discarded_unseen";
     case Verdict::kDriverUnavailable:
       return "driver_unavailable";
     case Verdict::kStateUnavailable:
@@ -42,7 +44,8 @@ std::string verdictName(Verdict verdict) {
 
 bool isDiscarded(Verdict verdict) {
   return verdict == Verdict::kDiscardedSelf || verdict == Verdict::kDiscardedPose ||
-         verdict == Verdict::kDiscardedPath || verdict == Verdict::kDiscardedStart || verdict == Verdict::kTruncated;
+         verdict == Verdict::kDiscardedPath || verdict == Verdict::kDiscardedStart || verdict == Verdict::kTruncated ||
+         verdict == Verdict::kDiscardedUnseen;
 }
 
 std::string strategyName(Strategy strategy) {
@@ -109,6 +112,10 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
       return d;
     case SceneOutcome::kInvalidRequest:
       d.verdict = Verdict::kInvalidRequest;
+      return d;
+    case SceneOutcome::kMapStale:  // blind: fail closed, as a discarded action (the episode goes on)
+      d.verdict = Verdict::kDiscardedUnseen;
+      d.unsafe_cause = static_cast<uint8_t>(outcome);
       return d;
     default:
       d.verdict = Verdict::kSceneUnavailable;  // unknown code: fail closed

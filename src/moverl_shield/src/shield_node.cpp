@@ -60,6 +60,7 @@ static_assert(code(Verdict::kSafe) == StepRes::SAFE && code(Verdict::kReplanned)
                   code(Verdict::kDiscardedStart) == StepRes::DISCARDED_START &&
                   code(Verdict::kUnchecked) == StepRes::UNCHECKED && code(Verdict::kTruncated) == StepRes::TRUNCATED &&
                   code(Verdict::kAborted) == StepRes::ABORTED &&
+                  code(Verdict::kDiscardedUnseen) == StepRes::DISCARDED_UNSEEN &&
                   code(Verdict::kInvalidRequest) == StepRes::INVALID_REQUEST &&
                   code(Verdict::kSceneUnavailable) == StepRes::SCENE_UNAVAILABLE &&
                   code(Verdict::kExecutionFailed) == StepRes::EXECUTION_FAILED &&
@@ -72,7 +73,8 @@ static_assert(code(SceneOutcome::kValid) == SceneRes::VALID &&
                   code(SceneOutcome::kPoseCollision) == SceneRes::POSE_COLLISION &&
                   code(SceneOutcome::kPathCollision) == SceneRes::PATH_COLLISION &&
                   code(SceneOutcome::kStartInCollision) == SceneRes::START_IN_COLLISION &&
-                  code(SceneOutcome::kInvalidRequest) == SceneRes::INVALID_REQUEST,
+                  code(SceneOutcome::kInvalidRequest) == SceneRes::INVALID_REQUEST &&
+                  code(SceneOutcome::kMapStale) == SceneRes::MAP_STALE,
               "moverl_shield::SceneOutcome differs from moverl_msgs/ValidateMotion");
 constexpr std::int32_t code(TrajectoryError e) { return static_cast<std::int32_t>(e); }
 static_assert(code(TrajectoryError::kSuccessful) == FjtResult::SUCCESSFUL &&
@@ -326,6 +328,24 @@ class ShieldNode {
         // Safe: the robot rests at a state checked free of every obstacle's whole motion envelope.
         decision.waypoints = {s->q};
       }
+      if (decision.verdict == Verdict::kReplanned && vm.response.plan_horizon > 0.0) {
+        // Sensed obstacles: the plan was checked with the margin of a move lasting plan_horizon; a slower one is not
+        // covered by that check.
+        double planned = 0.0;
+        try {
+          planned = timeTrajectory(profile_, decision.waypoints, limits_, req.duration, sample_period_).duration();
+        } catch (const std::exception& e) {
+          res.message = std::string("cannot time the plan: ") + e.what();
+          return Verdict::kExecutionFailed;
+        }
+        if (planned > vm.response.plan_horizon) {
+          res.message += "; the plan lasts " + std::to_string(planned) + " s, longer than the sensed margin covers (" +
+                         std::to_string(vm.response.plan_horizon) + " s): held still";
+          decision.verdict = Verdict::kDiscardedPath;
+          decision.waypoints.clear();
+          if (!real_time && vm.response.moving_obstacles && req.duration > 0.0) decision.waypoints = {s->q};
+        }
+      }
       if (decision.verdict == Verdict::kTruncated) {
         res.message += "; truncated: moved to the last safe state at fraction " +
                        std::to_string(decision.truncated_fraction) + " of the straight path";
@@ -347,6 +367,9 @@ class ShieldNode {
       vm->start_time = s.stamp.toSec() - motion_epoch_.toSec();  // in doubles: any stamp a driver sends is safe
       vm->duration = duration;
     }
+    // The absolute time of start_time (the sensed map's age is measured against it).
+    const double stamp = motion_epoch_.toSec() + vm->start_time;
+    vm->stamp = stamp > 0.0 ? ros::Time(stamp) : ros::Time(0, 1);
   }
 
   /// Time and execute waypoints (the first is the current state); the verdict after the driver's result.

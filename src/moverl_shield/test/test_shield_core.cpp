@@ -33,6 +33,23 @@ TEST(Decide, CollisionsAreDiscardedAndHoldStill) {
   EXPECT_FALSE(isDiscarded(Verdict::kReplanned));
 }
 
+TEST(Decide, AStaleSensedMapDiscardsWhateverTheStrategy) {
+  for (Strategy s : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe}) {
+    SceneAnswer a;
+    a.outcome = SceneOutcome::kMapStale;
+    a.replanned = true;  // even with a plan or a last free state on offer: nothing is known free
+    a.plan = {kStart, kTarget};
+    a.last_free_fraction = 0.5;
+    a.last_free_state = kTarget;
+    const Decision d = decide(s, a, kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kDiscardedUnseen) << strategyName(s);
+    EXPECT_TRUE(d.waypoints.empty());
+    EXPECT_TRUE(isDiscarded(d.verdict));
+    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(SceneOutcome::kMapStale));
+  }
+  EXPECT_EQ(verdictName(Verdict::kDiscardedUnseen), "discarded_unseen");
+}
+
 TEST(Decide, PathCollisionWithPlanExecutesThePlanFromTheMeasuredState) {
   Waypoints plan{{0.001, 0, 0}, {0.05, 0.1, 0}, kTarget};
   Decision d = decide(SceneOutcome::kPathCollision, true, plan, kStart, kTarget);

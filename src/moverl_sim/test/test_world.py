@@ -79,6 +79,10 @@ BAD_WORLDS = {
         ".observed",
     ),
     "numeric_id": ("name: w\nobjects:\n  - {id: 3, shape: sphere, size: [1], xyz: [0, 0, 0]}\n", "objects[0].id"),
+    "sensing_not_a_mapping": ("name: w\nsensing: 1.6\n", "'sensing'"),
+    "sensing_unknown_key": ("name: w\nsensing: {speed: 1.6}\n", "sensing.speed"),
+    "sensing_negative_speed": ("name: w\nsensing: {speed_bound: -1}\n", ">= 0"),
+    "sensing_infinite_speed": ("name: w\nsensing: {speed_bound: .inf}\n", "sensing.speed_bound"),
 }
 
 
@@ -106,3 +110,11 @@ def test_world_dataclass_is_extensible():
 
     o = WorldObject(id="a", shape="sphere", size=(0.1,), xyz=(0, 0, 0))
     assert o.rpy == (0.0, 0.0, 0.0) and o.observed is True
+
+
+def test_sensing_speed_bound(tmp_path):
+    p = tmp_path / "w.yaml"
+    p.write_text("name: w\nsensing: {speed_bound: 0.16}\n")
+    assert load_world(p).sensed_speed_bound == 0.16
+    p.write_text("name: w\n")
+    assert load_world(p).sensed_speed_bound is None  # the planning scene's octomap/speed_bound applies

@@ -42,6 +42,7 @@ COLLISION_TYPES = {
     _Step.DISCARDED_POSE: "pose",
     _Step.DISCARDED_PATH: "path",
     _Step.DISCARDED_START: "start",
+    _Step.DISCARDED_UNSEEN: "unseen",  # not a collision: the sensed map was too old to know anything free
     _Step.TRUNCATED: "path",
 }
 #: ShieldStep.unsafe_cause codes (moverl_msgs/ValidateMotion outcomes) -> collision type.
@@ -54,7 +55,14 @@ UNSAFE_CAUSES = {
 #: Verdicts that count as discarded (the action was unsafe: the agent gets safety_penalty). A truncated step
 #: (strategy last_safe) moved only along the safe part of the unsafe action: it counts too.
 DISCARDED = frozenset(
-    {_Step.DISCARDED_SELF, _Step.DISCARDED_POSE, _Step.DISCARDED_PATH, _Step.DISCARDED_START, _Step.TRUNCATED}
+    {
+        _Step.DISCARDED_SELF,
+        _Step.DISCARDED_POSE,
+        _Step.DISCARDED_PATH,
+        _Step.DISCARDED_START,
+        _Step.DISCARDED_UNSEEN,
+        _Step.TRUNCATED,
+    }
 )
 #: Verdicts after which the env cannot go on (MoveRLError), with the component that failed.
 FAILURES = {

@@ -86,6 +86,15 @@ class FclCollisionChecker : public CollisionChecker {
   ///        The tree is read by every check: callers must not modify it while a check runs.
   void setOctree(std::shared_ptr<const octomap::OcTree> tree);
   bool hasOctree() const { return static_cast<bool>(octree_); }
+  /// \brief The sensed obstacles' predictive margin (m, >= 0): robot links are inflated by padding + margin against
+  ///        the octree in the checks that follow (where a sensed obstacle may have moved since it was seen). Rounded
+  ///        up to a multiple of kMarginStep; each link's inflated shapes are built the first time a level is used.
+  ///        False (margin unchanged) when the margin is not finite, negative or above kMaxMargin.
+  bool setOctreeMargin(double margin);
+  /// \brief The margin (m) the octree checks now use (the requested one rounded up).
+  double octreeMargin() const { return octo_level_ * kMarginStep; }
+  static constexpr double kMarginStep = 0.01;  ///< m between the sensed margin's levels
+  static constexpr double kMaxMargin = 1.0;    ///< m: the largest margin (100 levels)
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
@@ -142,7 +151,10 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
   std::shared_ptr<fcl::OcTree<double>> octree_;  // sensed obstacles (may be null)
-  std::vector<std::size_t> moving_;              // indices into world_ of moving obstacles
+  int octo_level_ = 0;                           // sensed margin: octoGeom's level (kMarginStep each)
+  /// The shape of g checked against the octree at the current margin.
+  const std::shared_ptr<fcl::CollisionGeometry<double>>& octoGeom(Geom& g);
+  std::vector<std::size_t> moving_;  // indices into world_ of moving obstacles
   double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();
   std::vector<double> joint_radius_;
   double reach_radius_ = 0.0;

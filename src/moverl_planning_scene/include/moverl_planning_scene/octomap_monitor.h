@@ -10,6 +10,8 @@
 #pragma once
 
 #include <atomic>
+#include <condition_variable>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -44,6 +46,16 @@ class OctomapMonitor {
   ///        the map (fail closed: an empty map calls everything free). False with *error.
   bool init(std::string* error);
 
+  /// \brief The predictive margins (m) of one check whose move starts at `stamp` and lasts `duration` s (infinite:
+  ///        unknown), from the map's age at `stamp`: stamp minus the oldest of the cameras' last integrated clouds.
+  ///        While that age exceeds octomap/max_age, waits up to octomap/stale_wait (wall) s for newer clouds (in
+  ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
+  ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
+  ///        Must not be called with the scene's mutex held (integration needs it).
+  bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why);
+  /// \brief The world's speed bound (World.sensed_speed_bound, m/s) replaces octomap/speed_bound; negative: keep it.
+  void setWorldSpeedBound(double speed_bound);
+
  private:
   void onJointState(const sensor_msgs::JointState::ConstPtr& msg);
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg);
@@ -74,6 +86,12 @@ class OctomapMonitor {
   std::atomic<uint32_t> clouds_{0}, dropped_{0};
   ros::Time last_cloud_stamp_;  // the last integrated cloud's stamp and frame (reported with drops too)
   std::string last_cloud_frame_;
+  // The sensed margin: octomap/speed_bound, latency, plan_horizon, max_age, stale_wait (config/planning_scene.yaml).
+  std::atomic<double> speed_bound_{0.0};
+  double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
+  std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
+  std::condition_variable stamps_cv_;
+  std::map<std::string, ros::Time> frame_stamps_;  // each camera frame's last integrated cloud stamp
 };
 
 }  // namespace moverl_planning_scene

@@ -34,7 +34,8 @@ enum class MotionOutcome {
   kPoseCollision = 2,
   kPathCollision = 3,
   kStartInCollision = 4,
-  kInvalidRequest = 5
+  kInvalidRequest = 5,
+  kMapStale = 6
 };
 
 /// \brief Result of checkState.
@@ -53,6 +54,17 @@ struct PathCheck {
   std::size_t checked_states = 0;
   std::string message;
   double check_time = 0.0;
+};
+
+/// \brief The sensed obstacles' predictive margins (m) of one validateMotion (see
+/// FclCollisionChecker::setOctreeMargin):
+///        a sensed obstacle may have moved this far since it was seen, by the time the robot is at the start (start),
+///        at any state of the straight move or its goal (end), or anywhere on a plan lasting at most plan_horizon s
+///        (plan).
+struct SensedMargins {
+  double start = 0.0, end = 0.0, plan = 0.0;
+  double map_age = -1.0;      ///< s (reported)
+  double plan_horizon = 0.0;  ///< s (reported: a plan executed slower is not covered)
 };
 
 /// \brief Result of validateMotion.
@@ -103,9 +115,10 @@ class PlanningScene {
   ///        its interior states are checked against the volume each moving obstacle sweeps in that window (widened
   ///        by kTimeSlack on both sides); the goal, the start, plans and the last free state against each moving
   ///        obstacle's whole motion envelope. Ignored without moving obstacles. duration = +inf: envelope only.
+  /// \param sensed the sensed obstacles' margins (nullptr: none)
   void validateMotion(const std::vector<double>& start, const std::vector<double>& goal, bool plan_on_path_collision,
                       MotionCheck* out, bool find_last_free = false, double start_time = 0.0,
-                      double duration = std::numeric_limits<double>::infinity());
+                      double duration = std::numeric_limits<double>::infinity(), const SensedMargins* sensed = nullptr);
 
   const RobotModel& model() const { return *model_; }
   FclCollisionChecker& checker() { return *checker_; }

@@ -24,6 +24,7 @@ enum class Verdict : uint8_t {
   kUnchecked = 6,           ///< shield disabled: executed straight without checks
   kTruncated = 7,           ///< unsafe target (last_safe): moved straight to the last safe state before the collision
   kAborted = 8,             ///< the driver stopped the move on the way (path/goal tolerance): the episode should end
+  kDiscardedUnseen = 9,     ///< the sensed map is too old: nothing is known to be free, held still
   kInvalidRequest = 10,     ///< malformed target: nothing moves
   kSceneUnavailable = 11,   ///< planning scene unreachable, failed or late: fail closed
   kExecutionFailed = 12,    ///< the driver refused the trajectory
@@ -39,6 +40,7 @@ enum class SceneOutcome : uint8_t {
   kPathCollision = 3,
   kStartInCollision = 4,
   kInvalidRequest = 5,
+  kMapStale = 6,
 };
 
 /// What the shield does with an unsafe action (param ~strategy).

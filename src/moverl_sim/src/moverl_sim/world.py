@@ -31,7 +31,8 @@ __all__ = [
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
-_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras"}
+_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing"}
+_SENSING_KEYS = {"speed_bound"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
 MOTION_TYPES = ("oscillate",)
 _MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
@@ -156,6 +157,9 @@ class World:
     objects: Tuple[WorldObject, ...] = ()
     source: str = field(default="<memory>", compare=False)  # file it was read from
     cameras: Tuple[WorldCamera, ...] = ()
+    #: ``sensing: speed_bound:`` (m/s): how fast what the cameras see may move, for the planning scene's predictive
+    #: margin in the sensed mode; None: not given (the scene's octomap/speed_bound applies).
+    sensed_speed_bound: Optional[float] = None
 
     @property
     def moving_objects(self):
@@ -420,4 +424,26 @@ def parse_world(data, source="<memory>"):
             motion = _parse_motion(raw["motion"], source, where + ".motion")
         objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed, motion=motion))
     cameras = _parse_cameras(data.get("cameras"), source)
-    return World(name=name, frame=frame, goal=goal, objects=tuple(objects), source=source, cameras=cameras)
+    speed_bound = None
+    sensing = data.get("sensing")
+    if sensing is not None:
+        if not isinstance(sensing, dict):
+            _fail(source, "sensing", "expected a mapping with keys %s, got %r" % (sorted(_SENSING_KEYS), sensing))
+        unknown = set(map(str, sensing)) - _SENSING_KEYS
+        if unknown:
+            _fail(
+                source, "sensing." + sorted(unknown)[0], "unknown key (allowed: %s)" % ", ".join(sorted(_SENSING_KEYS))
+            )
+        if "speed_bound" in sensing:
+            speed_bound = _numbers([sensing["speed_bound"]], source, "sensing.speed_bound", 1)[0]
+            if not (speed_bound >= 0.0 and math.isfinite(speed_bound)):
+                _fail(source, "sensing.speed_bound", "must be finite and >= 0 (m/s), got %r" % (speed_bound,))
+    return World(
+        name=name,
+        frame=frame,
+        goal=goal,
+        objects=tuple(objects),
+        source=source,
+        cameras=cameras,
+        sensed_speed_bound=speed_bound,
+    )

@@ -5,6 +5,8 @@
     python src/moverl_gym/scripts/pushing_policy_audit.py --robot-config my_arm.yaml --worlds table human case
     python src/moverl_gym/scripts/pushing_policy_audit.py --worlds table human case --shield on --control dynamic \
         --out docs/dynamic_control/pushing
+    python src/moverl_gym/scripts/pushing_policy_audit.py --worlds human --shield on --obstacles octomap \
+        --mode realtime --out docs/sensed_person/realtime
 
 Random actions near home rarely reach the obstacles; this policy does. Before the run it samples configurations
 within +-spread rad of the robot's home in which a link penetrates a world object by at least 5 mm (PyBullet, in
@@ -17,7 +19,9 @@ must be 0; with it off they show that the policy does push into the obstacles.
 
 Each run (robot config x world x shield) uses its own process and ROS graph. Writes docs/pushing_policy/audit.md and
 .csv (or --out); exit code 1 if a shielded run made any contact. --control dynamic runs the simulator's
-position-controlled motors (the mode closest to hardware); any error the env raises fails the run.
+position-controlled motors (the mode closest to hardware); any error the env raises fails the run. --obstacles octomap
+makes the shield know the obstacles only through the world's depth cameras (the sensed mode); --mode realtime runs the
+simulator in real time (the shield's window covers its own thinking time).
 """
 
 from __future__ import annotations
@@ -108,6 +112,8 @@ def worker(
     switch: int,
     noise: float,
     control: str | None = None,
+    obstacles: str | None = None,
+    mode: str | None = None,
 ) -> dict:
     import yaml
     from gymnasium.wrappers import TimeLimit
@@ -145,7 +151,12 @@ def worker(
             world=world,
             shield=shield,
             graph="launch",
-            launch_args={"robot_config": str(robot_config), **({"control": control} if control else {})},
+            launch_args={
+                "robot_config": str(robot_config),
+                **({"control": control} if control else {}),
+                **({"obstacles": obstacles} if obstacles else {}),
+                **({"mode": mode} if mode else {}),
+            },
         ),
         max_episode_steps=max_steps,
     )
@@ -180,6 +191,8 @@ def worker(
         "robot": rc.get("name", Path(robot_config).stem),
         "world": world,
         "control": control or "",
+        "obstacles": obstacles or "objects",
+        "mode": mode or "lockstep",
         "shield": shield,
         "steps": steps,
         "episodes": episodes,
@@ -216,6 +229,13 @@ def main(argv=None) -> int:
         default=None,
         help="the simulator's control mode (default: config/sim.yaml's)",
     )
+    p.add_argument(
+        "--obstacles",
+        choices=["objects", "octomap"],
+        default=None,
+        help="what the shield knows: the world file's objects (default) or only what the depth cameras see",
+    )
+    p.add_argument("--mode", choices=["lockstep", "realtime"], default=None, help="the simulator's clock")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
     p.add_argument("--worker", nargs=3, metavar=("CONFIG", "WORLD", "on|off"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -233,6 +253,8 @@ def main(argv=None) -> int:
                     args.switch,
                     args.noise,
                     args.control,
+                    args.obstacles,
+                    args.mode,
                 )
             )
         )
@@ -267,6 +289,8 @@ def main(argv=None) -> int:
                         "--noise",
                         args.noise,
                         *(["--control", args.control] if args.control else []),
+                        *(["--obstacles", args.obstacles] if args.obstacles else []),
+                        *(["--mode", args.mode] if args.mode else []),
                     ],
                     f"worker {config.name} {world} shield {shield}",
                 )
@@ -287,7 +311,7 @@ def main(argv=None) -> int:
     if args.robot_config:
         cmd += "".join(f" --robot-config {c}" for c in args.robot_config)
     cmd += " --worlds " + " ".join(args.worlds) + f" --steps {args.steps}"
-    for name in ("shield", "seed", "spread", "switch", "noise", "control"):
+    for name in ("shield", "seed", "spread", "switch", "noise", "control", "obstacles", "mode"):
         if getattr(args, name) != p.get_default(name):
             cmd += f" --{name} {getattr(args, name)}"
     if args.out:
@@ -309,15 +333,16 @@ def main(argv=None) -> int:
         "(unsensed moves must be 0). at limit = steps whose command put a joint onto its URDF limit (with dynamic "
         "control the motors overshoot there; the env must not raise).",
         "",
-        "| robot | world | control | shield | steps | episodes | contacts | steps with contact | unsensed moves | "
-        "at limit | verdicts | targets per object | steps/s |",
-        "|---|---|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|",
+        "| robot | world | control | obstacles | clock | shield | steps | episodes | contacts | steps with contact | "
+        "unsensed moves | at limit | verdicts | targets per object | steps/s |",
+        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|",
     ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
         t = ", ".join(f"{k} {n}" for k, n in sorted(r["targets"].items()))
         lines.append(
-            f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {'on' if r['shield'] else 'off'} | "
+            f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | {r['mode']} | "
+            f"{'on' if r['shield'] else 'off'} | "
             f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | "
             f"{r['unsensed_moves']} | {r['steps_at_limit']} | {v} | {t} | {r['steps_per_s']} |"
         )

@@ -236,9 +236,10 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why) {
   // The oldest camera's last view decides: a region only one camera sees is as old as that camera's last cloud.
   auto age = [&] {
+    if (frame_stamps_.empty()) return std::numeric_limits<double>::infinity();  // nothing seen (start, clear)
     double oldest = std::numeric_limits<double>::infinity();
     for (const auto& f : frame_stamps_) oldest = std::min(oldest, f.second.toSec());
-    return std::max(0.0, stamp.toSec() - oldest);  // inf before the first cloud (or after a clear)
+    return std::max(0.0, stamp.toSec() - oldest);  // a cloud newer than the state: age 0
   };
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   out->map_age = age();
@@ -264,6 +265,13 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     return false;
   }
   return true;
+}
+
+ros::Time OctomapMonitor::newestStamp() {
+  std::lock_guard<std::mutex> lock(stamps_mutex_);
+  ros::Time newest;
+  for (const auto& f : frame_stamps_) newest = std::max(newest, f.second);
+  return newest;
 }
 
 bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {

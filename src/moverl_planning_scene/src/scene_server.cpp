@@ -31,12 +31,14 @@ using MotionRes = moverl_msgs::ValidateMotion::Response;
 static_assert(code(CheckOutcome::kValid) == CheckRes::VALID &&
                   code(CheckOutcome::kSelfCollision) == CheckRes::SELF_COLLISION &&
                   code(CheckOutcome::kWorldCollision) == CheckRes::WORLD_COLLISION &&
-                  code(CheckOutcome::kInvalidRequest) == CheckRes::INVALID_REQUEST,
+                  code(CheckOutcome::kInvalidRequest) == CheckRes::INVALID_REQUEST &&
+                  code(CheckOutcome::kMapStale) == CheckRes::MAP_STALE,
               "CheckOutcome differs from moverl_msgs/CheckState");
 static_assert(code(CheckOutcome::kValid) == PathRes::VALID &&
                   code(CheckOutcome::kSelfCollision) == PathRes::SELF_COLLISION &&
                   code(CheckOutcome::kWorldCollision) == PathRes::WORLD_COLLISION &&
-                  code(CheckOutcome::kInvalidRequest) == PathRes::INVALID_REQUEST,
+                  code(CheckOutcome::kInvalidRequest) == PathRes::INVALID_REQUEST &&
+                  code(CheckOutcome::kMapStale) == PathRes::MAP_STALE,
               "CheckOutcome differs from moverl_msgs/CheckPath");
 static_assert(code(PlanStatus::kSuccess) == PlanRes::SUCCESS &&
                   code(PlanStatus::kStartInvalid) == PlanRes::START_INVALID &&
@@ -269,9 +271,37 @@ void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
   }
 }
 
+/// Sensed obstacles, for the queries without a stamp (check_state, check_path, plan): the margin as of the newest
+/// integrated cloud (the time of a state these queries do not know), for a state (duration 0) or a plan. False with
+/// *why when the map is too old.
+bool SceneServer::unstampedMargin(bool plan, double* margin, std::string* why) {
+  *margin = 0.0;
+  if (!monitor_) return true;
+  SensedMargins m;
+  if (!monitor_->margins(monitor_->newestStamp(), plan ? std::numeric_limits<double>::infinity() : 0.0, &m, why)) {
+    return false;
+  }
+  *margin = plan ? m.plan : m.start;
+  return true;
+}
+
+/// Sets the checker's sensed margin for the rest of a query (mutex_ held) and back to none at its end.
+struct SceneServer::MarginScope {
+  MarginScope(PlanningScene* scene, double margin) : scene_(scene) { scene_->checker().setOctreeMargin(margin); }
+  ~MarginScope() { scene_->checker().setOctreeMargin(0.0); }
+  PlanningScene* scene_;
+};
+
 bool SceneServer::checkState(moverl_msgs::CheckState::Request& req, moverl_msgs::CheckState::Response& res) {
   try {
+    std::string blind;
+    if (!unstampedMargin(false, &res.sensed_margin, &blind)) {
+      res.outcome = moverl_msgs::CheckState::Response::MAP_STALE;
+      res.message = blind;
+      return true;
+    }
     std::lock_guard<std::mutex> lock(mutex_);
+    const MarginScope margin(scene_.get(), res.sensed_margin);
     scene_->checkState(req.positions, &state_);  // depth 0: FCL MPR depths on vertex-only hulls are unreliable
     res.outcome = static_cast<uint8_t>(state_.outcome);
     toPairs(state_.pairs, &res.pairs);
@@ -286,7 +316,15 @@ bool SceneServer::checkState(moverl_msgs::CheckState::Request& req, moverl_msgs:
 
 bool SceneServer::checkPath(moverl_msgs::CheckPath::Request& req, moverl_msgs::CheckPath::Response& res) {
   try {
+    std::string blind;
+    if (!unstampedMargin(false, &res.sensed_margin, &blind)) {
+      res.outcome = moverl_msgs::CheckPath::Response::MAP_STALE;
+      res.collision_fraction = -1.0;
+      res.message = blind;
+      return true;
+    }
     std::lock_guard<std::mutex> lock(mutex_);
+    const MarginScope margin(scene_.get(), res.sensed_margin);
     scene_->checkPath(req.start, req.goal, &path_);
     res.outcome = static_cast<uint8_t>(path_.outcome);
     toPairs(path_.pairs, &res.pairs);
@@ -303,7 +341,15 @@ bool SceneServer::checkPath(moverl_msgs::CheckPath::Request& req, moverl_msgs::C
 
 bool SceneServer::plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res) {
   try {
+    double sensed = 0.0;
+    std::string blind;
+    if (!unstampedMargin(true, &sensed, &blind)) {
+      res.outcome = moverl_msgs::PlanPath::Response::NO_SOLUTION;
+      res.message = "no plan: " + blind;
+      return true;
+    }
     std::lock_guard<std::mutex> lock(mutex_);
+    const MarginScope margin(scene_.get(), sensed);
     scene_->plan(req.start, req.goal, req.planner, req.time_limit, &plan_);
     res.outcome = static_cast<uint8_t>(plan_.status);
     toTrajectory(plan_.waypoints, scene_->model().jointNames(), &res.path);

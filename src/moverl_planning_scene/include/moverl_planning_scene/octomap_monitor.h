@@ -53,6 +53,8 @@ class OctomapMonitor {
   ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
   ///        Must not be called with the scene's mutex held (integration needs it).
   bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why);
+  /// \brief The newest integrated cloud's stamp (zero before the first).
+  ros::Time newestStamp();
   /// \brief The world's speed bound (World.sensed_speed_bound, m/s) replaces octomap/speed_bound; negative: keep it.
   void setWorldSpeedBound(double speed_bound);
 

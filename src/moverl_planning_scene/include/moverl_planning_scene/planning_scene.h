@@ -25,7 +25,7 @@ struct PlanningSceneOptions {
 };
 
 /// \brief Outcome of a state check (values match moverl_msgs/CheckState and CheckPath).
-enum class CheckOutcome { kValid = 0, kSelfCollision = 1, kWorldCollision = 2, kInvalidRequest = 3 };
+enum class CheckOutcome { kValid = 0, kSelfCollision = 1, kWorldCollision = 2, kInvalidRequest = 3, kMapStale = 4 };
 
 /// \brief Outcome of validateMotion (values match moverl_msgs/ValidateMotion).
 enum class MotionOutcome {

@@ -231,9 +231,10 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--obstacles",
-        choices=["objects", "octomap"],
+        choices=["objects", "octomap", "sensed"],
         default=None,
-        help="what the shield knows: the world file's objects (default) or only what the depth cameras see",
+        help="what the shield knows: the world file's objects (default), only what the depth cameras see, or the "
+        "static objects plus what the cameras see (sensed)",
     )
     p.add_argument("--mode", choices=["lockstep", "realtime"], default=None, help="the simulator's clock")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")

@@ -54,9 +54,9 @@ def parse_args(argv=None):
     p.add_argument(
         "--obstacles",
         default="objects",
-        choices=("objects", "octomap", "both"),
+        choices=("objects", "octomap", "both", "sensed"),
         help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
-        "from the world's depth cameras, or both",
+        "from the world's depth cameras, both, or sensed (the static objects plus the OctoMap for what moves)",
     )
     p.add_argument(
         "--task",

@@ -47,7 +47,7 @@ struct FclCollisionChecker::Obstacle {
   std::shared_ptr<fcl::CollisionGeometry<double>> geom;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   double radius = 0.0;  // bounding sphere about pose.translation()
-  WorldObject source;   // moving obstacles: the object as given (pose at t = 0, unpadded dimensions, motion)
+  WorldObject source;   // the object as given (pose at t = 0, unpadded dimensions, motion)
 };
 
 }  // namespace moverl_planning_scene

@@ -46,8 +46,9 @@ std::string cloudLayoutError(const sensor_msgs::PointCloud2& c) {
   return "";
 }
 
-OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex)
-    : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex) {
+OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex,
+                               bool filter_static)
+    : nh_(nh), pnh_(pnh), scene_(scene), scene_mutex_(scene_mutex), filter_static_(filter_static) {
   speed_bound_ = -1.0;  // until init or the world sets it
 }
 
@@ -213,6 +214,15 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     if (c > 0) {
       for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
     }
+  }
+  if (filter_static_) {
+    // Points on the scene's static objects (known exactly: no predictive margin) mark nothing, as the robot's.
+    {
+      std::lock_guard<std::mutex> lock(*scene_mutex_);
+      scene_->checker().staticObjectPointMask(points_, self_filter_padding_, &mask_more_);
+    }
+    if (mask_.size() != mask_more_.size()) mask_.assign(points_.size(), 0);
+    for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
   }
   map_->computeUpdate(points_, mask_, pose.translation(), &update_);
   {

@@ -4,6 +4,7 @@
  */
 #include "moverl_planning_scene/scene_server.h"
 
+#include <algorithm>
 #include <cstdlib>
 #include <exception>
 
@@ -175,8 +176,8 @@ bool SceneServer::init(std::string* error) {
     *error = e.what();
     return false;
   }
-  if (obstacles_ != "objects" && obstacles_ != "octomap" && obstacles_ != "both") {
-    *error = pnh_.resolveName("obstacles") + " must be objects, octomap or both, not '" + obstacles_ + "'";
+  if (obstacles_ != "objects" && obstacles_ != "octomap" && obstacles_ != "both" && obstacles_ != "sensed") {
+    *error = pnh_.resolveName("obstacles") + " must be objects, octomap, both or sensed, not '" + obstacles_ + "'";
     return false;
   }
   planning_time_ = o.planner.planning_time;
@@ -209,7 +210,7 @@ bool SceneServer::init(std::string* error) {
     return false;
   }
   if (obstacles_ != "objects") {
-    monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_);
+    monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_, obstacles_ == "sensed");
     monitor_->setWorldSpeedBound(get_world.response.world.sensed_speed_bound);
     if (!monitor_->init(error)) return false;
   }
@@ -248,6 +249,11 @@ bool SceneServer::applyWorld(const moverl_msgs::World& msg, std::string* error) 
   std::vector<WorldObject> objects;
   if (!toWorld(msg, &objects, error)) return false;
   if (obstacles_ == "octomap") objects.clear();  // sensed only: the scene must not know the objects
+  if (obstacles_ == "sensed") {                  // the static ones only (the cell's fixtures); what moves is sensed
+    objects.erase(
+        std::remove_if(objects.begin(), objects.end(), [](const WorldObject& o) { return o.motion.moving(); }),
+        objects.end());
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   if (!scene_->setWorld(objects, error)) return false;
   world_msg_ = msg;
@@ -393,8 +399,9 @@ bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
     // which integration needs).
     SensedMargins sensed;
     std::string blind;
+    // Without a stamp: as of the newest cloud (in lockstep the driver's clock is not this node's).
     if (monitor_ &&
-        !monitor_->margins(req.stamp.isZero() ? ros::Time::now() : req.stamp, req.duration, &sensed, &blind)) {
+        !monitor_->margins(req.stamp.isZero() ? monitor_->newestStamp() : req.stamp, req.duration, &sensed, &blind)) {
       res.outcome = moverl_msgs::ValidateMotion::Response::MAP_STALE;
       res.moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
       res.message = blind + ": failing closed";

@@ -131,10 +131,8 @@ bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std:
     if (m.moving()) m.range(0.0, std::numeric_limits<double>::infinity(), &lo, &hi);  // whole envelope
     if (!sweptGeometry(o, p, lo, hi, &ob.geom, &ob.pose, &ob.radius, &why)) return bad(why);
     ob.geom->computeLocalAABB();
-    if (m.moving()) {
-      moving.push_back(world.size());
-      ob.source = o;
-    }
+    ob.source = o;
+    if (m.moving()) moving.push_back(world.size());
     world.push_back(std::move(ob));
   }
   moving_.swap(moving);
@@ -163,6 +161,37 @@ void FclCollisionChecker::setMotionWindow(double t0, double t1) {
 
 double FclCollisionChecker::obstacleRadius(std::size_t i) const { return world_.at(i).radius; }
 Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { return world_.at(i).pose.translation(); }
+
+void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
+                                                std::vector<std::uint8_t>* mask) const {
+  mask->assign(points.size(), 0);
+  for (const Obstacle& ob : world_) {
+    const WorldObject& o = ob.source;
+    if (o.motion.moving()) continue;
+    const Eigen::Isometry3d inv = o.pose.inverse();
+    const auto& d = o.dimensions;
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if ((*mask)[k] != 0) continue;
+      const Eigen::Vector3d p = inv * points[k];  // in the object's frame (centred)
+      bool in = false;
+      switch (o.type) {
+        case ShapeType::kBox:
+          in = (p.cwiseAbs() - 0.5 * Eigen::Vector3d(d[0], d[1], d[2])).maxCoeff() <= padding;
+          break;
+        case ShapeType::kSphere:
+          in = p.norm() <= d[0] + padding;
+          break;
+        case ShapeType::kCylinder:
+        case ShapeType::kCone:  // (its bounding cylinder)
+          in = std::fabs(p.z()) <= 0.5 * d[0] + padding && p.head<2>().norm() <= d[1] + padding;
+          break;
+        default:
+          break;
+      }
+      if (in) (*mask)[k] = 1;
+    }
+  }
+}
 
 bool FclCollisionChecker::obstacleContains(std::size_t i, const Eigen::Vector3d& point) const {
   const Obstacle& ob = world_.at(i);

@@ -99,6 +99,10 @@ class FclCollisionChecker : public CollisionChecker {
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
                       std::vector<std::uint8_t>* mask) const;
+  /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of a static world object (no motion; cones
+  ///        as their bounding cylinder). Reads the world: callers serialize it with setWorld.
+  void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
+                             std::vector<std::uint8_t>* mask) const;
   /// \brief As robotPointMask, for the collision shapes of one link only (link index; -1: every link).
   void linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
                      std::vector<std::uint8_t>* mask) const;

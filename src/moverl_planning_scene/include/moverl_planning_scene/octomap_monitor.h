@@ -39,7 +39,9 @@ std::string cloudLayoutError(const sensor_msgs::PointCloud2& cloud);
 class OctomapMonitor {
  public:
   /// \param scene the scene whose checker gets the map; scene_mutex the mutex every reader of the scene holds
-  OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex);
+  /// \param filter_static points on the scene's static objects mark nothing (they are known exactly: obstacles sensed)
+  OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, PlanningScene* scene, std::mutex* scene_mutex,
+                 bool filter_static = false);
   ~OctomapMonitor();
 
   /// \brief Read the octomap/ parameters, create the map, subscribe, and wait until the cameras' first views are in
@@ -69,6 +71,7 @@ class OctomapMonitor {
   ros::NodeHandle nh_, pnh_;
   PlanningScene* scene_;
   std::mutex* scene_mutex_;
+  bool filter_static_ = false;
   std::unique_ptr<OccupancyMap> map_;
   std::mutex sensor_mutex_;  // serializes cloud integration with ~clear_octomap (never held by the queries)
   ros::CallbackQueue sensor_queue_, joint_queue_;

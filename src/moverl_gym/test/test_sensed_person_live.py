@@ -2,8 +2,9 @@
 docs/sensed_person (scripts/pushing_policy_audit.py --obstacles sensed):
 
 * the human scenario in the sensed mode (the planning scene knows the table from the world file, and the person only
-  from the OctoMap built from the world's three cameras, with the predictive margin), shield on, a policy that keeps pushing toward the walking person and the table: no contact, in
-  lockstep and in real time; and the policy does get near them (the shield discards many of its steps);
+  from the OctoMap built from the world's three cameras, with the predictive margin), shield on, a policy that keeps
+  pushing toward the walking person and the table: no contact, in lockstep and in real time; and the policy does get
+  near them (the shield discards many of its steps);
 * the same policy in a world whose person walks faster than the world declares (sensing: speed_bound): the margin no
   longer covers where the person may be, and the robot is hit (the speed bound is an assumption the shield cannot
   check: the README says so).

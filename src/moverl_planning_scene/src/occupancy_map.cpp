@@ -48,6 +48,12 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
       o.occupancy_threshold >= o.clamp_max) {
     return bad("occupancy_threshold must lie in (clamp_min, clamp_max)");
   }
+  auto logit = [](double p) { return std::log(p / (1.0 - p)); };
+  if (!(logit(o.prob_hit) + logit(o.clamp_min) > logit(o.occupancy_threshold))) {
+    return bad(
+        "one hit must make a cell clamped at clamp_min occupied: logit(prob_hit) + logit(clamp_min) > "
+        "logit(occupancy_threshold) (an obstacle stepping into space seen free would show views later)");
+  }
   std::unique_ptr<OccupancyMap> m(new OccupancyMap());
   m->options_ = o;
   m->tree_ = std::make_shared<octomap::OcTree>(o.resolution);

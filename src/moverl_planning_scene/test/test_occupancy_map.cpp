@@ -66,6 +66,10 @@ TEST(OccupancyMap, RejectsBadOptions) {
   o.max_range = -1.0;
   EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
   EXPECT_NE(error.find("max_range"), std::string::npos) << error;
+  o = mps::panda::mapOptions();
+  o.prob_hit = 0.7;  // octomap_server's: 3 hits to turn a cell clamped free occupied
+  EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
+  EXPECT_NE(error.find("one hit"), std::string::npos) << error;
   o = mps::panda::mapOptions();  // no bounds: the dense grid needs them
   EXPECT_FALSE(mps::OccupancyMap::create(o, &error));
   EXPECT_NE(error.find("bounds"), std::string::npos) << error;
@@ -97,6 +101,20 @@ TEST(OccupancyMap, HitsFreeSpaceRangeAndRobotPoints) {
   // The half-way cell is known free, a cell off every beam is unknown.
   EXPECT_NE(map->tree()->search(0.25, 0.0, 0.5), nullptr);
   EXPECT_EQ(map->tree()->search(0.0, -1.0, 0.0), nullptr);
+}
+
+/// Something that steps into space seen free many times is occupied in the very next view.
+TEST(OccupancyMap, OneViewMarksAnObstacleInSpaceSeenFree) {
+  auto map = makeMap();
+  const Eigen::Vector3d origin(0.4, 0.0, 1.0);
+  const auto floor = plane(0.0, 0.8, -0.4, 0.4, 0.0, 0.01);
+  for (int k = 0; k < 10; ++k) integrate(map.get(), floor, origin);  // the space above the floor: clamped free
+  EXPECT_FALSE(map->occupied({0.4, 0.0, 0.4}));
+  auto with_box = floor;
+  const auto top = plane(0.3, 0.5, -0.1, 0.1, 0.4, 0.01);
+  with_box.insert(with_box.end(), top.begin(), top.end());
+  integrate(map.get(), with_box, origin);
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.4}));
 }
 
 TEST(OccupancyMap, ForgetsAnObstacleThatMovedAway) {

@@ -243,12 +243,17 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
-bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why) {
+bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
+                             const ros::Time& epoch) {
   // The oldest camera's last view decides: a region only one camera sees is as old as that camera's last cloud.
   auto age = [&] {
     if (frame_stamps_.empty()) return std::numeric_limits<double>::infinity();  // nothing seen (start, clear)
     double oldest = std::numeric_limits<double>::infinity();
-    for (const auto& f : frame_stamps_) oldest = std::min(oldest, f.second.toSec());
+    for (const auto& f : frame_stamps_) {
+      // Seen only before the reset (1 ms: the epoch is computed from doubles; renders at the reset carry its stamp).
+      if (f.second.toSec() < epoch.toSec() - 1e-3) return std::numeric_limits<double>::infinity();
+      oldest = std::min(oldest, f.second.toSec());
+    }
     return std::max(0.0, stamp.toSec() - oldest);  // a cloud newer than the state: age 0
   };
   std::unique_lock<std::mutex> lock(stamps_mutex_);

@@ -400,8 +400,10 @@ bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
     SensedMargins sensed;
     std::string blind;
     // Without a stamp: as of the newest cloud (in lockstep the driver's clock is not this node's).
-    if (monitor_ &&
-        !monitor_->margins(req.stamp.isZero() ? monitor_->newestStamp() : req.stamp, req.duration, &sensed, &blind)) {
+    // The motions' epoch (the last reset) is stamp - start_time.
+    const double epoch = req.stamp.toSec() - req.start_time;
+    if (monitor_ && !monitor_->margins(req.stamp.isZero() ? monitor_->newestStamp() : req.stamp, req.duration, &sensed,
+                                       &blind, req.stamp.isZero() || !(epoch > 0.0) ? ros::Time() : ros::Time(epoch))) {
       res.outcome = moverl_msgs::ValidateMotion::Response::MAP_STALE;
       res.moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
       res.message = blind + ": failing closed";

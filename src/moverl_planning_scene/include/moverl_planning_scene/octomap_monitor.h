@@ -54,7 +54,11 @@ class OctomapMonitor {
   ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
   ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
   ///        Must not be called with the scene's mutex held (integration needs it).
-  bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why);
+  /// \param epoch when the world's motions last restarted (a simulator reset moves every moving object back to its
+  ///        start): a camera's clouds from before it tell nothing about where moving things are now, and the camera
+  ///        counts as unseen until its next cloud. Zero: none.
+  bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
+               const ros::Time& epoch = ros::Time());
   /// \brief The newest integrated cloud's stamp (zero before the first).
   ros::Time newestStamp();
   /// \brief The world's speed bound (World.sensed_speed_bound, m/s) replaces octomap/speed_bound; negative: keep it.

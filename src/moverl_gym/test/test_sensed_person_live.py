@@ -61,3 +61,9 @@ def test_pushing_at_the_sensed_person_realtime(tmp_path):
     assert proc.returncode == 0, text[-5000:]
     assert int(row["contacts"]) == 0 and int(row["unsensed_moves"]) == 0, text[-5000:]
     assert _discarded(row) > 20, "the policy did not push near anything: " + row["verdicts"]
+
+
+def test_a_person_faster_than_the_declared_bound_is_not_covered(tmp_path):
+    proc, row, text = _audit(tmp_path, FAST_WORLD, 600)
+    assert int(row["contacts"]) > 0, "the lunging person never reached the robot: " + text[-3000:]
+    assert proc.returncode == 1, text[-3000:]  # the audit reports the shielded run's contacts as a failure

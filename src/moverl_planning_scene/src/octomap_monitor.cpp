@@ -59,6 +59,12 @@ void OctomapMonitor::setWorldSpeedBound(double speed_bound) {
 OctomapMonitor::~OctomapMonitor() {
   // Stop the threads before the members they use go.
   if (sensor_spinner_) sensor_spinner_->stop();
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    stop_ = true;
+  }
+  pending_cv_.notify_all();
+  if (integrator_.joinable()) integrator_.join();
   if (joint_spinner_) joint_spinner_->stop();
 }
 
@@ -125,6 +131,7 @@ bool OctomapMonitor::init(std::string* error) {
       [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); }, ros::VoidPtr(), &sensor_queue_);
   joint_sub_ = nh_.subscribe(js);
   cloud_sub_ = nh_.subscribe(pc);
+  integrator_ = std::thread([this] { integrateLoop(); });
   sensor_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &sensor_queue_);
   sensor_spinner_->start();
   joint_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &joint_queue_);
@@ -176,6 +183,40 @@ void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) 
 }
 
 void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    pending_[msg->header.frame_id] = msg;  // an older one still pending is replaced: the newest view is what counts
+  }
+  pending_cv_.notify_one();
+}
+
+void OctomapMonitor::integrateLoop() {
+  while (true) {
+    sensor_msgs::PointCloud2::ConstPtr msg;
+    {
+      std::unique_lock<std::mutex> lock(pending_mutex_);
+      pending_cv_.wait(lock, [&] { return stop_ || !pending_.empty(); });
+      if (stop_) return;
+      // The camera whose last integrated cloud is oldest (never integrated: first).
+      auto pick = pending_.begin();
+      {
+        std::lock_guard<std::mutex> stamps(stamps_mutex_);
+        auto last = [&](const std::string& frame) {
+          const auto it = frame_stamps_.find(frame);
+          return it == frame_stamps_.end() ? ros::Time() : it->second;
+        };
+        for (auto it = pending_.begin(); it != pending_.end(); ++it) {
+          if (last(it->first) < last(pick->first)) pick = it;
+        }
+      }
+      msg = pick->second;
+      pending_.erase(pick);
+    }
+    integrate(msg);
+  }
+}
+
+void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
   const ros::WallTime t0 = ros::WallTime::now();
   geometry_msgs::TransformStamped tf;

@@ -31,6 +31,8 @@ from .paths import world_file
 SHIELD_STEP = "/shield/step"
 SHIELD_RESET = "/shield/reset"
 SCENE_CHECK = "/planning_scene/check_state"
+#: s a state check waits for a sensed map fresh enough to answer (check_state's MAP_STALE) before the env raises.
+STALE_MAP_WAIT = 10.0
 SCENE_FK = "/planning_scene/fk"
 SCENE_WORLD = "/planning_scene/get_world"  # the world as its source (simulator or world server) describes it
 REQUIRED_SERVICES = (SHIELD_STEP, SHIELD_RESET, SCENE_CHECK, SCENE_FK, SCENE_WORLD)
@@ -321,7 +323,18 @@ class RosBackend(Backend):
     def check_state(self, q: np.ndarray) -> bool:
         from moverl_msgs.srv import CheckStateResponse
 
-        return self._check(self._srv["check"](positions=[float(x) for x in q])).outcome == CheckStateResponse.VALID
+        # A sensed map too old to tell (MAP_STALE: a camera's cloud is late, or a reset made the old ones worthless)
+        # says nothing about q: wait for the cameras, up to STALE_MAP_WAIT, rather than count q as in collision.
+        deadline = time.monotonic() + STALE_MAP_WAIT
+        while True:
+            res = self._check(self._srv["check"](positions=[float(x) for x in q]))
+            if res.outcome != CheckStateResponse.MAP_STALE:
+                return res.outcome == CheckStateResponse.VALID
+            if time.monotonic() > deadline:
+                raise MoveRLError(
+                    f"the planning scene's sensed map stayed too old for {STALE_MAP_WAIT} s: {res.message}"
+                )
+            time.sleep(0.05)
 
     def ee_pose(self, q: np.ndarray) -> np.ndarray:
         fk = self._fk(self._srv["fk"](positions=[float(x) for x in q], links=[]))

@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <moverl_msgs/OctomapStatus.h>
@@ -66,7 +67,12 @@ class OctomapMonitor {
 
  private:
   void onJointState(const sensor_msgs::JointState::ConstPtr& msg);
+  /// Receives a cloud: it replaces its camera's pending one (the integration thread takes them camera by camera).
   void onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg);
+  /// The integration thread: integrates the pending cloud of the camera whose last integrated cloud is oldest, so
+  /// that no camera starves when integration falls behind (a shared queue dropped whichever cloud was oldest).
+  void integrateLoop();
+  void integrate(const sensor_msgs::PointCloud2::ConstPtr& msg);
   bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void drop(const std::string& why);
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
@@ -101,6 +107,11 @@ class OctomapMonitor {
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
   std::condition_variable stamps_cv_;
   std::map<std::string, ros::Time> frame_stamps_;  // each camera frame's last integrated cloud stamp
+  std::mutex pending_mutex_;                       // guards pending_ and stop_; pending_cv_ wakes the integrator
+  std::condition_variable pending_cv_;
+  std::map<std::string, sensor_msgs::PointCloud2::ConstPtr> pending_;  // the newest unintegrated cloud per frame
+  bool stop_ = false;
+  std::thread integrator_;
 };
 
 }  // namespace moverl_planning_scene

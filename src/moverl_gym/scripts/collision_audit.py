@@ -106,7 +106,7 @@ MODE_NOTES = {
     "both": "obstacles: both (the world file's shapes plus the OctoMap from the depth cameras).",
     "sensed": (
         "obstacles: sensed (the world file's static shapes, exactly; everything that moves only as the OctoMap "
-        "from the depth cameras, with the world's predictive margin: see the sensed_margin column)."
+        "from the depth cameras, with the world's predictive margin, given per world in the notes)."
     ),
 }
 

@@ -235,10 +235,7 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   // Sensed obstacles: each check with the margin of the time it covers; back to none when done.
   const SensedMargins none;
   const SensedMargins& margin = sensed != nullptr ? *sensed : none;
-  struct Reset {
-    FclCollisionChecker* checker;
-    ~Reset() { checker->setOctreeMargin(0.0); }
-  } reset{checker_.get()};
+  const OctreeMarginScope scope(checker_.get(), margin.end);
   const bool moving = checker_->hasMovingObstacles();
   out->moving_obstacles = moving;
   out->replanned = false;
@@ -261,7 +258,6 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   }
   // Moving obstacles are their whole motion envelope here (the checker's default), except for the straight path.
   // Goal: self then world (one state check), then the start.
-  checker_->setOctreeMargin(margin.end);
   checker_->checkState(goal_.data(), all_pairs_, &state_result_);
   if (state_result_.status == CollisionStatus::kSelf) {
     out->outcome = MotionOutcome::kSelfCollision;

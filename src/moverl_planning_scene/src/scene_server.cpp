@@ -291,13 +291,6 @@ bool SceneServer::unstampedMargin(bool plan, double* margin, std::string* why) {
   return true;
 }
 
-/// Sets the checker's sensed margin for the rest of a query (mutex_ held) and back to none at its end.
-struct SceneServer::MarginScope {
-  MarginScope(PlanningScene* scene, double margin) : scene_(scene) { scene_->checker().setOctreeMargin(margin); }
-  ~MarginScope() { scene_->checker().setOctreeMargin(0.0); }
-  PlanningScene* scene_;
-};
-
 bool SceneServer::checkState(moverl_msgs::CheckState::Request& req, moverl_msgs::CheckState::Response& res) {
   try {
     std::string blind;
@@ -307,7 +300,7 @@ bool SceneServer::checkState(moverl_msgs::CheckState::Request& req, moverl_msgs:
       return true;
     }
     std::lock_guard<std::mutex> lock(mutex_);
-    const MarginScope margin(scene_.get(), res.sensed_margin);
+    const OctreeMarginScope margin(&scene_->checker(), res.sensed_margin);
     scene_->checkState(req.positions, &state_);  // depth 0: FCL MPR depths on vertex-only hulls are unreliable
     res.outcome = static_cast<uint8_t>(state_.outcome);
     toPairs(state_.pairs, &res.pairs);
@@ -330,7 +323,7 @@ bool SceneServer::checkPath(moverl_msgs::CheckPath::Request& req, moverl_msgs::C
       return true;
     }
     std::lock_guard<std::mutex> lock(mutex_);
-    const MarginScope margin(scene_.get(), res.sensed_margin);
+    const OctreeMarginScope margin(&scene_->checker(), res.sensed_margin);
     scene_->checkPath(req.start, req.goal, &path_);
     res.outcome = static_cast<uint8_t>(path_.outcome);
     toPairs(path_.pairs, &res.pairs);
@@ -355,7 +348,7 @@ bool SceneServer::plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPat
       return true;
     }
     std::lock_guard<std::mutex> lock(mutex_);
-    const MarginScope margin(scene_.get(), sensed);
+    const OctreeMarginScope margin(&scene_->checker(), sensed);
     scene_->plan(req.start, req.goal, req.planner, req.time_limit, &plan_);
     res.outcome = static_cast<uint8_t>(plan_.status);
     toTrajectory(plan_.waypoints, scene_->model().jointNames(), &res.path);

@@ -169,4 +169,18 @@ class FclCollisionChecker : public CollisionChecker {
   std::size_t degenerate_hulls_ = 0;
 };
 
+/// \brief Sets a checker's sensed margin for a scope and back to none at its end (every query leaves none behind).
+class OctreeMarginScope {
+ public:
+  OctreeMarginScope(FclCollisionChecker* checker, double margin) : checker_(checker) {
+    checker_->setOctreeMargin(margin);
+  }
+  ~OctreeMarginScope() { checker_->setOctreeMargin(0.0); }
+  OctreeMarginScope(const OctreeMarginScope&) = delete;
+  OctreeMarginScope& operator=(const OctreeMarginScope&) = delete;
+
+ private:
+  FclCollisionChecker* checker_;
+};
+
 }  // namespace moverl_planning_scene

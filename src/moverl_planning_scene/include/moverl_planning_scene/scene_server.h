@@ -71,7 +71,6 @@ class SceneServer {
   bool fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Response& res);
   bool getWorld(moverl_msgs::GetWorld::Request& req, moverl_msgs::GetWorld::Response& res);
   bool unstampedMargin(bool plan, double* margin, std::string* why);
-  struct MarginScope;
 
   ros::NodeHandle nh_, pnh_;
   std::string obstacles_;

@@ -27,6 +27,7 @@ from pathlib import Path
 import yaml
 
 import moverl_gym
+from moverl_gym.env import DISCARDED_COUNTERS
 from moverl_gym.training import load_hyperparams
 
 #: Keys of rllib_ppo.yml that are not PPOConfig.training() arguments.
@@ -287,7 +288,7 @@ def main(argv=None) -> int:
     print(f"episodes: {row['episodes']}   success rate (last 100 episodes): {row['success_rate']}")
     print(
         f"shield interventions (discarded actions): {row['interventions']}  "
-        + str({k: row[k] for k in ("discarded_self", "discarded_pose", "discarded_path", "discarded_start")})
+        + str({k: row[k] for k in DISCARDED_COUNTERS})
         + f"   replanned paths: {row['replanned']}   truncated moves: {row['truncated']}"
     )
     print(f"ground-truth contacts (physics): {row['contacts']} contact pairs, {row['contact_substeps']} substeps")

@@ -41,6 +41,9 @@ def test_env_verdict_table_is_the_message():
     assert env.VERDICTS == {v: k.lower() for k, v in srv_constants("ShieldStep").items()}
     assert env.ABORTED == ShieldStepResponse.ABORTED
     assert set(env.FAILURES) | env.DISCARDED | {env.ABORTED} <= set(env.VERDICTS)
+    # Every DISCARDED_* verdict of the message is counted in the training logs, under its own name.
+    discarded = sorted((v, k.lower()) for k, v in srv_constants("ShieldStep").items() if k.startswith("DISCARDED_"))
+    assert env.DISCARDED_COUNTERS == tuple(name for _, name in discarded)
     assert env.DRIVER_ERRORS == {
         getattr(FollowJointTrajectoryResult, n): n
         for n in dir(FollowJointTrajectoryResult)

@@ -64,6 +64,8 @@ DISCARDED = frozenset(
         _Step.TRUNCATED,
     }
 )
+#: Counters of discarded steps per verdict for training logs and metrics ("discarded_self", ... in code order).
+DISCARDED_COUNTERS = tuple(VERDICTS[v] for v in sorted(DISCARDED) if VERDICTS[v].startswith("discarded_"))
 #: Verdicts after which the env cannot go on (MoveRLError), with the component that failed.
 FAILURES = {
     _Step.INVALID_REQUEST: "shield (invalid request)",

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import gymnasium as gym
 
+from .env import DISCARDED_COUNTERS
+
 #: The name the env creator is registered under with Ray Tune's registry.
 ENV_NAME = "moverl"
 #: Counters summed over every runner and kept over the whole run (and across a resume): result key
@@ -42,10 +44,7 @@ LIFETIME_COUNTERS = (
     "contact_substeps",
     "cost",
     "interventions",
-    "discarded_self",
-    "discarded_pose",
-    "discarded_path",
-    "discarded_start",
+    *DISCARDED_COUNTERS,
     "replanned",
     "truncated",
     "graph_failures",
@@ -53,7 +52,7 @@ LIFETIME_COUNTERS = (
     "steps_without_ground_truth",
     "envs_created",
 )
-_VERDICT_COUNTERS = ("discarded_self", "discarded_pose", "discarded_path", "discarded_start", "replanned", "truncated")
+_VERDICT_COUNTERS = (*DISCARDED_COUNTERS, "replanned", "truncated")
 
 
 def env_creator(env_config: dict) -> gym.Env:

@@ -11,6 +11,8 @@ import numpy as np
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback
 
+from .env import DISCARDED_COUNTERS
+
 HYPERPARAMS_DIR = Path(__file__).resolve().parents[2] / "config" / "hyperparams"
 EPISODE_FIELDS = [
     "episode",
@@ -20,10 +22,7 @@ EPISODE_FIELDS = [
     "length",
     "success",
     "interventions",
-    "discarded_self",
-    "discarded_pose",
-    "discarded_path",
-    "discarded_start",
+    *DISCARDED_COUNTERS,
     "replanned",
     "contacts",
     "contact_substeps",
@@ -121,10 +120,7 @@ class EpisodeLogger(BaseCallback):
             "contacts",
             "contact_substeps",
             "cost",
-            "discarded_self",
-            "discarded_pose",
-            "discarded_path",
-            "discarded_start",
+            *DISCARDED_COUNTERS,
         ):
             self.totals[key] += row[key]
         for key in ("return", "length", "success", "interventions", "contacts", "cost", "graph_restarts"):
@@ -143,10 +139,7 @@ class EpisodeLogger(BaseCallback):
             "interventions": int(self.totals["interventions"]),
             "replanned": int(self.totals["replanned"]),
             "truncated": int(self.totals["truncated"]),
-            "by_type": {
-                k: int(self.totals[k])
-                for k in ("discarded_self", "discarded_pose", "discarded_path", "discarded_start")
-            },
+            "by_type": {k: int(self.totals[k]) for k in DISCARDED_COUNTERS},
             "contacts": int(self.totals["contacts"]),
             "contact_substeps": int(self.totals["contact_substeps"]),
             "graph_failures": int(sum(self.failure_counts.values())),  # incl. those a reset found between episodes

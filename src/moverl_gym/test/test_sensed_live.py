@@ -19,6 +19,10 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
       sim time; over 20 env steps of dt = 0.05 s and one 0.6 s hold each camera's clouds are stamped exactly 1/rate
       of sim time apart (also in the middle of a move, with a joint state stamped alike for the self filter), and a
       cloud stamped within a step has arrived when the step's call returns (give or take ARRIVAL_SLACK).
+  (f) unknown is occupied (a world's `sensing: unknown_occupied: true`, switched on here by publishing the world with
+      it): with the same map, every configuration that collides with unknown cells free also collides with them
+      occupied, some free ones now collide with the cells no camera has seen, home stays free (the cells inside the
+      robot are known free), and switching it off gives back the first verdicts.
 """
 
 import struct
@@ -34,8 +38,8 @@ from live_helpers import LiveAssertions
 from sensor_msgs.msg import JointState
 
 import moverl_gym  # noqa: F401
-from moverl_msgs.msg import OctomapStatus
-from moverl_msgs.srv import CheckPath, CheckStateResponse, ShieldStepResponse
+from moverl_msgs.msg import OctomapStatus, World
+from moverl_msgs.srv import CheckPath, CheckStateResponse, GetWorld, ShieldStepResponse
 
 SAFE, REPLANNED, DISCARDED_POSE, UNCHECKED = (
     ShieldStepResponse.SAFE,
@@ -225,6 +229,57 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             if r.outcome != VALID
         ]
         self.assertEqual(blocked, [], "home or episode starts are now in collision with the map")
+
+    def test_unknown_occupied(self):
+        # (f) runs last (unittest's order): the world stays as published here until the next reset.
+        get_world = rospy.ServiceProxy("/planning_scene/get_world", GetWorld)
+        get_world.wait_for_service(10.0)
+        world = get_world().world
+        self.assertFalse(world.sensed_unknown_occupied, "worlds/sensed_box.yaml does not set it")
+        world_pub = rospy.Publisher("/sim/world", World, queue_size=1, latch=True)
+        rng = np.random.default_rng(16)
+        configs = [list(np.asarray(HOME) + rng.uniform(-1.0, 1.0, 7)) for _ in range(150)]
+
+        def verdicts():
+            return [self.check_state(positions=q) for q in configs]
+
+        def switch(on):  # the scene publishes its status once it has switched
+            world.sensed_unknown_occupied = on
+            world_pub.publish(world)
+            deadline = time.monotonic() + WAIT
+            while self.status is None or (self.status.unobserved_cells > 0) != on:
+                self.assertLess(time.monotonic(), deadline, "unknown_occupied=%s not taken up" % on)
+                time.sleep(0.02)
+
+        self.current = HOME
+        self.place(HOME)
+        self.wait_for_clouds(2)
+        try:
+            switch(True)
+            self.wait_for_clouds(2)  # the cells inside the robot are turned free with each cloud
+            self.assertGreater(self.status.unobserved_cells, 1000, "the map has no unseen cells")
+            self.assertEqual(self.check_state(positions=HOME).outcome, VALID, "home is blocked by its own cells")
+            switch(False)
+            free = verdicts()  # the map as of now, with unknown cells free ...
+            switch(True)
+            occupied = verdicts()  # ... and with them occupied (lockstep: no cloud came in between)
+        finally:
+            world.sensed_unknown_occupied = False
+            world_pub.publish(world)
+        lost = [k for k in range(len(configs)) if free[k].outcome != VALID and occupied[k].outcome == VALID]
+        self.assertEqual(lost, [], "configurations blocked by sensed cells became free under unknown_occupied")
+        unseen = [k for k in range(len(configs)) if free[k].outcome == VALID and occupied[k].outcome != VALID]
+        self.assertGreater(len(unseen), 0, "no configuration reaches into space no camera has seen")
+        for k in unseen:
+            self.assertEqual(occupied[k].outcome, WORLD, occupied[k].message)
+            self.assertTrue(all(p.b == "octomap" for p in occupied[k].pairs), occupied[k].pairs)
+        rospy.loginfo(
+            "unknown_occupied: %d of %d configurations free with unknown cells free collide with them occupied "
+            "(%d unseen cells)",
+            len(unseen),
+            sum(v.outcome == VALID for v in free),
+            self.status.unobserved_cells,
+        )
 
 
 if __name__ == "__main__":

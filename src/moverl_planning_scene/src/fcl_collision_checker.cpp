@@ -197,6 +197,18 @@ void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eige
   linkPointMask(q, -1, points, padding, mask);
 }
 
+void FclCollisionChecker::robotBoundingBoxes(const double* q, double padding,
+                                             std::vector<Eigen::AlignedBox3d>* boxes) const {
+  boxes->clear();
+  std::vector<Eigen::Isometry3d> poses;
+  model_.computeLinkTransforms(q, &poses);
+  for (const Geom& g : geoms_) {
+    const Eigen::Vector3d center = poses[g.link] * g.center_local;
+    const Eigen::Vector3d r = Eigen::Vector3d::Constant(g.radius + std::max(padding, 0.0));
+    boxes->emplace_back(center - r, center + r);
+  }
+}
+
 void FclCollisionChecker::linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
                                         double padding, std::vector<std::uint8_t>* mask) const {
   mask->assign(points.size(), 0);

@@ -87,6 +87,14 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->log_miss_ = m->tree_->getProbMissLog();
   m->clamp_min_ = m->tree_->getClampingThresMinLog();
   m->clamp_max_ = m->tree_->getClampingThresMaxLog();
+  // Unobserved under unknown_occupied: half a miss above the threshold, so one miss turns the cell free and one hit
+  // keeps it occupied (octomap's isNodeOccupied: log-odds >= the threshold's).
+  m->prior_ = m->tree_->getOccupancyThresLog() - 0.5f * m->log_miss_;
+  if (!(m->prior_ < m->clamp_max_))
+    return bad("occupancy_threshold too close to clamp_max for unknown_occupied's prior");
+  m->observed_.assign(m->seen_.size(), 0);
+  m->options_.unknown_occupied = false;
+  m->setUnknownOccupied(o.unknown_occupied);
   return m;
 }
 
@@ -115,6 +123,9 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
 }
 
 constexpr std::uint8_t kHit = 1, kRobot = 2;
+
+bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
+void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
 /// apply: beyond this many changed cells, update lazily and fix the inner nodes once.
 constexpr std::size_t kLazyAbove = 20000;
 /// octomap's key of coordinate x is floor(x / resolution) + this (its tree_max_val for 16 levels).
@@ -165,8 +176,8 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit" (small enough to stay in cache).
   std::fill(seen_.begin(), seen_.end(), 0);
   std::fill(hit_.begin(), hit_.end(), 0);
-  auto test = [](const std::vector<std::uint64_t>& bits, std::int64_t k) { return (bits[k >> 6] >> (k & 63)) & 1u; };
-  auto set = [](std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); };
+  const auto& test = testBit;
+  const auto& set = setBit;
   // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it); only ends inside
   // the bounds mark anything.
   std::size_t hit_cells = 0;
@@ -253,6 +264,17 @@ float OccupancyMap::updated(float v, float update) const {
   return std::min(std::max(base + update, clamp_min_), clamp_max_);
 }
 
+void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out) {
+  for (std::uint64_t packed : keys) {
+    const std::int64_t c = cell(packed);
+    if (c < 0 || testBit(observed_, c) || testBit(hit_, c) || testBit(seen_, c)) continue;
+    setBit(&seen_, c);
+    out->misses.push_back(packed);  // prior + one miss: free
+    ++out->stats.known_free;
+    ++out->stats.changed_cells;
+  }
+}
+
 void OccupancyMap::apply(const MapUpdate& update) {
   // Few changes (the usual cloud once the scene is known): each update fixes its parents on the way (and prunes).
   // Many (the first views): lazy updates, then one pass over the inner nodes.
@@ -263,6 +285,7 @@ void OccupancyMap::apply(const MapUpdate& update) {
       const std::int64_t c = cell(packed);
       if (c < 0) continue;
       value_[c] = updated(value_[c], u);
+      setBit(&observed_, c);
       tree_->setNodeValue(unpack(packed), value_[c], lazy);
     }
   }
@@ -272,6 +295,69 @@ void OccupancyMap::apply(const MapUpdate& update) {
 void OccupancyMap::clear() {
   tree_->clear();
   std::fill(value_.begin(), value_.end(), std::numeric_limits<float>::quiet_NaN());
+  std::fill(observed_.begin(), observed_.end(), 0);
+  if (options_.unknown_occupied) fillUnobserved(true);
+}
+
+void OccupancyMap::setUnknownOccupied(bool on) {
+  if (on == options_.unknown_occupied) return;
+  options_.unknown_occupied = on;
+  fillUnobserved(on);
+}
+
+void OccupancyMap::fillUnobserved(bool on) {
+  // The tree is rebuilt from the grid (deleting single leaves of pruned nodes trips octomap's node assertions).
+  const float unknown = std::numeric_limits<float>::quiet_NaN();
+  tree_->clear();
+  std::int64_t at[3];
+  std::int64_t k = 0;
+  for (at[0] = 0; at[0] < size_[0]; ++at[0]) {
+    for (at[1] = 0; at[1] < size_[1]; ++at[1]) {
+      for (at[2] = 0; at[2] < size_[2]; ++at[2], ++k) {
+        if (!testBit(observed_, k)) value_[k] = on ? prior_ : unknown;
+        if (!std::isnan(value_[k])) tree_->setNodeValue(unpack(packAt(at)), value_[k], /*lazy_eval=*/true);
+      }
+    }
+  }
+  tree_->updateInnerOccupancy();
+  tree_->prune();  // blocks of equal cells (the prior, space clamped free) collapse into larger leaves
+}
+
+void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
+                                   std::vector<std::uint64_t>* keys) const {
+  centers->clear();
+  keys->clear();
+  if (!options_.unknown_occupied || box.isEmpty()) return;
+  // Grid index ranges of the cells whose centre lies in the box.
+  const double r = options_.resolution;
+  std::int64_t lo[3], hi[3];
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = std::max<std::int64_t>(
+        0, static_cast<std::int64_t>(std::ceil(box.min()[i] / r - 0.5)) + kKeyOffset - key_min_[i]);
+    hi[i] = std::min<std::int64_t>(
+        size_[i] - 1, static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) + kKeyOffset - key_min_[i]);
+    if (lo[i] > hi[i]) return;
+  }
+  std::int64_t at[3];
+  for (at[0] = lo[0]; at[0] <= hi[0]; ++at[0]) {
+    for (at[1] = lo[1]; at[1] <= hi[1]; ++at[1]) {
+      for (at[2] = lo[2]; at[2] <= hi[2]; ++at[2]) {
+        const std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+        if (testBit(observed_, k)) continue;
+        const std::uint64_t packed = packAt(at);
+        const octomap::point3d c = tree_->keyToCoord(unpack(packed));
+        centers->emplace_back(c.x(), c.y(), c.z());
+        keys->push_back(packed);
+      }
+    }
+  }
+}
+
+std::size_t OccupancyMap::unobservedCount() const {
+  if (!options_.unknown_occupied) return 0;
+  std::size_t seen = 0;
+  for (std::uint64_t w : observed_) seen += static_cast<std::size_t>(__builtin_popcountll(w));
+  return value_.size() - seen;
 }
 
 std::shared_ptr<const octomap::OcTree> OccupancyMap::tree() const { return tree_; }

@@ -13,6 +13,7 @@
 #include <visualization_msgs/Marker.h>
 
 #include "moverl_planning_scene/ros_param.h"
+#include "moverl_planning_scene/sensed_margin.h"
 
 namespace moverl_planning_scene {
 
@@ -52,8 +53,16 @@ OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, Planning
   speed_bound_ = -1.0;  // until init or the world sets it
 }
 
-void OctomapMonitor::setWorldSpeedBound(double speed_bound) {
+void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied) {
   if (speed_bound >= 0.0 && std::isfinite(speed_bound)) speed_bound_ = speed_bound;
+  static_known_free_ = true;  // the static objects may have changed
+  if (unknown_occupied_.exchange(unknown_occupied) == unknown_occupied || !map_) return;
+  std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    map_->setUnknownOccupied(unknown_occupied);
+  }
+  publishStatus(last_cloud_stamp_, last_cloud_frame_);  // the unobserved count changed
 }
 
 OctomapMonitor::~OctomapMonitor() {
@@ -111,6 +120,7 @@ bool OctomapMonitor::init(std::string* error) {
   // Map only what the robot can reach (padded): beams are clipped there, which keeps integration fast.
   const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + 2 * mo.resolution;
   mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  mo.unknown_occupied = unknown_occupied_;
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
   {
@@ -139,9 +149,9 @@ bool OctomapMonitor::init(std::string* error) {
   publishStatus(ros::Time(0), "");
   ROS_INFO(
       "planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
-      "mapped within +-%.2f m of the base; speed bound %.2f m/s, max age %.2f s)",
+      "mapped within +-%.2f m of the base; speed bound %.2f m/s, max age %.2f s; unknown cells count as %s)",
       cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach, speed_bound_.load(),
-      max_age_);
+      max_age_, mo.unknown_occupied ? "occupied" : "free");
   // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
   while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {
@@ -266,6 +276,7 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
   }
   map_->computeUpdate(points_, mask_, pose.translation(), &update_);
+  if (map_->unknownOccupied()) addKnownFree();
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->apply(update_);
@@ -284,43 +295,56 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
+void OctomapMonitor::addKnownFree() {
+  // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free.
+  auto turn_free = [&](const auto& mask) {
+    free_keys_.clear();
+    for (const Eigen::AlignedBox3d& box : boxes_) {
+      map_->unobservedCells(box, &cell_centers_, &cell_keys_);
+      if (cell_centers_.empty()) continue;
+      mask(cell_centers_, &mask_more_);
+      for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
+        if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
+      }
+    }
+    map_->addKnownFree(free_keys_, &update_);
+  };
+  for (const auto& q : configurations_) {
+    scene_->checker().robotBoundingBoxes(q.data(), self_filter_padding_, &boxes_);
+    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
+      scene_->checker().robotPointMask(q.data(), pts, self_filter_padding_, m);
+    });
+  }
+  if (filter_static_ && static_known_free_.exchange(false)) {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);  // the world
+    scene_->checker().staticObjectBoxes(self_filter_padding_, &boxes_);
+    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
+      scene_->checker().staticObjectPointMask(pts, self_filter_padding_, m);
+    });
+  }
+}
+
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
                              const ros::Time& epoch) {
-  // The oldest camera's last view decides: a region only one camera sees is as old as that camera's last cloud.
   auto age = [&] {
-    if (frame_stamps_.empty()) return std::numeric_limits<double>::infinity();  // nothing seen (start, clear)
-    double oldest = std::numeric_limits<double>::infinity();
-    for (const auto& f : frame_stamps_) {
-      // Seen only before the reset (1 ms: the epoch is computed from doubles; renders at the reset carry its stamp).
-      if (f.second.toSec() < epoch.toSec() - 1e-3) return std::numeric_limits<double>::infinity();
-      oldest = std::min(oldest, f.second.toSec());
-    }
-    return std::max(0.0, stamp.toSec() - oldest);  // a cloud newer than the state: age 0
+    std::vector<double> last;
+    for (const auto& f : frame_stamps_) last.push_back(f.second.toSec());
+    return sensedMapAge(last, stamp.toSec(), epoch.toSec());
   };
   std::unique_lock<std::mutex> lock(stamps_mutex_);
-  out->map_age = age();
-  if (out->map_age > max_age_ && stale_wait_ > 0.0) {
+  double map_age = age();
+  if (map_age > max_age_ && stale_wait_ > 0.0) {
     stamps_cv_.wait_for(lock, std::chrono::duration<double>(stale_wait_), [&] { return age() <= max_age_; });
-    out->map_age = age();
+    map_age = age();
   }
   lock.unlock();
-  if (out->map_age > max_age_) {
-    *why = "the sensed map is " + std::to_string(out->map_age) + " s old at the state's stamp (octomap/max_age " +
-           std::to_string(max_age_) + " s): a camera stopped publishing or integration fell behind";
-    return false;
-  }
-  const double horizon = std::isfinite(duration) ? duration : plan_horizon_;
-  out->start = speed_bound_ * (out->map_age + latency_);
-  out->end = speed_bound_ * (out->map_age + horizon + latency_);
-  out->plan = speed_bound_ * (out->map_age + plan_horizon_ + latency_);
-  out->plan_horizon = plan_horizon_;
-  if (std::max(out->end, out->plan) > FclCollisionChecker::kMaxMargin) {
-    *why = "the sensed margin would be " + std::to_string(std::max(out->end, out->plan)) + " m (speed bound " +
-           std::to_string(speed_bound_) + " m/s, map age " + std::to_string(out->map_age) +
-           " s): beyond the largest the checker builds";
-    return false;
-  }
-  return true;
+  SensedMarginRule rule;
+  rule.speed_bound = speed_bound_;
+  rule.latency = latency_;
+  rule.plan_horizon = plan_horizon_;
+  rule.max_age = max_age_;
+  rule.max_margin = FclCollisionChecker::kMaxMargin;
+  return rule.compute(map_age, duration, out, why);
 }
 
 ros::Time OctomapMonitor::newestStamp() {
@@ -336,6 +360,7 @@ bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->clear();
   }
+  static_known_free_ = true;
   {
     std::lock_guard<std::mutex> lock(stamps_mutex_);
     frame_stamps_.clear();  // nothing seen: blind until the cameras' next clouds
@@ -373,6 +398,11 @@ void OctomapMonitor::publishStatus(const ros::Time& stamp, const std::string& se
   s.free_cells = static_cast<uint32_t>(u.free_cells);
   s.integration_time = last_integration_;
   s.dropped = dropped_;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    s.unobserved_cells = static_cast<uint32_t>(map_->unobservedCount());
+  }
+  s.known_free_cells = static_cast<uint32_t>(u.known_free);
   status_pub_.publish(s);
 }
 

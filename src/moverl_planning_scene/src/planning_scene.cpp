@@ -318,7 +318,9 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
     out->path_check_time += since(t0);
     m << "; last free fraction " << out->last_free_fraction;
   }
-  if (plan_on_path_collision) {
+  if (plan_on_path_collision && !(margin.plan <= FclCollisionChecker::kMaxMargin)) {
+    m << "; no plan: a plan's sensed margin is beyond the largest the checker builds (speed bound x plan horizon)";
+  } else if (plan_on_path_collision) {
     t0 = Clock::now();
     checker_->setOctreeMargin(margin.plan);
     planner_->plan(start_, goal_, "", 0.0, &plan_result_, /*try_straight=*/false);

@@ -211,7 +211,8 @@ bool SceneServer::init(std::string* error) {
   }
   if (obstacles_ != "objects") {
     monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_, obstacles_ == "sensed");
-    monitor_->setWorldSpeedBound(get_world.response.world.sensed_speed_bound);
+    monitor_->setWorldSensing(get_world.response.world.sensed_speed_bound,
+                              get_world.response.world.sensed_unknown_occupied);
     if (!monitor_->init(error)) return false;
   }
   world_sub_ = nh_.subscribe(world_topic, 1, &SceneServer::onWorld, this);
@@ -272,7 +273,7 @@ void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
   if (!applyWorld(*msg, &error)) {
     ROS_ERROR("planning_scene: world update '%s' rejected, previous world kept: %s", msg->name.c_str(), error.c_str());
   } else {
-    if (monitor_) monitor_->setWorldSpeedBound(msg->sensed_speed_bound);
+    if (monitor_) monitor_->setWorldSensing(msg->sensed_speed_bound, msg->sensed_unknown_occupied);
     ROS_DEBUG("planning_scene: world '%s' with %zu objects", msg->name.c_str(), msg->objects.size());
   }
 }
@@ -288,6 +289,10 @@ bool SceneServer::unstampedMargin(bool plan, double* margin, std::string* why) {
     return false;
   }
   *margin = plan ? m.plan : m.start;
+  if (!(*margin <= FclCollisionChecker::kMaxMargin)) {
+    *why = "a plan's sensed margin is beyond the largest the checker builds (speed bound x plan horizon)";
+    return false;
+  }
   return true;
 }
 

@@ -193,6 +193,34 @@ void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3
   }
 }
 
+void FclCollisionChecker::staticObjectBoxes(double padding, std::vector<Eigen::AlignedBox3d>* boxes) const {
+  boxes->clear();
+  for (const Obstacle& ob : world_) {
+    const WorldObject& o = ob.source;
+    if (o.motion.moving()) continue;
+    const auto& d = o.dimensions;
+    Eigen::Vector3d half;  // of the shape in its own frame, as staticObjectPointMask tests it
+    switch (o.type) {
+      case ShapeType::kBox:
+        half = 0.5 * Eigen::Vector3d(d[0], d[1], d[2]);
+        break;
+      case ShapeType::kSphere:
+        half = Eigen::Vector3d::Constant(d[0]);
+        break;
+      case ShapeType::kCylinder:
+      case ShapeType::kCone:
+        half = Eigen::Vector3d(d[1], d[1], 0.5 * d[0]);
+        break;
+      default:
+        continue;  // staticObjectPointMask masks no point on other shapes
+    }
+    // The padded box rotated into the base frame: its extent along each axis is |R| * (half + padding).
+    const Eigen::Vector3d extent =
+        o.pose.linear().cwiseAbs() * (half + Eigen::Vector3d::Constant(std::max(padding, 0.0)));
+    boxes->emplace_back(o.pose.translation() - extent, o.pose.translation() + extent);
+  }
+}
+
 bool FclCollisionChecker::obstacleContains(std::size_t i, const Eigen::Vector3d& point) const {
   const Obstacle& ob = world_.at(i);
   auto probe = std::make_shared<fcl::Sphered>(1e-6);

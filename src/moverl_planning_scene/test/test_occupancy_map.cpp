@@ -8,9 +8,11 @@
 #include <octomap/OcTree.h>
 
 #include <chrono>
+#include <limits>
 
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
+#include "moverl_planning_scene/sensed_margin.h"
 #include "panda_support.h"
 
 namespace mps = moverl_planning_scene;
@@ -359,6 +361,152 @@ TEST_F(PandaOctomap, SensedMarginInflatesTheRobotAgainstTheMap) {
   EXPECT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision) << mc.message;
   EXPECT_DOUBLE_EQ(scene_->checker().octreeMargin(), 0.0) << "validateMotion leaves no margin behind";
   scene_->checker().setOctree(nullptr);
+}
+
+/// Unknown is occupied: the rule is octomap's update from a prior just above the threshold; one view clears what it
+/// sees, space no camera sees stays occupied, known-free cells (inside the robot) are turned free, and switching the
+/// rule off forgets only the prior.
+TEST(OccupancyMap, UnknownOccupiedRule) {
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1.0, -1.0, -0.2), Eigen::Vector3d(1.0, 1.0, 1.0));
+  o.unknown_occupied = true;
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  const std::size_t cells = map->unobservedCount();
+  EXPECT_GE(cells, 100u * 100u * 60u);          // the whole box (one more cell per axis where a bound falls on an edge)
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.4}));  // never seen
+  EXPECT_TRUE(map->occupied({-0.9, 0.9, 0.9}));
+  EXPECT_FALSE(map->occupied({1.5, 0.0, 0.4}));  // outside the mapped box: never occupied
+  // One view from above of a floor at z = 0 with a box top at z = 0.4 on it.
+  const Eigen::Vector3d origin(0.4, 0.0, 0.99);
+  auto pts = plane(0.0, 0.8, -0.4, 0.4, 0.0, 0.01);
+  for (auto& p : pts) {
+    if (std::fabs(p.x() - 0.4) <= 0.1 && std::fabs(p.y()) <= 0.1) p.z() = 0.4;
+  }
+  mps::MapUpdate u;
+  map->computeUpdate(pts, {}, origin, &u);
+  // Cells the robot's links would fill (here: a box the camera cannot see, under the box top), given as known free.
+  std::vector<Eigen::Vector3d> centers;
+  std::vector<std::uint64_t> keys;
+  map->unobservedCells(Eigen::AlignedBox3d(Eigen::Vector3d(0.36, -0.04, 0.1), Eigen::Vector3d(0.46, 0.06, 0.3)),
+                       &centers, &keys);
+  EXPECT_EQ(keys.size(), 5u * 5u * 10u);
+  for (const auto& c : centers) EXPECT_TRUE(map->occupied(c));
+  map->addKnownFree(keys, &u);
+  EXPECT_EQ(u.stats.known_free, keys.size());
+  map->apply(u);
+  EXPECT_FALSE(map->occupied({0.4, 0.0, 0.6}));     // seen free in one view (prior + one miss)
+  EXPECT_FALSE(map->occupied({0.1, 0.3, 0.2}));     // seen free, beside the box
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.4}));      // hit: the box top
+  EXPECT_TRUE(map->occupied({0.41, 0.03, 0.05}));   // under the box top, outside the known-free box: unseen
+  EXPECT_FALSE(map->occupied({0.41, 0.01, 0.21}));  // known free
+  EXPECT_TRUE(map->occupied({0.4, 0.0, -0.1}));     // under the floor: unseen
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.0}));      // the floor: hit
+  EXPECT_LT(map->unobservedCount(), cells);
+  map->unobservedCells(Eigen::AlignedBox3d(Eigen::Vector3d(0.36, -0.04, 0.1), Eigen::Vector3d(0.46, 0.06, 0.3)),
+                       &centers, &keys);
+  EXPECT_TRUE(keys.empty()) << "known-free cells count as observed";
+  // One hit turns a cell seen free occupied again, as without the rule.
+  integrate(map.get(), {{0.1, 0.3, 0.2}}, origin);
+  EXPECT_TRUE(map->occupied({0.1, 0.3, 0.2}));
+  // Off: the unobserved cells are unknown (free) again, what was observed stays.
+  map->setUnknownOccupied(false);
+  EXPECT_EQ(map->unobservedCount(), 0u);
+  EXPECT_FALSE(map->occupied({0.41, 0.03, 0.05}));
+  EXPECT_EQ(map->tree()->search(0.4, 0.0, -0.1), nullptr);
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.4}));
+  EXPECT_FALSE(map->occupied({0.4, 0.0, 0.6}));
+  map->unobservedCells(o.bounds, &centers, &keys);
+  EXPECT_TRUE(keys.empty());
+  // On again, then clear: every cell unobserved.
+  map->setUnknownOccupied(true);
+  EXPECT_TRUE(map->occupied({0.41, 0.03, 0.05}));
+  EXPECT_FALSE(map->occupied({0.4, 0.0, 0.6}));
+  map->clear();
+  EXPECT_EQ(map->unobservedCount(), cells);
+  EXPECT_TRUE(map->occupied({0.4, 0.0, 0.6}));
+}
+
+/// The robot in a map where nothing has been seen: the cells inside its links (self-filter padding) are known free,
+/// so it is free at no margin; the unseen space around it blocks it once the sensed margin reaches past them.
+TEST_F(PandaOctomap, UnknownOccupiedAroundTheRobot) {
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  const double reach = scene_->checker().reachRadius() + 0.05;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  o.unknown_occupied = true;
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  scene_->checker().setOctree(map->tree());
+  mps::StateCheck sc;
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << "inside unseen space";
+  const double pad = 0.03;
+  std::vector<Eigen::AlignedBox3d> boxes;
+  scene_->checker().robotBoundingBoxes(kHome.data(), pad, &boxes);
+  ASSERT_FALSE(boxes.empty());
+  mps::MapUpdate u;
+  map->computeUpdate({}, {}, Eigen::Vector3d::Zero(), &u);
+  std::vector<Eigen::Vector3d> centers;
+  std::vector<std::uint64_t> keys, free_keys;
+  std::vector<std::uint8_t> mask;
+  for (const auto& box : boxes) {
+    map->unobservedCells(box, &centers, &keys);
+    scene_->checker().robotPointMask(kHome.data(), centers, pad, &mask);
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      if (mask[k] != 0) free_keys.push_back(keys[k]);
+    }
+  }
+  map->addKnownFree(free_keys, &u);
+  EXPECT_GT(u.stats.known_free, 1000u);
+  map->apply(u);
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
+  ASSERT_TRUE(scene_->checker().setOctreeMargin(0.02));  // past the known-free shell: the unseen space is hit
+  scene_->checkState(kHome, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  ASSERT_TRUE(scene_->checker().setOctreeMargin(0.0));
+  std::vector<double> moved = kHome;
+  moved[0] += 0.3;  // into space nobody has seen
+  scene_->checkState(moved, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kWorldCollision) << sc.message;
+  scene_->checker().setOctree(nullptr);
+}
+
+/// The margin's arithmetic (README, "A person seen only by cameras"): 1.6 m/s and 0.1 s of map age cost 16 cm.
+TEST(SensedMargin, AgeAndRule) {
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(mps::sensedMapAge({}, 5.0, 0.0), inf);                         // nothing seen
+  EXPECT_DOUBLE_EQ(mps::sensedMapAge({4.5, 4.9}, 5.0, 0.0), 0.5);          // the oldest camera decides
+  EXPECT_DOUBLE_EQ(mps::sensedMapAge({5.2, 5.1}, 5.0, 0.0), 0.0);          // clouds newer than the state
+  EXPECT_EQ(mps::sensedMapAge({4.5, 4.9}, 5.0, 4.7), inf);                 // one camera seen only before the reset
+  EXPECT_NEAR(mps::sensedMapAge({4.6995, 4.9}, 5.0, 4.7), 0.3005, 1e-12);  // within the epoch's 1 ms slack
+  mps::SensedMarginRule rule;
+  rule.speed_bound = 1.6;
+  rule.latency = 0.03;
+  rule.plan_horizon = 1.0;
+  rule.max_age = 1.0;
+  rule.max_margin = 1.0;
+  mps::SensedMargins m;
+  std::string why;
+  ASSERT_TRUE(rule.compute(0.1, 0.05, &m, &why)) << why;
+  EXPECT_NEAR(m.start, 1.6 * 0.13, 1e-12);
+  EXPECT_NEAR(m.end, 1.6 * 0.18, 1e-12);
+  EXPECT_EQ(m.plan, inf);  // 1.6 x 1.13 = 1.81 m > max_margin: no plan can be checked, straight moves can
+  EXPECT_FALSE(rule.compute(0.6, 0.05, &m, &why));  // 1.6 x 0.68 = 1.09 m: not even a straight move
+  EXPECT_NE(why.find("margin"), std::string::npos) << why;
+  rule.speed_bound = 0.16;
+  ASSERT_TRUE(rule.compute(0.1, inf, &m, &why)) << why;
+  EXPECT_NEAR(m.end, 0.16 * 1.13, 1e-12);  // a plan: the end at plan_horizon
+  EXPECT_DOUBLE_EQ(m.plan_horizon, 1.0);
+  EXPECT_FALSE(rule.compute(1.01, 0.05, &m, &why));  // older than max_age: fail closed
+  EXPECT_NE(why.find("max_age"), std::string::npos) << why;
+  rule.max_age = inf;  // no age limit, but blind is blind, also with no speed bound
+  rule.speed_bound = 0.0;
+  EXPECT_FALSE(rule.compute(inf, 0.05, &m, &why));
+  ASSERT_TRUE(rule.compute(50.0, 0.05, &m, &why)) << why;
+  EXPECT_EQ(m.end, 0.0);
 }
 
 int main(int argc, char** argv) {

@@ -83,6 +83,7 @@ BAD_WORLDS = {
     "sensing_unknown_key": ("name: w\nsensing: {speed: 1.6}\n", "sensing.speed"),
     "sensing_negative_speed": ("name: w\nsensing: {speed_bound: -1}\n", ">= 0"),
     "sensing_infinite_speed": ("name: w\nsensing: {speed_bound: .inf}\n", "sensing.speed_bound"),
+    "sensing_unknown_not_bool": ("name: w\nsensing: {unknown_occupied: 1}\n", "sensing.unknown_occupied"),
 }
 
 
@@ -118,3 +119,11 @@ def test_sensing_speed_bound(tmp_path):
     assert load_world(p).sensed_speed_bound == 0.16
     p.write_text("name: w\n")
     assert load_world(p).sensed_speed_bound is None  # the planning scene's octomap/speed_bound applies
+
+
+def test_sensing_unknown_occupied(tmp_path):
+    p = tmp_path / "w.yaml"
+    p.write_text("name: w\nsensing: {unknown_occupied: true}\n")
+    assert load_world(p).sensed_unknown_occupied is True
+    p.write_text("name: w\n")
+    assert load_world(p).sensed_unknown_occupied is False  # unknown cells count as free (as in MoveIt)

@@ -103,6 +103,12 @@ class FclCollisionChecker : public CollisionChecker {
   ///        as their bounding cylinder). Reads the world: callers serialize it with setWorld.
   void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
                              std::vector<std::uint8_t>* mask) const;
+  /// \brief Axis-aligned boxes (base frame) around the bounding sphere of each robot collision shape in configuration
+  ///        q, grown by `padding`: where robotPointMask can return 1.
+  void robotBoundingBoxes(const double* q, double padding, std::vector<Eigen::AlignedBox3d>* boxes) const;
+  /// \brief Axis-aligned boxes (base frame) around each static world object, grown by `padding`: where
+  ///        staticObjectPointMask can return 1. Reads the world: callers serialize it with setWorld.
+  void staticObjectBoxes(double padding, std::vector<Eigen::AlignedBox3d>* boxes) const;
   /// \brief As robotPointMask, for the collision shapes of one link only (link index; -1: every link).
   void linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
                      std::vector<std::uint8_t>* mask) const;

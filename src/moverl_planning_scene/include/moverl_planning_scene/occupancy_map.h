@@ -8,9 +8,14 @@
  * Points that belong to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear
  * the cells before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when
  * other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with
- * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Cells never observed are unknown
- * and count as free for collision checking (as in MoveIt). Clearing: when an obstacle moves away, beams now pass
- * through its old cells and turn them free.
+ * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Clearing: when an obstacle moves
+ * away, beams now pass through its old cells and turn them free.
+ *
+ * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
+ * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
+ * mapped box starts at a prior log-odds just above the occupancy threshold, which one miss turns free and one hit
+ * keeps occupied, so the update rule is unchanged. Space no camera can see but that holds no obstacle (inside the
+ * robot's links, inside static world objects) is turned free by the caller with addKnownFree.
  *
  * Cost: a dense grid over `bounds` mirrors the tree's leaves (one log-odds value per cell). It deduplicates the cells
  * that a cloud's beams cross without sorting, and it tells which of them the update would change: a cell already
@@ -47,6 +52,9 @@ struct OccupancyMapOptions {
   /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Required (the dense
   /// grid covers it). The node sets it to the robot's reach (nothing outside can ever touch the robot).
   Eigen::AlignedBox3d bounds;
+  /// Cells never observed count as occupied (see the file comment). Set by the scenario (a world file's `sensing:
+  /// unknown_occupied:`), not by config/planning_scene.yaml; setUnknownOccupied switches it later.
+  bool unknown_occupied = false;
 };
 
 /// \brief What one integration did (logs, tests, the status topic).
@@ -58,6 +66,7 @@ struct MapUpdateStats {
   std::size_t hit_cells = 0;      ///< distinct cells marked occupied
   std::size_t free_cells = 0;     ///< distinct cells marked free
   std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
+  std::size_t known_free = 0;     ///< unobserved cells turned free by addKnownFree (inside the robot, static objects)
 };
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.
@@ -81,10 +90,24 @@ class OccupancyMap {
   ///        (non-zero: the point is on the robot).
   void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                      const Eigen::Vector3d& origin, MapUpdate* out);
+  /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as packed keys from
+  ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
+  ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
+  void addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out);
   /// \brief Apply an update to the tree (hits, then misses).
   void apply(const MapUpdate& update);
-  /// \brief Forget everything (all cells unknown).
+  /// \brief Forget everything (all cells unknown: occupied under unknown_occupied).
   void clear();
+  /// \brief Switch the unknown-is-occupied rule. On: every unobserved cell gets the prior (occupied); off: they turn
+  ///        unknown (free) again. Modifies the tree: serialize with readers as apply.
+  void setUnknownOccupied(bool on);
+  bool unknownOccupied() const { return options_.unknown_occupied; }
+  /// \brief Centres and packed keys of the cells whose centre lies in `box` and that were never observed. Empty
+  ///        unless unknown_occupied.
+  void unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
+                       std::vector<std::uint64_t>* keys) const;
+  /// \brief How many cells count as occupied only because no camera has seen them (0 unless unknown_occupied).
+  std::size_t unobservedCount() const;
 
   /// \brief The tree (for FCL). Stays the same object for the map's lifetime.
   std::shared_ptr<const octomap::OcTree> tree() const;
@@ -103,6 +126,8 @@ class OccupancyMap {
   std::uint64_t packAt(const std::int64_t* at) const;
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
+  /// Every unobserved cell at the prior (on) or unknown (off), in value_ and the tree.
+  void fillUnobserved(bool on);
 
   OccupancyMapOptions options_;
   std::shared_ptr<octomap::OcTree> tree_;
@@ -111,7 +136,9 @@ class OccupancyMap {
   std::int64_t size_[3] = {0, 0, 0};
   std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed (no node in the tree)
   std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
+  std::vector<std::uint64_t> observed_;    ///< a bit per cell: hit or seen free at least once since the last clear
   float log_hit_ = 0.0f, log_miss_ = 0.0f, clamp_min_ = 0.0f, clamp_max_ = 0.0f;
+  float prior_ = 0.0f;  ///< log-odds of an unobserved cell under unknown_occupied
 };
 
 }  // namespace moverl_planning_scene

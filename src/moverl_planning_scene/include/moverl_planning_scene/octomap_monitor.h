@@ -62,8 +62,9 @@ class OctomapMonitor {
                const ros::Time& epoch = ros::Time());
   /// \brief The newest integrated cloud's stamp (zero before the first).
   ros::Time newestStamp();
-  /// \brief The world's speed bound (World.sensed_speed_bound, m/s) replaces octomap/speed_bound; negative: keep it.
-  void setWorldSpeedBound(double speed_bound);
+  /// \brief The world's sensing section (World.msg): its speed bound (m/s) replaces octomap/speed_bound (negative:
+  ///        keep it); unknown_occupied switches OccupancyMapOptions::unknown_occupied. Before or after init.
+  void setWorldSensing(double speed_bound, bool unknown_occupied);
 
  private:
   void onJointState(const sensor_msgs::JointState::ConstPtr& msg);
@@ -77,6 +78,9 @@ class OctomapMonitor {
   void drop(const std::string& why);
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
   void publishMarkers();
+  /// Unknown-is-occupied: turns the unobserved cells inside the robot (in the cloud's configurations) and, once per
+  /// world, inside the static world objects free in update_: no camera sees them, no person can be there.
+  void addKnownFree();
 
   ros::NodeHandle nh_, pnh_;
   PlanningScene* scene_;
@@ -103,6 +107,11 @@ class OctomapMonitor {
   std::string last_cloud_frame_;
   // The sensed margin: octomap/speed_bound, latency, plan_horizon, max_age, stale_wait (config/planning_scene.yaml).
   std::atomic<double> speed_bound_{0.0};
+  std::atomic<bool> unknown_occupied_{false};   // the world's sensing: unknown_occupied
+  std::atomic<bool> static_known_free_{false};  // the static objects' cells are to be turned free (next cloud)
+  std::vector<Eigen::AlignedBox3d> boxes_;      // addKnownFree's scratch
+  std::vector<Eigen::Vector3d> cell_centers_;
+  std::vector<std::uint64_t> cell_keys_, free_keys_;
   double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
   std::condition_variable stamps_cv_;

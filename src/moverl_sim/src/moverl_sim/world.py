@@ -32,7 +32,7 @@ __all__ = [
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
 _TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing"}
-_SENSING_KEYS = {"speed_bound"}
+_SENSING_KEYS = {"speed_bound", "unknown_occupied"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
 MOTION_TYPES = ("oscillate",)
 _MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
@@ -160,6 +160,9 @@ class World:
     #: ``sensing: speed_bound:`` (m/s): how fast what the cameras see may move, for the planning scene's predictive
     #: margin in the sensed mode; None: not given (the scene's octomap/speed_bound applies).
     sensed_speed_bound: Optional[float] = None
+    #: ``sensing: unknown_occupied:``: in the sensed mode, map cells no camera has seen count as occupied (except
+    #: inside the robot and the static objects); False: they count as free.
+    sensed_unknown_occupied: bool = False
 
     @property
     def moving_objects(self):
@@ -425,6 +428,7 @@ def parse_world(data, source="<memory>"):
         objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed, motion=motion))
     cameras = _parse_cameras(data.get("cameras"), source)
     speed_bound = None
+    unknown_occupied = False
     sensing = data.get("sensing")
     if sensing is not None:
         if not isinstance(sensing, dict):
@@ -438,6 +442,9 @@ def parse_world(data, source="<memory>"):
             speed_bound = _numbers([sensing["speed_bound"]], source, "sensing.speed_bound", 1)[0]
             if not (speed_bound >= 0.0 and math.isfinite(speed_bound)):
                 _fail(source, "sensing.speed_bound", "must be finite and >= 0 (m/s), got %r" % (speed_bound,))
+        unknown_occupied = sensing.get("unknown_occupied", False)
+        if not isinstance(unknown_occupied, bool):
+            _fail(source, "sensing.unknown_occupied", "expected true or false, got %r" % (unknown_occupied,))
     return World(
         name=name,
         frame=frame,
@@ -446,4 +453,5 @@ def parse_world(data, source="<memory>"):
         source=source,
         cameras=cameras,
         sensed_speed_bound=speed_bound,
+        sensed_unknown_occupied=unknown_occupied,
     )

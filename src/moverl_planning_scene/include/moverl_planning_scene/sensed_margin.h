@@ -1,0 +1,38 @@
+/**
+ * \file sensed_margin.h
+ * \brief The predictive margin against sensed obstacles (issue 16), ROS-free: how old the map is at a state's time,
+ *        and how far a sensed obstacle may have come by the end of a move. OctomapMonitor applies it to the cameras'
+ *        stamps; the tunables are config/planning_scene.yaml's octomap: speed_bound, latency, plan_horizon, max_age.
+ */
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "moverl_planning_scene/planning_scene.h"
+
+namespace moverl_planning_scene {
+
+/// \brief Map age (s) at time `stamp`: the oldest camera's last integrated cloud decides (a region only one camera
+///        sees is as old as that camera's view). Infinite (blind) when no camera has been seen, or when a camera was
+///        last seen before `epoch` (the world's motions restarted then: its view tells nothing about where moving
+///        things are now; 1 ms of slack, as the epoch is computed from doubles). A cloud newer than the state: 0.
+double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch);
+
+/// \brief The margin rule: an obstacle moving at up to speed_bound (m/s) may have come speed_bound x (map age + the
+///        move's duration + latency) closer than where the map shows it.
+struct SensedMarginRule {
+  double speed_bound = 0.0;   ///< m/s
+  double latency = 0.0;       ///< s
+  double plan_horizon = 0.0;  ///< s: the longest a plan may last (the shield refuses slower ones)
+  double max_age = 0.0;       ///< s: an older map knows nothing free (fail closed)
+  double max_margin = 0.0;    ///< m: the largest margin the checker builds
+
+  /// \brief The margins of a move of `duration` s (infinite: a plan, plan_horizon) from a state whose map is
+  ///        `map_age` s old: the start with no move, the end with the move, a plan with plan_horizon. False with
+  ///        *why when the map is blind or older than max_age, or the end's margin exceeds max_margin. A plan's margin
+  ///        beyond max_margin is infinite: no plan can be checked (straight moves still can).
+  bool compute(double map_age, double duration, SensedMargins* out, std::string* why) const;
+};
+
+}  // namespace moverl_planning_scene

@@ -224,6 +224,8 @@ def main(argv=None) -> int:
             "shield_off": lambda: worker_graph(False, args.steps, args.seed, 0),
             "shield_scene_own": lambda: worker_graph(True, args.steps, args.seed, 0, scene_process="own"),
             "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
+            # the person seen only by the 3 cameras (table from the world file; issue 16)
+            "shield_sensed_human": lambda: worker_graph(True, args.steps, args.seed, 0, "sensed", env_id=human),
             # real time: a step lasts at least dt of wall time, so fewer steps say as much
             "shield_standard": lambda: worker_graph(
                 True, min(args.steps, 500), args.seed, 0, driver="follow_joint_trajectory"
@@ -241,7 +243,9 @@ def main(argv=None) -> int:
             reps[name].append(run_worker(name, args))
     results = {"repetitions": reps}
     others = (
-        () if args.only_ratios else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off", "bullet")
+        ()
+        if args.only_ratios
+        else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_sensed_human", "shield_off", "bullet")
     )
     for name in others:
         print(f"measuring {name} ({args.steps} steps) ...", flush=True)
@@ -278,6 +282,7 @@ def main(argv=None) -> int:
         ("shield_scene_own", "  shield ON, planning scene in its own process (table)"),
         ("shield_standard", "  shield ON, standard driver, simulator in real time"),
         ("shield_octomap", "  shield ON, obstacles sensed (depth cameras + OctoMap)"),
+        ("shield_sensed_human", "  shield ON, human, the person sensed (3 cameras)"),
         ("shield_off", "MoveRL, full ROS graph, shield OFF"),
         ("bullet", "same task in PyBullet, no ROS, no shield"),
     ):

@@ -45,7 +45,8 @@ static_assert(code(PlanStatus::kSuccess) == PlanRes::SUCCESS &&
                   code(PlanStatus::kStartInvalid) == PlanRes::START_INVALID &&
                   code(PlanStatus::kGoalInvalid) == PlanRes::GOAL_INVALID &&
                   code(PlanStatus::kNoSolution) == PlanRes::NO_SOLUTION &&
-                  code(PlanStatus::kInvalidRequest) == PlanRes::INVALID_REQUEST,
+                  code(PlanStatus::kInvalidRequest) == PlanRes::INVALID_REQUEST &&
+                  code(PlanStatus::kMapStale) == PlanRes::MAP_STALE,
               "PlanStatus differs from moverl_msgs/PlanPath");
 static_assert(code(MotionOutcome::kValid) == MotionRes::VALID &&
                   code(MotionOutcome::kSelfCollision) == MotionRes::SELF_COLLISION &&
@@ -348,7 +349,7 @@ bool SceneServer::plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPat
     double sensed = 0.0;
     std::string blind;
     if (!unstampedMargin(true, &sensed, &blind)) {
-      res.outcome = moverl_msgs::PlanPath::Response::NO_SOLUTION;
+      res.outcome = code(PlanStatus::kMapStale);
       res.message = "no plan: " + blind;
       return true;
     }

@@ -24,8 +24,16 @@ struct PlannerOptions {
   unsigned seed = 0;              ///< OMPL global RNG seed (0: not seeded). Applied once per process.
 };
 
-/// \brief Outcome of a planning call (values match moverl_msgs/PlanPath).
-enum class PlanStatus { kSuccess = 0, kStartInvalid = 1, kGoalInvalid = 2, kNoSolution = 3, kInvalidRequest = 4 };
+/// \brief Outcome of a planning call (moverl_msgs/PlanPath's codes). kMapStale: the scene server's sensed map is too old
+///        (or a plan's sensed margin too large) to plan in; the planner itself never returns it.
+enum class PlanStatus {
+  kSuccess = 0,
+  kStartInvalid = 1,
+  kGoalInvalid = 2,
+  kNoSolution = 3,
+  kInvalidRequest = 4,
+  kMapStale = 5
+};
 
 /// \brief Result of a planning call.
 struct PlanResult {

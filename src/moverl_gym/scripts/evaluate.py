@@ -40,6 +40,13 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, default=1000, help="env seed (start configurations); not a training seed")
     p.add_argument("--shield", choices=("on", "off"), default=None, help="default: as in training")
     p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"))
+    p.add_argument(
+        "--obstacles",
+        choices=("objects", "octomap", "both", "sensed"),
+        default=None,
+        help="what the planning scene knows of the obstacles (default: as in training)",
+    )
+    p.add_argument("--world", default=None, help="another world (name in worlds/ or file) than the env id's")
     p.add_argument("--out", type=Path, default=None, help="JSON file (default <run>/eval.json)")
     p.add_argument(
         "--video", type=int, default=0, metavar="N", help="record the first N episodes to <run>/videos (mp4)"
@@ -85,6 +92,11 @@ def main(argv=None) -> int:
     kwargs = dict(
         shield=shield, graph=args.graph, task={k: v for k, v in (config.get("task") or {}).items() if k in known}
     )
+    obstacles = args.obstacles or config.get("obstacles", "objects")
+    if obstacles != "objects":
+        kwargs["launch_args"] = {"obstacles": obstacles}
+    if args.world:
+        kwargs["world"] = args.world
     if args.video > 0:
         from moverl_gym.training import recording_env
 
@@ -118,6 +130,8 @@ def main(argv=None) -> int:
                 ep["length"] += 1
                 ep["contacts"] += max(info.get("contacts", 0), 0)
                 ep["interventions"] += int(bool(info.get("discarded")))
+                if info.get("discarded"):
+                    ep[info.get("verdict", "discarded")] += 1  # by verdict: discarded_pose, ..., discarded_unseen
                 ep["replanned"] += int(info.get("verdict") == "replanned")
                 ep["truncated"] += int(info.get("verdict") == "truncated")
             ep["success"] = int(bool(info.get("is_success", False)))
@@ -136,6 +150,8 @@ def main(argv=None) -> int:
         "algo": algo,
         "shield": bool(shield),
         "trained_with_shield": bool(config["shield"]),
+        "obstacles": obstacles,
+        "world": args.world,
         "deterministic": args.deterministic,
         "episodes": len(episodes),
         "seed": args.seed,

@@ -127,3 +127,18 @@ def test_sensing_unknown_occupied(tmp_path):
     assert load_world(p).sensed_unknown_occupied is True
     p.write_text("name: w\n")
     assert load_world(p).sensed_unknown_occupied is False  # unknown cells count as free (as in MoveIt)
+
+
+def test_base_world(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.yaml").write_text("name: a\ngoal: [0.1, 0.2, 0.3]\nsensing: {speed_bound: 0.16}\n")
+    (tmp_path / "sub" / "b.yaml").write_text("base: ../a.yaml\nname: b\nsensing: {unknown_occupied: true}\n")
+    w = load_world(tmp_path / "sub" / "b.yaml")
+    assert w.name == "b" and w.goal == (0.1, 0.2, 0.3)  # the base's goal
+    assert w.sensed_speed_bound is None and w.sensed_unknown_occupied  # sensing: replaced as a whole
+    (tmp_path / "a.yaml").write_text("base: sub/b.yaml\nname: a\n")
+    with pytest.raises(WorldFileError, match="cycle"):
+        load_world(tmp_path / "sub" / "b.yaml")
+    (tmp_path / "c.yaml").write_text("base: missing.yaml\nname: c\n")
+    with pytest.raises(WorldFileError, match="missing.yaml: world file not found"):
+        load_world(tmp_path / "c.yaml")

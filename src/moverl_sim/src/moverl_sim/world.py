@@ -184,7 +184,11 @@ class World:
 
 def load_world(path):
     """Read and validate a world file. Raises WorldFileError naming the file and the bad key."""
-    path = os.fspath(path)
+    return parse_world(_read_world(os.fspath(path), ()), source=os.fspath(path))
+
+
+def _read_world(path, chain):
+    """The top-level mapping of a world file, with its ``base:`` chain merged in (keys given replace the base's)."""
     if not os.path.isfile(path):
         raise WorldFileError("%s: world file not found" % path)
     try:
@@ -194,7 +198,18 @@ def load_world(path):
         raise WorldFileError("%s: YAML syntax error: %s" % (path, exc)) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise WorldFileError("%s: cannot read: %s" % (path, exc)) from None
-    return parse_world(data, source=path)
+    if not isinstance(data, dict) or "base" not in data:
+        return data
+    base = _string(data["base"], path, "base")
+    base_path = os.path.normpath(os.path.join(os.path.dirname(path), base))
+    if os.path.realpath(base_path) in chain + (os.path.realpath(path),):
+        _fail(path, "base", "%s is this file or one it is based on (a cycle)" % base)
+    merged = _read_world(base_path, chain + (os.path.realpath(path),))
+    if not isinstance(merged, dict):
+        _fail(path, "base", "%s is not a world file (a mapping)" % base)
+    merged = dict(merged)
+    merged.update({k: v for k, v in data.items() if k != "base"})
+    return merged
 
 
 def _fail(source, key, msg):

@@ -35,9 +35,8 @@ bool SensedMarginRule::compute(double map_age, double duration, SensedMargins* o
   out->plan = speed_bound * (map_age + plan_horizon + latency);
   if (!(out->plan <= max_margin)) out->plan = std::numeric_limits<double>::infinity();  // no plan is covered
   if (!(out->end <= max_margin)) {
-    *why = "the sensed margin would be " + std::to_string(out->end) + " m (speed bound " +
-           std::to_string(speed_bound) + " m/s, map age " + std::to_string(map_age) +
-           " s): beyond the largest the checker builds";
+    *why = "the sensed margin would be " + std::to_string(out->end) + " m (speed bound " + std::to_string(speed_bound) +
+           " m/s, map age " + std::to_string(map_age) + " s): beyond the largest the checker builds";
     return false;
   }
   return true;

@@ -24,7 +24,8 @@ struct PlannerOptions {
   unsigned seed = 0;              ///< OMPL global RNG seed (0: not seeded). Applied once per process.
 };
 
-/// \brief Outcome of a planning call (moverl_msgs/PlanPath's codes). kMapStale: the scene server's sensed map is too old
+/// \brief Outcome of a planning call (moverl_msgs/PlanPath's codes). kMapStale: the scene server's sensed map is too
+/// old
 ///        (or a plan's sensed margin too large) to plan in; the planner itself never returns it.
 enum class PlanStatus {
   kSuccess = 0,

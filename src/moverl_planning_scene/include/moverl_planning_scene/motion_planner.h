@@ -25,8 +25,7 @@ struct PlannerOptions {
 };
 
 /// \brief Outcome of a planning call (moverl_msgs/PlanPath's codes). kMapStale: the scene server's sensed map is too
-/// old
-///        (or a plan's sensed margin too large) to plan in; the planner itself never returns it.
+///        old (or a plan's sensed margin too large) to plan in; the planner itself never returns it.
 enum class PlanStatus {
   kSuccess = 0,
   kStartInvalid = 1,

@@ -1,0 +1,189 @@
+#!/usr/bin/env python3
+"""Can the goal be reached at all in the sensed mode? A scripted policy drives the joints straight at a goal
+configuration and keeps pushing while the shield holds the arm; per camera rate in simulated time.
+
+    python src/moverl_gym/scripts/sensed_reach_probe.py --world human --camera-rates 2 5 10 \
+        --goal-q -0.022 0.052 0.023 -2.379 -0.002 2.431 0.003 --out docs/sensed_person/reach_probe
+
+The goal configuration is the one a world file's header gives as evidence for its goal (worlds/human.yaml). The
+shield inflates the robot against the sensed cells by speed_bound x (map age + step + latency): the map age grows up
+to one camera period between renders, so the camera rate decides how close the hand may come to a sensed person.
+Each rate runs in its own ROS graph (--obstacles, default sensed), with the world's cameras set to that rate (a
+temporary world file based on the given one). Writes <out>/probe.md and probe.json: per rate, episodes that reach the
+goal (the env's is_success), steps to get there, the closest distance, the shield's verdicts, ground-truth contacts,
+steps/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from moverl_gym.workers import run_json_worker
+
+
+def worker(args) -> dict:
+    import gymnasium as gym
+
+    import moverl_gym  # noqa: F401
+    from moverl_gym.registration import env_id
+
+    goal_q = np.asarray(args.goal_q, dtype=float)
+    env = gym.make(
+        env_id(args.robot, "Human"),
+        world=args.world_file,
+        graph="launch",
+        launch_args={"obstacles": args.obstacles},
+        task={"max_episode_steps": args.max_steps},
+    )
+    u = env.unwrapped
+    episodes, t0, steps = [], time.perf_counter(), 0
+    try:
+        for ep in range(args.episodes):
+            env.reset(seed=args.seed + ep)
+            verdicts, contacts, closest, reached_at = {}, 0, float("inf"), None
+            done = False
+            while not done:
+                d = goal_q - u.q[: len(goal_q)]
+                action = np.clip(d / max(float(np.abs(d).max()), 1e-9), -1.0, 1.0).astype(np.float32)
+                _, _, terminated, truncated, info = env.step(action)
+                steps += 1
+                done = terminated or truncated
+                verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+                contacts += max(info.get("contacts", 0), 0)
+                closest = min(closest, float(info["distance"]))
+                if info.get("is_success") and reached_at is None:
+                    reached_at = sum(verdicts.values())
+            episodes.append(
+                {
+                    "success": bool(info.get("is_success")),
+                    "steps": sum(verdicts.values()),
+                    "reached_at": reached_at,
+                    "closest": closest,
+                    "verdicts": verdicts,
+                    "contacts": contacts,
+                }
+            )
+    finally:
+        env.close()
+    return {"episodes": episodes, "steps_per_s": steps / (time.perf_counter() - t0)}
+
+
+def with_camera_rate(world: Path, rate: float, folder: Path) -> Path:
+    """A world file based on `world` whose cameras render at `rate` per simulated second."""
+    from moverl_sim.world import load_world
+
+    cameras = []
+    for c in load_world(world).cameras:
+        cameras.append(
+            {
+                "id": c.id,
+                "xyz": list(c.xyz),
+                "target": list(c.target),
+                "up": list(c.up),
+                "width": c.width,
+                "height": c.height,
+                "fov": c.fov,
+                "near": c.near,
+                "far": c.far,
+                "rate": rate,
+            }
+        )
+    if not cameras:
+        raise SystemExit(f"{world} has no cameras")
+    out = folder / f"{world.stem}_cameras_{rate:g}hz.yaml"
+    out.write_text(yaml.safe_dump({"base": str(world.resolve()), "cameras": cameras}, sort_keys=False))
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
+    p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
+    p.add_argument("--goal-q", type=float, nargs="+", required=True, help="a configuration whose hand is at the goal")
+    p.add_argument("--camera-rates", type=float, nargs="+", default=[2.0], help="renders per simulated second")
+    p.add_argument("--obstacles", choices=["octomap", "sensed"], default="sensed")
+    p.add_argument("--episodes", type=int, default=6)
+    p.add_argument("--max-steps", type=int, default=100, help="steps per episode")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, default=None, help="write probe.md and probe.json here")
+    p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        args.world_file = str(args.worker)
+        print(json.dumps(worker(args)))
+        return 0
+    from moverl_gym.paths import world_file
+
+    world = world_file(args.world)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="moverl_probe_") as tmp:
+        for rate in args.camera_rates:
+            variant = with_camera_rate(world, rate, Path(tmp))
+            print(f"camera rate {rate:g} Hz: {args.episodes} episodes ...", flush=True)
+            worker_args = [*(argv if argv is not None else sys.argv[1:]), "--worker", variant]
+            r = run_json_worker(__file__, worker_args, f"camera rate {rate:g}", timeout=600 + 120 * args.episodes)
+            eps = r["episodes"]
+            verdicts = {}
+            for e in eps:
+                for k, v in e["verdicts"].items():
+                    verdicts[k] = verdicts.get(k, 0) + v
+            reached = [e["reached_at"] for e in eps if e["reached_at"] is not None]
+            rows.append(
+                {
+                    "camera_rate": rate,
+                    "episodes": len(eps),
+                    "reached": len(reached),
+                    "steps_to_goal_mean": float(np.mean(reached)) if reached else None,
+                    "closest_mean": float(np.mean([e["closest"] for e in eps])),
+                    "contacts": int(sum(e["contacts"] for e in eps)),
+                    "verdicts": dict(sorted(verdicts.items())),
+                    "steps_per_s": r["steps_per_s"],
+                    "per_episode": eps,
+                }
+            )
+            print(json.dumps({k: v for k, v in rows[-1].items() if k != "per_episode"}), flush=True)
+    command = "python src/moverl_gym/scripts/sensed_reach_probe.py " + " ".join(
+        argv if argv is not None else sys.argv[1:]
+    )
+    lines = [
+        "# Reaching the goal in the sensed mode, per camera rate",
+        "",
+        "Command:",
+        "",
+        "    " + command,
+        "",
+        "A scripted policy drives the joints straight at the goal configuration (max-norm action 1 toward it) and "
+        "keeps pushing while the shield holds the arm. reached: episodes whose end effector came within the task's "
+        "goal tolerance; steps to goal: mean over those; closest: the smallest distance to the goal, mean over "
+        "episodes.",
+        "",
+        "| camera rate (per simulated s) | episodes | reached | steps to goal | closest (m) | contacts | verdicts "
+        "| steps/s |",
+        "|---:|---:|---:|---:|---:|---:|---|---:|",
+    ]
+    for r in rows:
+        steps = "-" if r["steps_to_goal_mean"] is None else f"{r['steps_to_goal_mean']:.1f}"
+        verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
+        lines.append(
+            f"| {r['camera_rate']:g} | {r['episodes']} | **{r['reached']}** | {steps} | {r['closest_mean']:.3f} | "
+            f"{r['contacts']} | {verdicts} | {r['steps_per_s']:.1f} |"
+        )
+    text = "\n".join(lines) + "\n"
+    print(text)
+    if args.out:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "probe.md").write_text(text)
+        (args.out / "probe.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+    return 1 if any(r["contacts"] for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -117,8 +117,14 @@ bool OctomapMonitor::init(std::string* error) {
     return false;
   }
   if (speed_bound_ < 0.0) speed_bound_ = yaml_speed_bound_;  // the world did not give one
-  // Map only what the robot can reach (padded): beams are clipped there, which keeps integration fast.
-  const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + 2 * mo.resolution;
+  // Map only what the robot can reach (padded), plus the largest predictive margin a query may use: something
+  // farther away cannot touch the robot within the margin's time. Beams are clipped there, which keeps integration
+  // fast. A margin beyond this slack is refused (margins()): the map cannot see that far.
+  const double speed = speed_bound_;
+  const double slack =
+      speed > 0.0 ? std::min(FclCollisionChecker::kMaxMargin, speed * (max_age_ + plan_horizon_ + latency_)) : 0.0;
+  max_margin_ = slack + 2 * mo.resolution;
+  const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + max_margin_;
   mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
   mo.unknown_occupied = unknown_occupied_;
   map_ = OccupancyMap::create(mo, error);
@@ -343,7 +349,7 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   rule.latency = latency_;
   rule.plan_horizon = plan_horizon_;
   rule.max_age = max_age_;
-  rule.max_margin = FclCollisionChecker::kMaxMargin;
+  rule.max_margin = std::min(FclCollisionChecker::kMaxMargin, max_margin_);
   return rule.compute(map_age, duration, out, why);
 }
 

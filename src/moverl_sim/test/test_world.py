@@ -135,7 +135,7 @@ def test_base_world(tmp_path):
     (tmp_path / "sub" / "b.yaml").write_text("base: ../a.yaml\nname: b\nsensing: {unknown_occupied: true}\n")
     w = load_world(tmp_path / "sub" / "b.yaml")
     assert w.name == "b" and w.goal == (0.1, 0.2, 0.3)  # the base's goal
-    assert w.sensed_speed_bound is None and w.sensed_unknown_occupied  # sensing: replaced as a whole
+    assert w.sensed_speed_bound == 0.16 and w.sensed_unknown_occupied  # sensing: merged key by key
     (tmp_path / "a.yaml").write_text("base: sub/b.yaml\nname: a\n")
     with pytest.raises(WorldFileError, match="cycle"):
         load_world(tmp_path / "sub" / "b.yaml")

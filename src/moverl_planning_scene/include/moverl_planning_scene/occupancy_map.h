@@ -8,8 +8,8 @@
  * Points that belong to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear
  * the cells before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when
  * other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with
- * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach). Clearing: when an obstacle moves
- * away, beams now pass through its old cells and turn them free.
+ * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach and margin). Clearing: when an
+ * obstacle moves away, beams now pass through its old cells and turn them free.
  *
  * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
  * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
@@ -50,7 +50,8 @@ struct OccupancyMapOptions {
   double clamp_max = kUnset;
   double occupancy_threshold = kUnset;  ///< a cell above this probability is an obstacle
   /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Required (the dense
-  /// grid covers it). The node sets it to the robot's reach (nothing outside can ever touch the robot).
+  /// grid covers it). The node sets it to the robot's padded reach plus the largest predictive margin a check may use
+  /// (nothing outside can touch the robot within the margin's time).
   Eigen::AlignedBox3d bounds;
   /// Cells never observed count as occupied (see the file comment). Set by the scenario (a world file's `sensing:
   /// unknown_occupied:`), not by config/planning_scene.yaml; setUnknownOccupied switches it later.
@@ -77,9 +78,10 @@ struct MapUpdate {
 };
 
 /// \brief Occupancy octree in the robot base frame.
-///        computeUpdate reads the map (not the tree) and may run concurrently with collision checks that read tree(),
-///        but not with apply or clear; apply and clear modify the tree and must be serialized with every reader by
-///        the caller. One thread integrates clouds (computeUpdate uses the map's scratch space).
+///        computeUpdate, addKnownFree and unobservedCells read the map (not the tree) and may run concurrently with
+///        collision checks that read tree(), but not with apply, clear or setUnknownOccupied; those modify the tree
+///        and the map and must be serialized with every reader by the caller. One thread integrates clouds
+///        (computeUpdate uses the map's scratch space).
 class OccupancyMap {
  public:
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).

@@ -113,6 +113,7 @@ class OctomapMonitor {
   std::vector<Eigen::Vector3d> cell_centers_;
   std::vector<std::uint64_t> cell_keys_, free_keys_;
   double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
+  double max_margin_ = 0.0;  // the largest margin the mapped box covers (beyond the robot's padded reach)
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
   std::condition_variable stamps_cv_;
   std::map<std::string, ros::Time> frame_stamps_;  // each camera frame's last integrated cloud stamp

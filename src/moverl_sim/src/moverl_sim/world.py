@@ -188,7 +188,8 @@ def load_world(path):
 
 
 def _read_world(path, chain):
-    """The top-level mapping of a world file, with its ``base:`` chain merged in (keys given replace the base's)."""
+    """The top-level mapping of a world file, with its ``base:`` chain merged in: keys given replace the base's, a
+    mapping (sensing:) key by key."""
     if not os.path.isfile(path):
         raise WorldFileError("%s: world file not found" % path)
     try:
@@ -208,7 +209,13 @@ def _read_world(path, chain):
     if not isinstance(merged, dict):
         _fail(path, "base", "%s is not a world file (a mapping)" % base)
     merged = dict(merged)
-    merged.update({k: v for k, v in data.items() if k != "base"})
+    for key, value in data.items():
+        if key == "base":
+            continue
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):  # sensing: key by key
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
     return merged
 
 

@@ -367,11 +367,17 @@ bool OccupancyMap::occupied(const Eigen::Vector3d& p) const {
   return n != nullptr && tree_->isNodeOccupied(n);
 }
 
+// Unobserved cells hold exactly the prior (pruned blocks of them too); an observed cell's log-odds is the prior or 0
+// plus hits and misses, clamped, never the prior itself in practice.
+bool OccupancyMap::seenOccupied(const octomap::OcTreeNode& node) const {
+  return tree_->isNodeOccupied(node) && !(options_.unknown_occupied && node.getLogOdds() == prior_);
+}
+
 void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const {
   centers->clear();
   if (sizes != nullptr) sizes->clear();
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
-    if (!tree_->isNodeOccupied(*it)) continue;
+    if (!seenOccupied(*it)) continue;
     centers->emplace_back(it.getX(), it.getY(), it.getZ());
     if (sizes != nullptr) sizes->push_back(it.getSize());
   }
@@ -380,7 +386,7 @@ void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::ve
 std::size_t OccupancyMap::occupiedLeafCount() const {
   std::size_t n = 0;
   for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
-    if (tree_->isNodeOccupied(*it)) ++n;
+    if (seenOccupied(*it)) ++n;
   }
   return n;
 }

@@ -378,6 +378,7 @@ TEST(OccupancyMap, UnknownOccupiedRule) {
   EXPECT_TRUE(map->occupied({0.4, 0.0, 0.4}));  // never seen
   EXPECT_TRUE(map->occupied({-0.9, 0.9, 0.9}));
   EXPECT_FALSE(map->occupied({1.5, 0.0, 0.4}));  // outside the mapped box: never occupied
+  EXPECT_EQ(map->occupiedLeafCount(), 0u);       // nothing seen occupied yet (rviz markers show only what was seen)
   // One view from above of a floor at z = 0 with a box top at z = 0.4 on it.
   const Eigen::Vector3d origin(0.4, 0.0, 0.99);
   auto pts = plane(0.0, 0.8, -0.4, 0.4, 0.0, 0.01);

@@ -35,7 +35,8 @@
 
 namespace octomap {
 class OcTree;
-}
+class OcTreeNode;
+}  // namespace octomap
 
 namespace moverl_planning_scene {
 
@@ -115,8 +116,10 @@ class OccupancyMap {
   std::shared_ptr<const octomap::OcTree> tree() const;
   /// \brief True when the cell containing p (map frame) is occupied.
   bool occupied(const Eigen::Vector3d& p) const;
-  /// \brief Centre and edge length of every occupied leaf (pruned leaves may be larger than the resolution).
+  /// \brief Centre and edge length of every leaf seen occupied (pruned leaves may be larger than the resolution).
+  ///        Leaves occupied only because no camera has seen them (unknown_occupied) are left out: unobservedCount.
   void occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const;
+  /// \brief How many leaves occupiedLeaves lists.
   std::size_t occupiedLeafCount() const;
   const OccupancyMapOptions& options() const { return options_; }
 
@@ -128,6 +131,8 @@ class OccupancyMap {
   std::uint64_t packAt(const std::int64_t* at) const;
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
+  /// A leaf occupied by what a camera saw (not only by the unknown_occupied prior).
+  bool seenOccupied(const octomap::OcTreeNode& node) const;
   /// Every unobserved cell at the prior (on) or unknown (off), in value_ and the tree.
   void fillUnobserved(bool on);
 

@@ -30,13 +30,13 @@ trajectory_msgs::JointTrajectory toMsg(const std::vector<std::string>& joints, c
 SimServiceDriver::SimServiceDriver(ros::NodeHandle nh, const std::vector<std::string>& joints,
                                    const std::vector<double>& lower, const std::vector<double>& upper,
                                    const std::string& execute_service, const std::string& reset_service,
-                                   const DriverOptions& options, Watchdog* watchdog)
+                                   const DriverOptions& options)
     : mapper_(joints),
       lower_(lower),
       upper_(upper),
       options_(options),
-      execute_(nh, execute_service, watchdog),
-      reset_(nh, reset_service, watchdog) {
+      execute_(nh.resolveName(execute_service)),
+      reset_(nh.resolveName(reset_service)) {
   // States come with every response (in lockstep nothing moves between calls); the topic gives the first one only, so
   // that the simulator publishes nothing per step once this is done. Whoever else moves the simulated robot must
   // reset it through this shield before stepping through it (the tests with a second shield do).

@@ -28,6 +28,7 @@
 #include "deadline.h"
 #include "moverl_shield/driver_core.h"
 #include "moverl_shield/trajectory.h"
+#include "tcpros.h"
 
 namespace moverl_shield {
 
@@ -88,7 +89,7 @@ class SimServiceDriver : public Driver {
  public:
   SimServiceDriver(ros::NodeHandle nh, const std::vector<std::string>& joints, const std::vector<double>& lower,
                    const std::vector<double>& upper, const std::string& execute_service,
-                   const std::string& reset_service, const DriverOptions& options, Watchdog* watchdog);
+                   const std::string& reset_service, const DriverOptions& options);
   std::string name() const override { return "sim_service"; }
   bool realTime() const override { return false; }
   bool canTeleport() const override { return true; }
@@ -104,8 +105,9 @@ class SimServiceDriver : public Driver {
   JointStateMapper mapper_;
   std::vector<double> lower_, upper_;
   DriverOptions options_;
-  DeadlineClient<moverl_msgs::ExecuteTrajectory> execute_;
-  DeadlineClient<moverl_msgs::ResetRobot> reset_;
+  // Called by the thread that serves the step, over TCPROS directly (tcpros.h: no hand-offs between threads).
+  DirectServiceClient<moverl_msgs::ExecuteTrajectory> execute_;
+  DirectServiceClient<moverl_msgs::ResetRobot> reset_;
   ros::Subscriber state_sub_;  ///< the first state only (the others come with the responses)
   std::mutex mutex_;           ///< guards the state against the subscriber
   RobotState state_;

@@ -44,11 +44,11 @@ class InProcessScene : public SceneAccess {
 
 class ServiceScene : public SceneAccess {
  public:
-  ServiceScene(ros::NodeHandle nh, const std::string& ns, Watchdog* watchdog)
+  ServiceScene(ros::NodeHandle nh, const std::string& ns)
       : scene_nh_(nh, ns),
-        validate_(nh, scene_nh_.resolveName("validate_motion"), watchdog),
-        plan_(nh, scene_nh_.resolveName("plan"), watchdog),
-        world_(nh, scene_nh_.resolveName("get_world"), watchdog) {
+        validate_(scene_nh_.resolveName("validate_motion")),
+        plan_(scene_nh_.resolveName("plan")),
+        world_(scene_nh_.resolveName("get_world")) {
     // The same model the scene builds, from the same parameters (the robot config and the scene's urdf_dir).
     std::string urdf, error;
     mps::RobotModelOptions o = mps::robotOptions(nh, &urdf);
@@ -77,18 +77,17 @@ class ServiceScene : public SceneAccess {
 
  private:
   ros::NodeHandle scene_nh_;
-  DeadlineClient<moverl_msgs::ValidateMotion> validate_;
-  DeadlineClient<moverl_msgs::PlanPath> plan_;
-  DeadlineClient<moverl_msgs::GetWorld> world_;
+  DirectServiceClient<moverl_msgs::ValidateMotion> validate_;
+  DirectServiceClient<moverl_msgs::PlanPath> plan_;
+  DirectServiceClient<moverl_msgs::GetWorld> world_;
   std::unique_ptr<mps::RobotModel> model_;
 };
 
 }  // namespace
 
-std::unique_ptr<SceneAccess> SceneAccess::create(const std::string& mode, ros::NodeHandle nh, const std::string& ns,
-                                                 Watchdog* watchdog) {
+std::unique_ptr<SceneAccess> SceneAccess::create(const std::string& mode, ros::NodeHandle nh, const std::string& ns) {
   if (mode == "in_process") return std::make_unique<InProcessScene>(nh, ns);
-  if (mode == "service") return std::make_unique<ServiceScene>(nh, ns, watchdog);
+  if (mode == "service") return std::make_unique<ServiceScene>(nh, ns);
   throw std::runtime_error("unknown ~scene '" + mode + "' (expected in_process or service)");
 }
 

@@ -20,6 +20,7 @@
 #include "deadline.h"
 #include "moverl_planning_scene/robot_model.h"
 #include "moverl_planning_scene/unset.h"
+#include "tcpros.h"
 
 namespace moverl_shield {
 
@@ -48,8 +49,7 @@ class SceneAccess {
 
   /// \brief The scene as ~scene says ("in_process" or "service"), its server's namespace `ns` (parameters and
   ///        services). Throws std::runtime_error when it cannot be built.
-  static std::unique_ptr<SceneAccess> create(const std::string& mode, ros::NodeHandle nh, const std::string& ns,
-                                             Watchdog* watchdog);
+  static std::unique_ptr<SceneAccess> create(const std::string& mode, ros::NodeHandle nh, const std::string& ns);
 };
 
 }  // namespace moverl_shield

@@ -10,12 +10,13 @@
 // Drivers (drivers.h): the standard control_msgs/FollowJointTrajectory action with the robot's joint states (real
 // robots, the simulator in real time), or the simulator's lockstep services (training). The env sees no difference.
 //
-// Threads: ~step and ~reset are served one at a time on the global callback queue; the driver's joint states and
-// action callbacks run on their own queue and thread, so they arrive while a step waits; a watchdog thread enforces
-// every deadline (deadline.h). Every hop has one, from configuration: a scene in its own process gets its planning time
-// limit plus a margin (in process its calls are bounded by that planning time), the driver the move's duration plus
-// goal_time plus a margin. When one passes the shield fails closed (cancels the goal, holds) and its verdict names the
-// component.
+// Threads: ~step is served over TCPROS by a thread per client connection (tcpros.h), which also makes the step's
+// calls to the simulator: no hand-offs between threads on the hot path. ~reset runs on the global callback queue; a
+// mutex lets one step or reset run at a time. The driver's joint states and action callbacks run on their own queue
+// and thread, so they arrive while a step waits. Every hop has a deadline, from configuration: a scene in its own
+// process gets its planning time limit plus a margin (in process its calls are bounded by that planning time), the
+// driver the move's duration plus goal_time plus a margin. When one passes the shield fails closed (cancels the goal,
+// holds) and its verdict names the component.
 //
 // Moving obstacles: the scene checks the straight move against where they will be while it executes. In lockstep the
 // window is [motion time of the current state, + the move's duration]; in real time it also covers the time the check
@@ -24,6 +25,7 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -44,6 +46,7 @@
 #include "moverl_shield/shield_core.h"
 #include "moverl_shield/trajectory.h"
 #include "scene_access.h"
+#include "tcpros.h"
 
 namespace moverl_shield {
 namespace {
@@ -136,8 +139,8 @@ class ShieldNode {
     goal_time_ = driver.goal_time;
 
     // The planning scene, in this process or behind its services; its robot model is the shield's too.
-    scene_ = SceneAccess::create(required<std::string>(pnh, "scene"), nh, required<std::string>(pnh, "scene_namespace"),
-                                 &watchdog_);
+    scene_ =
+        SceneAccess::create(required<std::string>(pnh, "scene"), nh, required<std::string>(pnh, "scene_namespace"));
     const moverl_planning_scene::RobotModel& model = scene_->model();
     joints_ = model.jointNames();
     ee_link_ = model.linkIndex(model.eeLink());
@@ -168,15 +171,21 @@ class ShieldNode {
     } else if (name == "sim_service") {
       driver_ = std::make_unique<SimServiceDriver>(driver_nh, joints_, model.lowerLimits(), model.upperLimits(),
                                                    required<std::string>(pnh, "execute_service"),
-                                                   required<std::string>(pnh, "reset_service"), driver, &watchdog_);
+                                                   required<std::string>(pnh, "reset_service"), driver);
       driver_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &driver_queue_);
       driver_spinner_->start();
     } else {
       throw std::runtime_error("unknown ~driver '" + name + "' (expected follow_joint_trajectory or sim_service)");
     }
 
-    step_srv_ = pnh.advertiseService("step", &ShieldNode::step, this);
-    reset_srv_ = pnh.advertiseService("reset", &ShieldNode::reset, this);
+    // ~step is served over TCPROS by threads of its own (tcpros.h: the hot path without roscpp's thread hand-offs);
+    // ~reset on the global queue. serve_mutex_ lets one of them run at a time.
+    step_srv_ = advertiseDirect<moverl_msgs::ShieldStep>(
+        pnh.resolveName("step"), [this](moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
+          std::lock_guard<std::mutex> lock(serve_mutex_);
+          return step(req, res);
+        });
+    reset_srv_ = pnh.advertiseService("reset", &ShieldNode::serveReset, this);
     events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
     ROS_INFO("shield ready (%s, strategy %s, %s profile), %zu joints, scene %s, driver %s",
              enabled_ ? "enabled" : "DISABLED", strategyName(strategy_).c_str(), profileName(profile_).c_str(),
@@ -184,6 +193,7 @@ class ShieldNode {
   }
 
   ~ShieldNode() {
+    step_srv_.reset();  // unregisters ~step and waits for a step that is running
     if (driver_spinner_) driver_spinner_->stop();
   }
 
@@ -457,6 +467,10 @@ class ShieldNode {
   }
 
   // ---------------------------------------------------------------------------------------------------- reset
+  bool serveReset(moverl_msgs::ResetRobot::Request& req, moverl_msgs::ResetRobot::Response& res) {
+    std::lock_guard<std::mutex> lock(serve_mutex_);
+    return reset(req, res);
+  }
   bool reset(moverl_msgs::ResetRobot::Request& req, moverl_msgs::ResetRobot::Response& res) {
     res.success = false;
     res.unreachable = false;
@@ -585,14 +599,15 @@ class ShieldNode {
   }
 
   ros::NodeHandle& nh_;
-  Watchdog watchdog_;
   ros::CallbackQueue driver_queue_;
   std::unique_ptr<ros::AsyncSpinner> driver_spinner_;
   std::unique_ptr<SceneAccess> scene_;
   std::unique_ptr<Driver> driver_;
   ros::Publisher events_pub_;
   trajectory_msgs::JointTrajectory executed_;  // what this step sent to the driver (for ~events)
-  ros::ServiceServer step_srv_, reset_srv_;
+  std::mutex serve_mutex_;                     ///< one step or reset at a time
+  std::unique_ptr<TcprosServiceServer> step_srv_;
+  ros::ServiceServer reset_srv_;
   std::vector<std::string> joints_;
   int ee_link_ = -1;                                   ///< index of the end-effector link in the model's links
   mutable std::vector<Eigen::Isometry3d> link_poses_;  ///< FK scratch

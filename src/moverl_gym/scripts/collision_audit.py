@@ -380,9 +380,9 @@ def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
     if b in links:
         targets = [(sim.robot, links[b])]
     elif b == SENSED:
-        targets = [(body, -1) for body in sim._object_bodies.values()]
+        targets = list(sim._object_links.values())  # (body, link): grouped movers are links
     else:
-        targets = [(sim._object_bodies[b], -1)]
+        targets = [sim._object_links[b]]
     gaps = [
         pt[8]
         for body, lb in targets

@@ -25,6 +25,10 @@ __all__ = ["Simulator", "ContactStats", "ExecutionResult", "Motion", "InvalidTra
 POSITION_TOLERANCE = 1e-6  # rad (or m): tolerance on the joint position limits
 VELOCITY_TOLERANCE = 1e-6  # relative tolerance on the velocity limits
 START_TOLERANCE = 1e-4  # a first point at t=0 must be this close to the current state
+# Bullet's broadphase collision filter groups (btBroadphaseProxy): a fixed base's collider is static, and static
+# colliders do not collide with each other.
+_STATIC_FILTER = 2
+_ALL_FILTER = -1
 
 
 class InvalidTrajectory(ValueError):
@@ -111,6 +115,28 @@ class Motion:
 
 def _quat_from_pybullet(q):
     return (q[0], q[1], q[2], q[3])
+
+
+def _relative_pose(base_xyz, base_quat, xyz, quat):
+    """Pose (xyz, quaternion x y z w) of a frame given in the world relative to a base frame given in the world.
+
+    In double precision: PyBullet's invertTransform / multiplyTransforms return single precision (4e-8 m off)."""
+    bx, by, bz, bw = base_quat
+    x, y, z, w = quat
+    # conj(base) * quat
+    q = (
+        bw * x - bx * w - by * z + bz * y,
+        bw * y + bx * z - by * w - bz * x,
+        bw * z - bx * y + by * x - bz * w,
+        bw * w + bx * x + by * y + bz * z,
+    )
+    # conj(base) rotates d = xyz - base_xyz: d + 2 bw (u x d) + 2 u x (u x d), u = -(bx, by, bz)
+    dx, dy, dz = xyz[0] - base_xyz[0], xyz[1] - base_xyz[1], xyz[2] - base_xyz[2]
+    ux, uy, uz = -bx, -by, -bz
+    cx, cy, cz = uy * dz - uz * dy, uz * dx - ux * dz, ux * dy - uy * dx
+    ccx, ccy, ccz = uy * cz - uz * cy, uz * cx - ux * cz, ux * cy - uy * cx
+    d = (dx + 2.0 * (bw * cx + ccx), dy + 2.0 * (bw * cy + ccy), dz + 2.0 * (bw * cz + ccz))
+    return d, q
 
 
 class Simulator:
@@ -316,37 +342,78 @@ class Simulator:
                         self.adjacent_pairs.add((a, b))
                         self.adjacent_pairs.add((b, a))
 
-    def _setup_world(self):
+    def _shapes(self, obj):
+        """PyBullet (collision shape, visual shape) of a world object, centred on its frame."""
         p = self._p
-        self._object_bodies = {}
-        self._body_object = {}
+        if obj.shape == "box":
+            half = [s / 2.0 for s in obj.size]
+            col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+            vis = p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.6, 0.45, 0.3, 1])
+        elif obj.shape == "sphere":
+            col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=obj.size[0])
+            vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=obj.size[0], rgbaColor=[0.8, 0.2, 0.2, 1])
+        elif obj.shape == "cylinder":
+            h, r = obj.size
+            col = p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=h)
+            vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=[0.2, 0.4, 0.8, 1])
+        else:  # World validation makes this unreachable
+            raise ValueError("object %r: unknown shape %r" % (obj.id, obj.shape))
+        return col, vis
+
+    def _setup_world(self):
+        """One PyBullet body per static object; moving objects that share a motion (the same ObjectMotion value, as
+        the parts of a walking person) form ONE multibody: the first of them in the world file is the base, the others
+        are links on fixed joints. Their motion is a translation shared by all, so the links' poses relative to the
+        base never change, and one reset per substep moves the whole group (instead of one reset and one
+        position_at() per object: the human world's person is 8 objects)."""
+        p = self._p
+        groups = {}  # motion -> its moving objects, in world file order
         for obj in self.world.objects:
-            if obj.shape == "box":
-                half = [s / 2.0 for s in obj.size]
-                col = p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
-                vis = p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.6, 0.45, 0.3, 1])
-            elif obj.shape == "sphere":
-                col = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=obj.size[0])
-                vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=obj.size[0], rgbaColor=[0.8, 0.2, 0.2, 1])
-            elif obj.shape == "cylinder":
-                h, r = obj.size
-                col = p.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=h)
-                vis = p.createVisualShape(pybullet.GEOM_CYLINDER, radius=r, length=h, rgbaColor=[0.2, 0.4, 0.8, 1])
-            else:  # World validation makes this unreachable
-                raise ValueError("object %r: unknown shape %r" % (obj.id, obj.shape))
+            if obj.motion is not None:
+                groups.setdefault(obj.motion, []).append(obj)
+        self._object_links = {}  # object id -> (body, link index): -1 is a body's base, >= 0 a link of a group
+        self._link_object = {}  # (body, link index) -> object id: names the objects of contact points
+        self._movers = []  # (body, base object, its quaternion): one per motion, placed at every substep
+        for obj in self.world.objects:
+            group = groups.get(obj.motion, [obj])
+            if obj is not group[0]:
+                continue  # a link of its group's body, made with the group's base
+            base, links = group[0], group[1:]
+            col, vis = self._shapes(base)
+            shapes = [self._shapes(o) for o in links]
+            # Link frames relative to the base frame (PyBullet places a link at base pose * link pose). The link
+            # inertial frames are the link frames and the base's is the base frame (all identity): PyBullet reports
+            # and moves a body by its inertial frame, so the frames are exactly where the objects are.
+            frames = [_relative_pose(base.xyz, base.quaternion, o.xyz, o.quaternion) for o in links]
+            n = len(links)
             body = p.createMultiBody(
                 baseMass=0,
                 baseCollisionShapeIndex=col,
                 baseVisualShapeIndex=vis,
-                basePosition=list(obj.xyz),
-                baseOrientation=list(obj.quaternion),
+                basePosition=list(base.xyz),
+                baseOrientation=list(base.quaternion),
+                baseInertialFramePosition=[0, 0, 0],
+                linkMasses=[0] * n,
+                linkCollisionShapeIndices=[c for c, _ in shapes],
+                linkVisualShapeIndices=[v for _, v in shapes],
+                linkPositions=[f[0] for f in frames],
+                linkOrientations=[f[1] for f in frames],
+                linkInertialFramePositions=[[0, 0, 0]] * n,
+                linkInertialFrameOrientations=[[0, 0, 0, 1]] * n,
+                linkParentIndices=[0] * n,  # 0: the base
+                linkJointTypes=[pybullet.JOINT_FIXED] * n,
+                linkJointAxis=[[0, 0, 1]] * n,
             )
-            self._object_bodies[obj.id] = body
-            self._body_object[body] = obj.id
-        # Moving obstacles: (body, centre xyz, quaternion, motion)
-        self._movers = [
-            (self._object_bodies[o.id], o, list(o.quaternion)) for o in self.world.objects if o.motion is not None
-        ]
+            # Bullet filters pairs of static colliders (a fixed base) out, but counts links as dynamic: without
+            # this, the links would collide with the other obstacles (the person's legs with the table), at a cost
+            # in every collision detection and, under dynamic control, as constraints in the solver.
+            for link in range(n):
+                p.setCollisionFilterGroupMask(body, link, _STATIC_FILTER, _ALL_FILTER ^ _STATIC_FILTER)
+            for link, o in enumerate(group, -1):
+                self._object_links[o.id] = (body, link)
+                self._link_object[(body, link)] = o.id
+            if base.motion is not None:
+                self._movers.append((body, base, list(base.quaternion)))
         self._place_movers(0.0)
 
     def place_obstacles(self, t):
@@ -354,7 +421,7 @@ class Simulator:
         self._place_movers(t)
 
     def _place_movers(self, t):
-        """Put every moving obstacle at its pose at motion time t."""
+        """Put every moving obstacle at its pose at motion time t: each group's base object (its links follow)."""
         cid = self._cid if hasattr(self, "_cid") else self._p._client
         for body, obj, quat in self._movers:
             pybullet.resetBasePositionAndOrientation(body, obj.position_at(t), quat, physicsClientId=cid)
@@ -364,9 +431,9 @@ class Simulator:
         for a, b in self.adjacent_pairs:
             if a < b:
                 p.setCollisionFilterPair(robot, robot, a, b, 0)
-        for body in self._body_object:
-            for link in self._base_fixed_links:
-                p.setCollisionFilterPair(robot, body, link, -1, 0)
+        for body, link in self._object_links.values():
+            for robot_link in self._base_fixed_links:
+                p.setCollisionFilterPair(robot, body, robot_link, link, 0)
 
     def close(self):
         p = getattr(self, "_p", None)
@@ -768,7 +835,7 @@ class Simulator:
         """Record penetrating contacts; True when at least one counted."""
         robot = self.robot
         names = self.link_names
-        body_object = self._body_object
+        link_object = self._link_object
         adjacent = self.adjacent_pairs
         base_fixed = self._base_fixed_links
         found = False
@@ -786,7 +853,7 @@ class Simulator:
             else:
                 if a != robot:
                     a, b, la, lb = b, a, lb, la
-                obj = body_object.get(b)
+                obj = link_object.get((b, lb))
                 if obj is None or la in base_fixed:
                     continue
                 key = (names[la], obj)

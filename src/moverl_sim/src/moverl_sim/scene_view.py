@@ -106,8 +106,8 @@ class SceneView:
                 **sim_settings(),
             )
         p = self.sim._p
-        for oid, body in self.sim._object_bodies.items():
-            p.changeVisualShape(body, -1, rgbaColor=object_colour(world.object(oid)))
+        for oid, (body, link) in self.sim._object_links.items():
+            p.changeVisualShape(body, link, rgbaColor=object_colour(world.object(oid)))
         self._goal_body = None
         s = self.settings
         lo, hi = scene_bounds(world)

@@ -178,15 +178,16 @@ class ShieldNode {
       throw std::runtime_error("unknown ~driver '" + name + "' (expected follow_joint_trajectory or sim_service)");
     }
 
-    // ~step is served over TCPROS by threads of its own (tcpros.h: the hot path without roscpp's thread hand-offs);
-    // ~reset on the global queue. serve_mutex_ lets one of them run at a time.
+    reset_srv_ = pnh.advertiseService("reset", &ShieldNode::serveReset, this);
+    events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
+    // ~step is served over TCPROS by threads of its own (tcpros.h: the hot path without roscpp's thread hand-offs),
+    // from the moment it is advertised: last, once everything a step uses is built. ~reset runs on the global queue;
+    // serve_mutex_ lets one of them run at a time.
     step_srv_ = advertiseDirect<moverl_msgs::ShieldStep>(
         pnh.resolveName("step"), [this](moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
           std::lock_guard<std::mutex> lock(serve_mutex_);
           return step(req, res);
         });
-    reset_srv_ = pnh.advertiseService("reset", &ShieldNode::serveReset, this);
-    events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
     ROS_INFO("shield ready (%s, strategy %s, %s profile), %zu joints, scene %s, driver %s",
              enabled_ ? "enabled" : "DISABLED", strategyName(strategy_).c_str(), profileName(profile_).c_str(),
              joints_.size(), scene_->name().c_str(), driver_->name().c_str());

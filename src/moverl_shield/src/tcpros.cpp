@@ -25,8 +25,8 @@ namespace {
 /// A bound on reading a request or a header once its first byte is there, and on writing an answer: a peer that
 /// stops half-way through a message is dropped instead of holding a server thread.
 constexpr double kMessageTimeout = 5.0;
-/// Larger requests are refused (a corrupt length must not allocate gigabytes); a step request is under 1 kB.
-constexpr std::uint32_t kMaxRequestBytes = 64u << 20;
+/// Larger requests and answers are refused (a corrupt length must not allocate gigabytes); a step's are under 1 kB.
+constexpr std::uint32_t kMaxMessageBytes = 64u << 20;
 
 int millisecondsUntil(SteadyClock::time_point deadline) {
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - SteadyClock::now()).count();
@@ -176,13 +176,20 @@ bool TcprosSocket::readHeader(std::map<std::string, std::string>* fields, Steady
 
 // ----------------------------------------------------------------------------------------------- TcprosServiceClient
 bool TcprosServiceClient::open(SteadyClock::time_point deadline, std::string* error) {
-  std::string host;
-  std::uint32_t port = 0;
-  if (!ros::ServiceManager::instance()->lookupService(name_, host, port)) {
-    *error = "service " + name_ + " is not advertised";
-    return false;
+  // The master is asked where the service is only when the last address fails (an XML-RPC call has no deadline of its
+  // own; a restarted server has a new port).
+  if (port_ == 0 || !socket_.connect(host_, port_, deadline, error)) {
+    if (!ros::ServiceManager::instance()->lookupService(name_, host_, port_)) {
+      port_ = 0;
+      *error = "service " + name_ + " is not advertised";
+      return false;
+    }
+    if (SteadyClock::now() >= deadline) {
+      *error = "no time left to connect to " + name_;
+      return false;
+    }
+    if (!socket_.connect(host_, port_, deadline, error)) return false;
   }
-  if (!socket_.connect(host, port, deadline, error)) return false;
   const std::map<std::string, std::string> fields = {
       {"callerid", ros::this_node::getName()}, {"service", name_}, {"md5sum", md5_}, {"persistent", "1"}};
   std::map<std::string, std::string> answer;
@@ -212,6 +219,11 @@ CallEnd TcprosServiceClient::call(const std::uint8_t* request, std::size_t n, St
     bool ok = socket_.writeAll(request, n, deadline) && socket_.readAll(head, 5, deadline);
     if (ok) {
       const std::uint32_t len = readLength(head + 1);
+      if (len > kMaxMessageBytes) {  // not an answer of this service: the stream is out of step
+        *error = "service " + name_ + " sent an answer of " + std::to_string(len) + " bytes";
+        socket_.close();
+        return CallEnd::kUnreachable;
+      }
       response->resize(len);
       ok = socket_.readAll(response->data(), len, deadline);
       if (ok && head[0] != 1) {
@@ -247,7 +259,7 @@ TcprosServiceServer::TcprosServiceServer(std::string resolved_name, Type type, R
       (inet_pton(AF_INET, host.c_str(), &host_addr) == 1 && (ntohl(host_addr.s_addr) >> 24) == 127)) {
     addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   }
-  listen_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  listen_fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
   socklen_t len = sizeof(addr);
   if (listen_fd_ < 0 || ::bind(listen_fd_, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) < 0 ||
       ::listen(listen_fd_, 16) < 0 || getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&addr), &len) < 0 ||
@@ -259,19 +271,17 @@ TcprosServiceServer::TcprosServiceServer(std::string resolved_name, Type type, R
   uri_ = "rosrpc://" + host + ":" + std::to_string(ntohs(addr.sin_port));
   accept_thread_ = std::thread([this] { acceptLoop(); });
   if (!registerWithMaster("registerService")) {
-    stop_ = true;
-    const char b = 0;
-    (void)!::write(wake_[1], &b, 1);
-    accept_thread_.join();
-    ::close(listen_fd_);
-    ::close(wake_[0]);
-    ::close(wake_[1]);
+    stopAndJoin();
     throw std::runtime_error("cannot register service " + name_ + " with the master");
   }
 }
 
 TcprosServiceServer::~TcprosServiceServer() {
   registerWithMaster("unregisterService");
+  stopAndJoin();
+}
+
+void TcprosServiceServer::stopAndJoin() {
   stop_ = true;
   const char b = 0;
   (void)!::write(wake_[1], &b, 1);  // every thread polls the pipe's read end: all wake up and return
@@ -303,7 +313,13 @@ void TcprosServiceServer::acceptLoop() {
     if (fds[1].revents || stop_) return;
     if (!fds[0].revents) continue;
     const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (fd < 0) continue;
+    if (fd < 0) {
+      if (errno == EMFILE || errno == ENFILE || errno == ENOMEM || errno == ENOBUFS) {
+        ROS_ERROR_THROTTLE(10.0, "service %s: cannot accept a client: %s", name_.c_str(), std::strerror(errno));
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the client stays queued: no busy loop
+      }
+      continue;  // EAGAIN: the client left before it was accepted
+    }
     std::lock_guard<std::mutex> lock(threads_mutex_);
     for (auto it = threads_.begin(); it != threads_.end();) {  // join the connections that ended
       if (it->done->load()) {
@@ -313,16 +329,21 @@ void TcprosServiceServer::acceptLoop() {
         ++it;
       }
     }
-    auto done = std::make_shared<std::atomic<bool>>(false);
-    threads_.push_back(Connection{std::thread([this, fd, done] {
-                                    try {
-                                      serve(fd);
-                                    } catch (const std::exception& e) {  // the connection ends, never the node
-                                      ROS_ERROR("service %s: %s", name_.c_str(), e.what());
-                                    }
-                                    *done = true;
-                                  }),
-                                  done});
+    try {
+      auto done = std::make_shared<std::atomic<bool>>(false);
+      threads_.push_back(Connection{std::thread([this, fd, done] {
+                                      try {
+                                        serve(fd);
+                                      } catch (const std::exception& e) {  // the connection ends, never the node
+                                        ROS_ERROR("service %s: %s", name_.c_str(), e.what());
+                                      }
+                                      *done = true;
+                                    }),
+                                    done});
+    } catch (const std::exception& e) {  // no thread for it: the client is dropped
+      ROS_ERROR("service %s: cannot serve a client: %s", name_.c_str(), e.what());
+      ::close(fd);
+    }
   }
 }
 
@@ -343,14 +364,14 @@ void TcprosServiceServer::serve(int fd) {
     answer = {{"error", "md5sums do not match: [" + md5 + "] vs. [" + type_.md5sum + "]"}};
   }
   if (!socket.writeHeader(answer, after(kMessageTimeout)) || answer.count("error") || header["probe"] == "1") return;
-  const bool persistent = header["persistent"] == "1";
+  const bool persistent = header["persistent"] == "1" || header["persistent"] == "true";  // as rospy and roscpp
   std::vector<std::uint8_t> request, response;
   do {
     std::uint8_t len_bytes[4];
     // A persistent client may stay quiet for as long as it likes; the wake pipe ends the wait at shutdown.
     if (!socket.readAll(len_bytes, 4, SteadyClock::time_point::max(), wake_[0])) return;
     const std::uint32_t len = readLength(len_bytes);
-    if (len > kMaxRequestBytes) {
+    if (len > kMaxMessageBytes) {
       ROS_WARN("service %s: dropped a client sending a request of %u bytes", name_.c_str(), len);
       return;
     }
@@ -363,6 +384,7 @@ void TcprosServiceServer::serve(int fd) {
     } catch (const std::exception& e) {
       error = e.what();
     }
+    if (!ok) ROS_ERROR("service %s: %s", name_.c_str(), error.c_str());
     std::vector<std::uint8_t> out(5);
     out[0] = ok ? 1 : 0;
     if (!ok) {

@@ -10,9 +10,10 @@
 // itself: two wake-ups per step.
 //
 // The wire format is TCPROS (wiki.ros.org/ROS/TCPROS): the services are registered with the master and reached by
-// any ROS client (rospy, roscpp, `rosservice call`) as before. Every read and write has a deadline (poll(2)), so a
-// stalled peer costs at most the caller's timeout, and a timed-out connection is closed: a late answer is never read
-// as the answer to a later request.
+// any ROS client (rospy, roscpp, `rosservice call`) as before. Every connect, read and write has a deadline
+// (poll(2)), so a stalled peer costs at most the caller's timeout, and a timed-out connection is closed: a late answer
+// is never read as the answer to a later request. Not bounded: asking the master where a service is (an XML-RPC call,
+// as roscpp's own clients make it), done only when the last address fails.
 #pragma once
 
 #include <atomic>
@@ -26,6 +27,7 @@
 #include <thread>
 #include <vector>
 
+#include <ros/console.h>
 #include <ros/serialization.h>
 #include <ros/service_traits.h>
 
@@ -79,6 +81,8 @@ class TcprosServiceClient {
  private:
   bool open(SteadyClock::time_point deadline, std::string* error);
   std::string name_, md5_;
+  std::string host_;        ///< where the service was last found
+  std::uint32_t port_ = 0;  ///< 0: ask the master
   TcprosSocket socket_;
 };
 
@@ -95,7 +99,10 @@ class DirectServiceClient {
   CallEnd call(Srv& srv, double timeout) {
     const ros::SerializedMessage request = ros::serialization::serializeMessage(srv.request);
     const CallEnd end = client_.call(request.buf.get(), request.num_bytes, after(timeout), &buffer_, &error_);
-    if (end != CallEnd::kAnswered) return end;
+    if (end != CallEnd::kAnswered) {
+      ROS_WARN("%s", error_.c_str());  // the caller's verdict names the service; this says what went wrong
+      return end;
+    }
     try {
       ros::serialization::IStream in(buffer_.data(), static_cast<std::uint32_t>(buffer_.size()));
       ros::serialization::deserialize(in, srv.response);
@@ -131,6 +138,7 @@ class TcprosServiceServer {
 
  private:
   void acceptLoop();
+  void stopAndJoin();
   void serve(int fd);
   bool registerWithMaster(const char* method);
   std::string name_, uri_;

@@ -214,10 +214,18 @@ class MoveRLReachEnv(gym.Env):
         observed = [o for o in w.obstacles if o.observed]
         self._obstacles0 = np.concatenate([o.pose for o in observed]) if observed else np.zeros(0)  # at motion time 0
         self._obstacles = self._obstacles0
-        # Observed moving obstacles: (offset of x in the obstacle vector, their motion).
-        self._movers = [
-            (7 * k, np.asarray(o.motion.axis), o.motion) for k, o in enumerate(observed) if o.motion is not None
-        ]
+        # Observed moving obstacles, grouped by motion: (offsets of their x in the obstacle vector, the motion's axis,
+        # the motion). Obstacles that share a motion (the parts of a walking person) move by the same displacement:
+        # it is computed once per motion and step.
+        groups = []  # [(motion, [offset, ...])], by equality (a motion need not be hashable)
+        for k, o in enumerate(observed):
+            if o.motion is not None:
+                group = next((g for g in groups if g[0] == o.motion), None)
+                if group is None:
+                    groups.append((o.motion, [7 * k]))
+                else:
+                    group[1].append(7 * k)
+        self._movers = [(offsets, np.asarray(m.axis), m) for m, offsets in groups]
         self._motion_epoch = w.motion_epoch
         n = self.limits.size
         # Bounded spaces: joint angles within the URDF limits (a reported state a hair beyond one is clipped onto it
@@ -230,6 +238,9 @@ class MoveRLReachEnv(gym.Env):
         low = ([self.limits.lower] if obs_type_has_joints(self.obs_type) else []) + [ee_low, self._goal_low, ob_low]
         high = ([self.limits.upper] if obs_type_has_joints(self.obs_type) else []) + [ee_high, self._goal_high, ob_high]
         self._obs_low, self._obs_high = np.concatenate(low), np.concatenate(high)
+        # _observation fills this buffer in place: [joints] ee (7) goal (3) obstacles, the joints from offset 0.
+        self._obs_buf = np.empty(self._obs_low.size)
+        self._obs_ee = n if obs_type_has_joints(self.obs_type) else 0  # where the ee pose starts
         self.observation_space = gym.spaces.Box(
             self._obs_low.astype(np.float32), self._obs_high.astype(np.float32), dtype=np.float32
         )
@@ -252,8 +263,10 @@ class MoveRLReachEnv(gym.Env):
             return self._obstacles0
         t = stamp - self._motion_epoch
         out = self._obstacles0.copy()
-        for i, axis, motion in self._movers:
-            out[i : i + 3] += axis * motion.displacement(t)
+        for offsets, axis, motion in self._movers:
+            delta = axis * motion.displacement(t)
+            for i in offsets:
+                out[i : i + 3] += delta
         return out
 
     # -- gym API -------------------------------------------------------------------------------------------
@@ -444,10 +457,17 @@ class MoveRLReachEnv(gym.Env):
         return self._observation(), reward, success, truncated, info
 
     def _observation(self) -> np.ndarray:
-        parts = [self.q] if obs_type_has_joints(self.obs_type) else []
-        parts += [self.ee, self.task.goal, self._obstacles]
+        # [joints] ee goal obstacles, written into the preallocated float64 buffer (no list, no concatenate).
+        buf, e = self._obs_buf, self._obs_ee
+        if e:
+            buf[:e] = self.q
+        buf[e : e + 7] = self.ee
+        buf[e + 7 : e + 10] = self.task.goal
+        buf[e + 10 :] = self._obstacles
         # Within the space: joints a hair beyond a limit (PyBullet, encoders) and float rounding of unit quaternions.
-        return np.clip(np.concatenate(parts), self._obs_low, self._obs_high).astype(np.float32)
+        # = np.clip(buf, low, high).astype(np.float32): clipped in float64, then rounded into a new float32 array.
+        np.maximum(buf, self._obs_low, out=buf)
+        return np.minimum(buf, self._obs_high, out=np.empty(buf.size, dtype=np.float32))
 
     def render(self):
         """render_mode "rgb_array": an (H, W, 3) uint8 picture of the current state (the robot as observed, every

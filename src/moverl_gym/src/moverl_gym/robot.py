@@ -32,5 +32,7 @@ class ActionScaler:
         return a
 
     def command(self, q: np.ndarray, action) -> np.ndarray:
-        a = np.clip(self.check(action), -1.0, 1.0)
-        return np.clip(q + a * self.max_delta, self.limits.lower, self.limits.upper)
+        # clip(x, lo, hi) as maximum then minimum: the same numbers for finite x (check() refused NaN/inf), without
+        # np.clip's Python wrappers (a few us per call on 7 numbers, every env step).
+        a = np.minimum(np.maximum(self.check(action), -1.0), 1.0)
+        return np.minimum(np.maximum(q + a * self.max_delta, self.limits.lower), self.limits.upper)

@@ -100,7 +100,11 @@ def _node_of(service: str) -> str:
 
 
 class _Proxy:
-    def __init__(self, name, srv_type, watchdog: _Watchdog, timeout: float):
+    def __init__(self, name, srv_type, watchdog: _Watchdog, timeout: float, reuse_response: bool = False):
+        """reuse_response: deserialize every answer into one response instance instead of a new one per call (a
+        ShieldStep response builds a JointState, a Header, two Times, a Pose, ... in its constructor: a third of the
+        env's deserialization cost per step). Only for a caller that copies what it needs out of the answer before
+        its next call (RosBackend.step): deserialize() assigns every field, nothing of the previous answer remains."""
         import rospy
 
         self._rospy = rospy
@@ -108,13 +112,23 @@ class _Proxy:
         self.type = srv_type
         self.timeout = timeout
         self._watchdog = watchdog
-        self._proxy = rospy.ServiceProxy(name, srv_type, persistent=True)
+        self._response = srv_type._response_class() if reuse_response else None
+        self._errors = (rospy.ServiceException, rospy.ROSException, OSError)
+        self._proxy = self._new_proxy()
+
+    def _new_proxy(self):
+        proxy = self._rospy.ServiceProxy(self.name, self.type, persistent=True)
+        if self._response is not None:
+            # rospy makes the answer with protocol.recv_data_class() and then deserializes into it.
+            response = self._response
+            proxy.protocol.recv_data_class = lambda: response
+        return proxy
 
     def __call__(self, request, timeout: float | None = None):
         timeout = self.timeout if timeout is None else timeout
         if hasattr(request, "not_after"):
             request.not_after = time.time() + timeout
-        errors = (self._rospy.ServiceException, self._rospy.ROSException, OSError)
+        errors = self._errors
         for attempt in range(2):
             proxy = self._proxy
             token = self._watchdog.arm(timeout, proxy.close)  # closing the socket unblocks the call
@@ -146,7 +160,7 @@ class _Proxy:
 
     def _renew(self):
         self._proxy.close()
-        self._proxy = self._rospy.ServiceProxy(self.name, self.type, persistent=True)
+        self._proxy = self._new_proxy()
 
     def close(self):
         self._proxy.close()
@@ -250,14 +264,16 @@ class RosBackend(Backend):
             except rospy.ROSException as exc:
                 raise GraphError(f"service {name} is not available after {wait_timeout} s") from exc
         self._watchdog = _Watchdog()
-        self._step = _Proxy(SHIELD_STEP, ShieldStep, self._watchdog, call_timeout)
+        self._step = _Proxy(SHIELD_STEP, ShieldStep, self._watchdog, call_timeout, reuse_response=True)
         self._reset = _Proxy(SHIELD_RESET, ResetRobot, self._watchdog, reset_timeout)
         self._check = _Proxy(SCENE_CHECK, CheckState, self._watchdog, call_timeout)
         self._fk = _Proxy(SCENE_FK, GetFK, self._watchdog, call_timeout)
         self._world = _Proxy(SCENE_WORLD, GetWorld, self._watchdog, call_timeout)
         self._proxies = (self._step, self._reset, self._check, self._fk, self._world)
+        # One step request, refilled every step (its three fields are all set per call: target, duration here,
+        # not_after by _Proxy), rather than a message constructed per step.
+        self._step_request = ShieldStep._request_class()
         self._srv = {
-            "step": ShieldStep._request_class,
             "reset": ResetRobot._request_class,
             "check": CheckState._request_class,
             "fk": GetFK._request_class,
@@ -286,7 +302,11 @@ class RosBackend(Backend):
 
     # -- the interface ------------------------------------------------------------------------------------------
     def step(self, target: np.ndarray, duration: float) -> StepResult:
-        res = self._step(self._srv["step"](target=target.tolist(), duration=float(duration)))
+        request = self._step_request
+        request.target = target.tolist()
+        request.duration = float(duration)
+        # res is the step proxy's one response instance (reuse_response): everything is copied out of it here.
+        res = self._step(request)
         c = res.contacts
         known = c.available
         return StepResult(

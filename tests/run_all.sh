@@ -46,6 +46,8 @@ if [ "$live" = 1 ]; then
     -p no:cacheprovider src/moverl_gym/test/test_driver_modes_live.py
   suite "pytest stalled components (SIGSTOP of sim, scene, shield; both drivers)" python -m pytest -q \
     -p no:cacheprovider src/moverl_gym/test/test_stall_live.py
+  suite "pytest the shield's own TCPROS on ~step (probe, wrong MD5, cut-short and corrupt requests, non-persistent clients)" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_tcpros_live.py
   suite "pytest recovery (simulator killed mid-training: relaunched with recovery on, clear error off)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_recovery_live.py
   suite "pytest fuzzing of every service and subscribed topic (both drivers' graphs)" python -m pytest -q \

@@ -196,12 +196,14 @@ bool TcprosServiceClient::open(SteadyClock::time_point deadline, std::string* er
   if (!socket_.writeHeader(fields, deadline) || !socket_.readHeader(&answer, deadline, error)) {
     if (error->empty() || socket_.timedOut()) *error = "no answer to the connection header";
     socket_.close();
+    port_ = 0;  // perhaps no longer the service's address: ask the master next time
     return false;
   }
   const auto bad = answer.find("error");
   if (bad != answer.end()) {
     *error = "service " + name_ + " refused the connection: " + bad->second;
     socket_.close();
+    port_ = 0;
     return false;
   }
   return true;

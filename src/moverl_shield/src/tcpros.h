@@ -67,8 +67,9 @@ class TcprosSocket {
   bool timed_out_ = false;
 };
 
-/// \brief A persistent TCPROS service client whose calls have a deadline, made in the calling thread. The same
-///        contract as DeadlineClient (deadline.h): a broken connection is re-opened once, never waited for.
+/// \brief A persistent TCPROS service client whose calls have a deadline, made in the calling thread. Every call ends
+///        with an answer, or with a CallEnd (deadline.h) saying why not, by its deadline; a broken connection (a
+///        restarted server) is re-opened once, never waited for.
 class TcprosServiceClient {
  public:
   TcprosServiceClient(std::string service, std::string md5sum) : name_(std::move(service)), md5_(std::move(md5sum)) {}
@@ -86,7 +87,7 @@ class TcprosServiceClient {
   TcprosSocket socket_;
 };
 
-/// \brief A typed TcprosServiceClient: `call(srv, timeout)` as DeadlineClient<Srv>.
+/// \brief A typed TcprosServiceClient: `call(srv, timeout)` fills srv.response, with a deadline `timeout` s from now.
 template <class Srv>
 class DirectServiceClient {
  public:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Where the CPU of one env step goes: CPU milliseconds per step of each process of the env and of the graph it
-launched (the env's own process, the simulator, the shield hosting the planning scene, ...), for several ids in one
-run, interleaved (this VM varies by 30 % between runs: compare ids within one run).
+"""Where the CPU of one env step goes: CPU milliseconds and context switches per step of each process of the env and
+of the graph it launched (the env's own process, the simulator, the shield hosting the planning scene, ...), for
+several ids in one run, interleaved (this VM varies by 30 % between runs: compare ids within one run).
 
     python src/moverl_gym/scripts/step_cost.py --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 --reps 2
 
@@ -24,7 +24,7 @@ def worker(env_id: str, steps: int, seed: int) -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
-    from moverl_gym.proctree import cmdline, cpu_seconds, tree
+    from moverl_gym.proctree import cmdline, context_switches, cpu_seconds, tree
 
     env = gym.make(env_id)
     try:
@@ -46,18 +46,27 @@ def worker(env_id: str, steps: int, seed: int) -> dict:
             names[(p.pid, p.start)] = name.replace("__name:=", "/") or os.path.basename(
                 line.split()[0] if line else "?"
             )
-        c0 = cpu_seconds(procs)
+        c0, s0 = cpu_seconds(procs), context_switches(procs)
         t0 = time.perf_counter()
         run(steps)
         wall = time.perf_counter() - t0
-        c1 = cpu_seconds(procs)
+        c1, s1 = cpu_seconds(procs), context_switches(procs)
     finally:
         env.close()
-    per = {}
+    per, switches = {}, {}
     for key, t in c1.items():
         if key in c0:
             per[names[key]] = per.get(names[key], 0.0) + 1000.0 * (t - c0[key]) / steps
-    return {"env_id": env_id, "steps_per_s": steps / wall, "ms_per_step": per, "total_ms": sum(per.values())}
+    for key, n in s1.items():
+        if key in s0:
+            switches[names[key]] = switches.get(names[key], 0.0) + (n - s0[key]) / steps
+    return {
+        "env_id": env_id,
+        "steps_per_s": steps / wall,
+        "ms_per_step": per,
+        "total_ms": sum(per.values()),
+        "switches_per_step": switches,
+    }
 
 
 def main(argv=None) -> int:
@@ -88,6 +97,13 @@ def main(argv=None) -> int:
             print(n.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
     totals = [sum(r["total_ms"] for r in results[i]) / len(results[i]) for i in args.ids]
     print("total".ljust(24) + "".join(f"{v:28.3f}" for v in totals))
+    # Each context switch is a thread put to sleep and woken: what a hand-off between threads costs on the step's path.
+    print("\ncontext switches per env step (every thread of each process), mean over reps (under 0.05 left out):")
+    print("process".ljust(24) + "".join(i.split("/")[-1].rjust(28) for i in args.ids))
+    for n in names:
+        vals = [sum(r["switches_per_step"].get(n, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
+        if max(vals) >= 0.05:
+            print(n.ljust(24) + "".join(f"{v:28.2f}" for v in vals))
     return 0
 
 

@@ -104,6 +104,22 @@ class TreeWatch:
         return left
 
 
+def context_switches(procs) -> dict[tuple[int, int], int]:
+    """Context switches (voluntary + involuntary, summed over the threads alive now) of each process so far, keyed by
+    (pid, start); gone processes are left out. A thread that ended took its count with it."""
+    out = {}
+    for p in procs:
+        total = 0
+        try:
+            for task in os.listdir(f"/proc/{p.pid}/task"):
+                with open(f"/proc/{p.pid}/task/{task}/status") as f:
+                    total += sum(int(line.split()[1]) for line in f if "ctxt_switches:" in line)
+        except (OSError, ValueError):
+            continue
+        out[(p.pid, p.start)] = total
+    return out
+
+
 def cpu_seconds(procs) -> dict[tuple[int, int], float]:
     """User + system CPU seconds each process has used so far, keyed by (pid, start); gone processes are left out."""
     out = {}

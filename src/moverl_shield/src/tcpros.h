@@ -94,8 +94,6 @@ class DirectServiceClient {
   explicit DirectServiceClient(const std::string& resolved_name)
       : client_(resolved_name, ros::service_traits::md5sum<Srv>()) {}
   const std::string& name() const { return client_.name(); }
-  /// \brief The last call's failure, when it did not end kAnswered.
-  const std::string& error() const { return error_; }
 
   CallEnd call(Srv& srv, double timeout) {
     const ros::SerializedMessage request = ros::serialization::serializeMessage(srv.request);
@@ -135,7 +133,6 @@ class TcprosServiceServer {
   ~TcprosServiceServer();
   TcprosServiceServer(const TcprosServiceServer&) = delete;
   TcprosServiceServer& operator=(const TcprosServiceServer&) = delete;
-  const std::string& uri() const { return uri_; }
 
  private:
   void acceptLoop();

@@ -111,6 +111,10 @@ def context_switches(procs) -> dict[tuple[int, int], int]:
     for p in procs:
         total = 0
         try:
+            with open(f"/proc/{p.pid}/stat", "rb") as f:
+                data = f.read()
+            if int(data[data.rindex(b")") + 2 :].split()[19]) != p.start:
+                continue  # the pid now names another process
             for task in os.listdir(f"/proc/{p.pid}/task"):
                 with open(f"/proc/{p.pid}/task/{task}/status") as f:
                     total += sum(int(line.split()[1]) for line in f if "ctxt_switches:" in line)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# MoveRL entry points (run ./catkin_ws_setup.sh first):
+# MoveRL entry points (run ./catkin_ws_setup.sh first). ./run.sh <command> --help (or -h): that command's options.
 #   ./run.sh demo     short safe PPO training on the table world; prints success, interventions, contacts, steps/s
 #   ./run.sh test     every test: lint, gtest (C++ cores), pytest (Python cores), rostest (live graph), env checks
 #   ./run.sh lint     style checks only (clang-format, ruff, catkin_lint); --fix rewrites the files
@@ -11,18 +11,33 @@
 #   ./run.sh eval ..  evaluate a saved model (run folder or model.zip)
 set -eo pipefail
 cd "$(dirname "$0")"
-# shellcheck disable=SC1091
-source ./env.sh
+commands() { sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; }  # the comment above
+wants_help() { for a in "$@"; do [[ $a == -h || $a == --help ]] && return 0; done; return 1; }
 cmd=${1:-}; shift || true
 case "$cmd" in
-  demo)  exec python src/moverl_gym/scripts/train.py --env MoveRL/PandaReachTable-v0 -n 5000 --log-folder runs/demo "$@" ;;
-  train) exec python src/moverl_gym/scripts/train.py "$@" ;;
-  rllib) exec python src/moverl_gym/scripts/rllib_train.py "$@" ;;
-  scaling) exec python src/moverl_gym/scripts/scaling.py "$@" ;;
-  bench) exec python src/moverl_gym/scripts/benchmark.py "$@" ;;
+  -h|--help|help) commands; exit 0 ;;
+  "") commands >&2; exit 2 ;;
+esac
+# shellcheck disable=SC1091
+source ./env.sh  # (none of run.sh's arguments reaches ROS's setup scripts: env.sh sees to it)
+scripts=src/moverl_gym/scripts
+demo=(--env MoveRL/PandaReachTable-v0 -n 5000 --log-folder runs/demo)
+case "$cmd" in
+  demo)
+    if wants_help "$@"; then
+      echo "usage: ./run.sh demo [train.py options]"
+      echo "A short safe PPO training: train.py ${demo[*]}"
+      echo "and the options given (a later one wins: --shield off, -n 20000). train.py's options:"
+      exec python $scripts/train.py --help
+    fi
+    exec python $scripts/train.py "${demo[@]}" "$@" ;;
+  train) exec python $scripts/train.py "$@" ;;
+  rllib) exec python $scripts/rllib_train.py "$@" ;;
+  scaling) exec python $scripts/scaling.py "$@" ;;
+  bench) exec python $scripts/benchmark.py "$@" ;;
   test)  exec bash tests/run_all.sh "$@" ;;
   lint)  exec bash tests/lint.sh "$@" ;;
-  study) exec python src/moverl_gym/scripts/study.py "$@" ;;
-  eval)  exec python src/moverl_gym/scripts/evaluate.py "$@" ;;
-  *) sed -n '2,10p' "$0"; exit 2 ;;
+  study) exec python $scripts/study.py "$@" ;;
+  eval)  exec python $scripts/evaluate.py "$@" ;;
+  *) echo "run.sh: no command '$cmd'" >&2; commands >&2; exit 2 ;;
 esac

@@ -6,6 +6,11 @@
 #   tests/lint.sh --fix    rewrite the files in place (clang-format -i, ruff format, ruff check --fix), then check
 set -uo pipefail
 cd "$(dirname "$0")/.."
+case "${1:-}" in
+  ""|--fix) ;;
+  -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
+  *) echo "lint.sh: unknown option '$1' (--fix, --help)" >&2; exit 2 ;;
+esac
 bin=.venv/bin
 for tool in clang-format ruff catkin_lint; do
   [ -x "$bin/$tool" ] || { echo "lint: $bin/$tool is missing: run ./catkin_ws_setup.sh" >&2; exit 2; }

@@ -5,10 +5,16 @@
 #   tests/run_all.sh --no-live  cores only
 set -uo pipefail
 cd "$(dirname "$0")/.."
+live=1
+case "${1:-}" in
+  "") ;;
+  --no-live) live=0 ;;
+  -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
+  *) echo "run_all.sh: unknown option '$1' (--no-live, --help)" >&2; exit 2 ;;
+esac
 # shellcheck disable=SC1091
 set +u; source ./env.sh; set -u  # ROS's setup scripts read unset variables
 export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
-live=1; [ "${1:-}" = "--no-live" ] && live=0
 RESULTS=$(mktemp -d /tmp/moverl_test_results.XXXXXX)  # rostest's XML results (its default is a shared ~/.ros path)
 passed=0; failed=0; failures=()
 suite() {
@@ -34,7 +40,7 @@ done
 suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/test src/moverl_sim/test \
   src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
   src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py \
-  src/moverl_gym/test/test_goal_render_core.py
+  src/moverl_gym/test/test_goal_render_core.py src/moverl_gym/test/test_run_help.py
 suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
   src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.

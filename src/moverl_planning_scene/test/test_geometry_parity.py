@@ -22,6 +22,7 @@ import pytest
 import yaml
 
 from moverl_gym.geometry_parity import compare, format_report
+from moverl_sim.robot_config import load_robot_config
 from moverl_sim.urdf import resolve_uri
 
 HERE = Path(__file__).resolve().parent
@@ -63,7 +64,7 @@ def test_ascii_stl_is_no_shape_for_pybullet_but_is_for_the_scene():
 
 @pytest.mark.parametrize("config", ROBOT_CONFIGS, ids=lambda p: p.stem)
 def test_robot_config(config):
-    rc = yaml.safe_load(config.read_text())["robot"]
+    rc = load_robot_config(config)
     rep = compare(resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), configs=3)
     _check(rep)
 

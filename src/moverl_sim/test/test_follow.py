@@ -9,16 +9,15 @@ from types import SimpleNamespace as NS
 
 import numpy as np
 import pytest
-import yaml
 from conftest import HOME, JOINTS, REPO_DIR, make_sim
 
 from moverl_sim import follow
 from moverl_sim.core import ContactStats
+from moverl_sim.robot_config import load_robot_config
 
 LO, HI = [-3.0] * 7, [3.0] * 7
 INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
-with open(f"{REPO_DIR}/config/robots/panda.yaml") as _f:
-    ACCELERATION_LIMITS = np.array(yaml.safe_load(_f)["robot"]["acceleration_limits"])
+ACCELERATION_LIMITS = np.array(load_robot_config(f"{REPO_DIR}/config/robots/panda.yaml")["acceleration_limits"])
 SHUFFLED = JOINTS[::-1]
 
 

@@ -11,7 +11,8 @@ the ids by its id_name), one id per scenario x observation kind, and the goal-co
 from __future__ import annotations
 
 import gymnasium as gym
-import yaml
+
+from moverl_sim.robot_config import RobotConfigError, load_robot_config
 
 from .paths import config_file
 
@@ -28,8 +29,10 @@ def _robots() -> dict[str, str]:
     """id_name -> robot config name (the file's stem), for every shipped robot config."""
     out = {}
     for path in sorted(config_file("robots").glob("*.yaml")):
-        robot = yaml.safe_load(path.read_text())["robot"]
-        out[str(robot["id_name"])] = path.stem
+        robot = load_robot_config(path)
+        if "id_name" not in robot:
+            raise RobotConfigError(f"{path}: 'robot.id_name': missing (a shipped robot config names its env ids)")
+        out[robot["id_name"]] = path.stem
     return out
 
 

@@ -40,14 +40,16 @@ done
 suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/test src/moverl_sim/test \
   src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
   src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py \
-  src/moverl_gym/test/test_goal_render_core.py src/moverl_gym/test/test_run_help.py
+  src/moverl_gym/test/test_goal_render_core.py src/moverl_gym/test/test_run_help.py \
+  src/moverl_gym/test/test_launch_args.py
 suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
   src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.
 if [ "$live" = 1 ]; then
-  suite "pytest graph start-up errors, lifecycle (close, SIGSTOP, SIGKILL, sockets), real-time clock" \
+  suite "pytest graph start-up errors, launch-argument check, lifecycle (close, SIGSTOP, SIGKILL, sockets), real-time clock" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_graph_errors.py \
-    src/moverl_gym/test/test_graph_lifecycle.py src/moverl_gym/test/test_realtime_live.py
+    src/moverl_gym/test/test_launch_args_live.py src/moverl_gym/test/test_graph_lifecycle.py \
+    src/moverl_gym/test/test_realtime_live.py
   suite "pytest dynamic control and the standard driver in real time (pushing policies)" python -m pytest -q \
     -p no:cacheprovider src/moverl_gym/test/test_driver_modes_live.py
   suite "pytest stalled components (SIGSTOP of sim, scene, shield; both drivers)" python -m pytest -q \

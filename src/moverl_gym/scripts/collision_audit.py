@@ -52,6 +52,7 @@ import time
 from pathlib import Path
 
 from moverl_gym.workers import run_json_worker
+from moverl_sim.robot_config import load_robot_config
 
 # CheckState / CheckPath outcomes (moverl_msgs)
 VALID, SELF, WORLD, INVALID = 0, 1, 2, 3
@@ -334,17 +335,10 @@ def crossing_through(
 
 
 # ----------------------------------------------------------------------------- worker (one world, one process)
-def load_robot_config(path) -> dict:
-    import yaml
-
-    with open(path) as f:
-        return yaml.safe_load(f)["robot"]
-
-
 def robot_config_path(robot: str, robot_config: str | None) -> Path:
-    from moverl_gym.paths import config_file
+    from moverl_gym.paths import robot_config_file
 
-    return Path(robot_config).resolve() if robot_config else config_file(f"robots/{robot}.yaml")
+    return Path(robot_config).resolve() if robot_config else robot_config_file(robot)
 
 
 def make_simulator(config_path, world_path: str):
@@ -759,7 +753,7 @@ def main(argv=None) -> int:
     from moverl_sim.urdf import resolve_uri
 
     config = robot_config_path(args.robot, args.robot_config)
-    robot_name = load_robot_config(config).get("name", config.stem)
+    robot_name = load_robot_config(config)["name"]
     default_robot = args.robot_config is None and args.robot == defaults.robot
     out_dir = Path(args.out) if args.out else repo_root() / "docs" / "audit"
     rows, skipped, all_misses, notes = [], [], {}, []

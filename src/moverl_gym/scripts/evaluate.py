@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 import moverl_gym  # noqa: F401  (registers the env ids)
+from moverl_gym.launch_args import CHOICES
 
 
 def parse_args(argv=None):
@@ -42,7 +43,7 @@ def parse_args(argv=None):
     p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"))
     p.add_argument(
         "--obstacles",
-        choices=("objects", "octomap", "both", "sensed"),
+        choices=CHOICES["obstacles"],
         default=None,
         help="what the planning scene knows of the obstacles (default: as in training)",
     )

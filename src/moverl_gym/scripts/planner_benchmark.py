@@ -273,14 +273,13 @@ def worker(world_path: str, args) -> dict:
 
 def _limits(robot: str):
     import numpy as np
-    import yaml
 
-    from moverl_gym.paths import config_file
+    from moverl_gym.paths import robot_config_file
     from moverl_gym.robot import JointLimits
+    from moverl_sim.robot_config import load_robot_config
     from moverl_sim.urdf import resolve_uri
 
-    with open(config_file(f"robots/{robot}.yaml")) as f:
-        rc = yaml.safe_load(f)["robot"]
+    rc = load_robot_config(robot_config_file(robot))
     with open(resolve_uri(rc["urdf"])) as f:
         lim = JointLimits.from_urdf(f.read(), rc["joints"])
     return np.asarray(lim.lower, dtype=float), np.asarray(lim.upper, dtype=float)

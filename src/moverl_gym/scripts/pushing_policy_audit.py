@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from moverl_gym.workers import run_json_worker
+from moverl_sim.robot_config import load_robot_config
 
 MIN_DEPTH = 0.005  # a target configuration penetrates an obstacle by at least this (m)
 
@@ -115,7 +116,6 @@ def worker(
     obstacles: str | None = None,
     mode: str | None = None,
 ) -> dict:
-    import yaml
     from gymnasium.wrappers import TimeLimit
 
     from moverl_gym.env import MoveRLReachEnv
@@ -126,7 +126,7 @@ def worker(
     from moverl_sim.urdf import resolve_uri
     from moverl_sim.world import load_world
 
-    rc = yaml.safe_load(Path(robot_config).read_text())["robot"]
+    rc = load_robot_config(robot_config)
     rng = np.random.default_rng(seed)
     sim = Simulator(
         resolve_uri(rc["urdf"]),
@@ -188,7 +188,7 @@ def worker(
     finally:
         env.close()
     return {
-        "robot": rc.get("name", Path(robot_config).stem),
+        "robot": rc["name"],
         "world": world,
         "control": control or "",
         "obstacles": obstacles or "objects",
@@ -208,6 +208,7 @@ def worker(
 
 
 def main(argv=None) -> int:
+    from moverl_gym.launch_args import CHOICES
     from moverl_gym.paths import config_file, repo_root
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -225,7 +226,7 @@ def main(argv=None) -> int:
     p.add_argument("--noise", type=float, default=0.3, help="standard deviation of the noise added to the actions")
     p.add_argument(
         "--control",
-        choices=["kinematic", "dynamic"],
+        choices=[c for c in CHOICES["control"] if c],
         default=None,
         help="the simulator's control mode (default: config/sim.yaml's)",
     )
@@ -236,7 +237,7 @@ def main(argv=None) -> int:
         help="what the shield knows: the world file's objects (default), only what the depth cameras see, or the "
         "static objects plus what the cameras see (sensed)",
     )
-    p.add_argument("--mode", choices=["lockstep", "realtime"], default=None, help="the simulator's clock")
+    p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
     p.add_argument("--worker", nargs=3, metavar=("CONFIG", "WORLD", "on|off"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)

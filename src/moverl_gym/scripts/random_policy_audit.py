@@ -98,6 +98,7 @@ def worker(
 
 def main(argv=None) -> int:
     import moverl_gym
+    from moverl_gym.launch_args import CHOICES
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--steps", type=int, default=10000)
@@ -106,7 +107,7 @@ def main(argv=None) -> int:
     p.add_argument("--shield", choices=["on", "off", "both"], default="both")
     p.add_argument(
         "--control",
-        choices=["kinematic", "dynamic"],
+        choices=[c for c in CHOICES["control"] if c],
         default=None,
         help="the simulator's control mode (default: config/sim.yaml's)",
     )

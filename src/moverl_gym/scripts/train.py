@@ -32,6 +32,7 @@ from pathlib import Path
 import yaml
 
 import moverl_gym  # noqa: F401  (registers the env ids)
+from moverl_gym.launch_args import CHOICES
 from moverl_gym.training import EpisodeLogger, load_hyperparams
 
 ALGOS = ("ppo", "sac", "td3")
@@ -54,7 +55,7 @@ def parse_args(argv=None):
     p.add_argument(
         "--obstacles",
         default="objects",
-        choices=("objects", "octomap", "both", "sensed"),
+        choices=CHOICES["obstacles"],
         help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
         "from the world's depth cameras, both, or sensed (the static objects plus the OctoMap for what moves)",
     )

@@ -12,6 +12,7 @@ import pytest
 import moverl_gym  # noqa: F401
 from moverl_gym import ros_backend as ros
 from moverl_gym.graph import GraphError, LaunchedGraph
+from moverl_gym.launch_args import LaunchArgError
 from moverl_gym.paths import config_file
 
 
@@ -30,9 +31,11 @@ def test_malformed_world_file(tmp_path):
     assert "blob" in msg and str(bad) in msg
 
 
-def test_missing_world_file(tmp_path):
-    msg = start(tmp_path, world_file=str(tmp_path / "nope.yaml"))
-    assert "nope.yaml" in msg
+def test_missing_world_file_is_refused_before_launching(tmp_path):
+    t0 = time.monotonic()
+    with pytest.raises(LaunchArgError, match="nope.yaml"):
+        LaunchedGraph(dict(world_file=str(tmp_path / "nope.yaml")))
+    assert time.monotonic() - t0 < 1.0
 
 
 def test_urdf_that_does_not_parse(tmp_path):

@@ -11,12 +11,12 @@ no planning scene).
 from __future__ import annotations
 
 import numpy as np
-import yaml
 
 from moverl_msgs.srv import ShieldStepResponse
 
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
-from .paths import config_file, world_file
+from .launch_args import check as check_launch_args
+from .paths import robot_config_file, world_file
 
 
 class BulletBackend(Backend):
@@ -30,12 +30,13 @@ class BulletBackend(Backend):
     ):
         if shield:
             raise ValueError("the PyBullet backend has no shield: use shield=False, or the ROS backend")
+        from moverl_sim.robot_config import load_robot_config
         from moverl_sim.urdf import robot_description
         from moverl_sim.world import load_world
 
-        path = robot_config or config_file(f"robots/{robot}.yaml")
-        with open(path) as f:
-            rc = yaml.safe_load(f)["robot"]
+        # The world and robot exist, the robot config is valid (LaunchArgError naming those available otherwise).
+        check_launch_args(dict(world=world, robot=robot, **({"robot_config": robot_config} if robot_config else {})))
+        rc = load_robot_config(robot_config or robot_config_file(robot))
         self._args = (world, rc)
         self.urdf = robot_description(rc["urdf"])
         self.joints = list(rc["joints"])
@@ -44,11 +45,7 @@ class BulletBackend(Backend):
         self.robot_config = rc
         self.shield_enabled = False
         self.restartable = True
-        wf = world_file(world)
-        if not wf.exists():
-            known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
-            raise ValueError(f"no world file {wf} (worlds available: {known})")
-        self._world = load_world(str(wf))
+        self._world = load_world(str(world_file(world)))
         self.world = WorldInfo(
             name=self._world.name,
             goal=self._world.goal,

@@ -24,6 +24,8 @@ from moverl_msgs.srv import ValidateMotionResponse as _Motion
 from .backend import Backend
 from .errors import MoveRLError
 from .graph import GraphError
+from .launch_args import LaunchArgError
+from .launch_args import check as check_launch_args
 from .paths import config_file
 from .robot import ActionScaler, JointLimits, chain_reach
 from .task import ReachTask, TaskConfig
@@ -83,6 +85,13 @@ DRIVER_ERRORS = {
     if name.isupper() and isinstance(getattr(_Fjt, name), int) and getattr(_Fjt, name) != _Fjt.SUCCESSFUL
 }
 OBS_TYPES = ("joints", "ee")
+#: moverl.launch's arguments that the env takes as its own arguments, not in launch_args.
+ENV_LAUNCH_ARGS = {
+    "world": "world=<name or path>",
+    "world_file": "world=<path>",
+    "robot": "robot=<name> (or launch_args robot_config=<path>)",
+    "shield": "shield=True/False",
+}
 
 
 def _collision_type(verdict: int, unsafe_cause: int) -> "str | None":
@@ -105,7 +114,9 @@ class MoveRLReachEnv(gym.Env):
             no ROS, no shield; shield must be False), or a moverl_gym.backend.Backend instance.
         robot: robot config name (config/robots/<robot>.yaml) for a launched graph.
         goal: override the world's goal [x, y, z].
-        launch_args: extra roslaunch arguments (gui, mode, ...).
+        launch_args: extra roslaunch arguments (gui, mode, ...): launch/moverl.launch's, world, world_file, robot and
+            shield excepted (the arguments above). Checked with the ones above before anything starts
+            (moverl_gym.launch_args): a wrong name or value raises LaunchArgError (a ValueError) naming the valid ones.
         task: overrides of config/env.yaml (dt, kappa, ...).
         recover: when a component of the graph fails (MoveRLError), end the episode (truncated, info["graph_failure"]
             says what failed) instead of raising, and tear the graph down and relaunch it at the next reset()
@@ -156,19 +167,25 @@ class MoveRLReachEnv(gym.Env):
         self._restarts_in_a_row = 0
         self._steps_since_restart = 0
         self._backend = None
+        # Every launch argument, the env's own included, checked before anything starts (moverl_gym.launch_args).
+        launch_args = dict(launch_args or {})
+        for name, instead in ENV_LAUNCH_ARGS.items():
+            if name in launch_args:
+                raise LaunchArgError(f"launch_args[{name!r}]: give it as the env's argument {instead}")
+        check_launch_args(dict(world=world, robot=robot, shield=shield, **launch_args))
         try:
             if isinstance(backend, Backend):
                 self._backend = backend
             elif backend == "bullet":
                 from .bullet_backend import BulletBackend
 
-                self._backend = BulletBackend(world, robot, (launch_args or {}).get("robot_config"), shield=shield)
+                self._backend = BulletBackend(world, robot, launch_args.get("robot_config"), shield=shield)
             elif backend == "ros":
                 from .ros_backend import RosBackend
 
                 self._backend = RosBackend(
                     graph,
-                    dict(world=world, robot=robot, shield=shield, **(launch_args or {})),
+                    dict(world=world, robot=robot, shield=shield, **launch_args),
                     call_timeout=self.config.step_timeout,
                     reset_timeout=self.config.reset_timeout,
                 )

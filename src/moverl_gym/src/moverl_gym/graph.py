@@ -25,6 +25,7 @@ import xmlrpc.client
 from pathlib import Path
 
 from . import reaper
+from .launch_args import check as check_launch_args
 from .paths import launch_file, repo_root
 
 #: Environment variable: the host name or address under which other hosts reach this machine. When set, graphs
@@ -88,6 +89,8 @@ class LaunchedGraph:
         attempts: master ports to try when a picked port turns out taken.
 
     Raises:
+        LaunchArgError: a launch argument moverl.launch does not take, or a value it does not accept (a ValueError,
+            raised before anything starts; moverl_gym.launch_args).
         GraphError: the graph could not be started (with the tail of its log), or close() left processes.
     """
 
@@ -101,6 +104,7 @@ class LaunchedGraph:
         grace: float | None = None,
         attempts: int = 5,
     ):
+        launch_args = check_launch_args(launch_args)
         for tool in ("roslaunch", "rosmaster"):
             if shutil.which(tool) is None:
                 raise GraphError(f"{tool} is not on PATH: source devel/setup.bash (see README) first")
@@ -174,7 +178,7 @@ class LaunchedGraph:
                     "--sigterm-timeout=1",
                     str(launch_file()),
                 ]
-                + [f"{k}:={_launch_value(v)}" for k, v in launch_args.items()],
+                + [f"{k}:={v}" for k, v in launch_args.items()],
             )
             self._reaper = reaper.Handle(spec, self._environment(host), self._log)
             event = self._reaper.wait_for(("master", "taken", "master-exit", "error"), deadline)
@@ -289,9 +293,3 @@ def _rosout() -> str:
     if not found:
         raise GraphError("the rosout node is not installed (apt package ros-base-dev / rosout)")
     return found[0]
-
-
-def _launch_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    return str(v)

@@ -27,5 +27,10 @@ def world_file(world: str) -> Path:
     return repo_root() / "worlds" / f"{world}.yaml"
 
 
+def robot_config_file(robot: str) -> Path:
+    """A shipped robot config by name: config/robots/<robot>.yaml."""
+    return repo_root() / "config" / "robots" / f"{robot}.yaml"
+
+
 def launch_file(name: str = "moverl.launch") -> Path:
     return repo_root() / "launch" / name

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from moverl_sim.robot_config import parse_robot
 from moverl_sim.world import ObjectMotion
 
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
@@ -240,12 +241,9 @@ class RosBackend(Backend):
             )
         self.attached = not (graph == "launch" or (graph == "auto" and not attachable))
         if not self.attached:
+            # moverl.launch's world is a name; world_file takes a path too (LaunchedGraph checks that it exists).
             args = {k: v for k, v in self._launch_args.items() if k != "world"}
-            wf = world_file(self._launch_args["world"])
-            if not wf.exists():
-                known = sorted(p.stem for p in wf.parent.glob("*.yaml"))
-                raise ValueError(f"no world file {wf} (worlds available: {known})")
-            args["world_file"] = str(wf)
+            args["world_file"] = str(world_file(self._launch_args["world"]))
             port = None
             if _NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
                 port = int(_NODE_MASTER.rsplit(":", 1)[1])
@@ -279,9 +277,10 @@ class RosBackend(Backend):
             "fk": GetFK._request_class,
         }
         self.urdf = rospy.get_param("/robot_description")
-        self.joints = list(rospy.get_param("/robot/joints"))
-        self.home = list(rospy.get_param("/robot/home"))
-        self.robot_config = dict(rospy.get_param("/robot"))  # the robot config's robot: section, as launched
+        # The robot config's robot: section as the graph was launched with it (an attached graph's too), checked.
+        self.robot_config = parse_robot(rospy.get_param("/robot"), "the graph's /robot parameter", prefix="/robot/")
+        self.joints = list(self.robot_config["joints"])
+        self.home = list(self.robot_config["home"])
         self.ee_link = self.robot_config["ee_link"]
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
         self.world = _world_info(self._world(GetWorld._request_class()).world)

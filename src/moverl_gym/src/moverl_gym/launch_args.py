@@ -1,0 +1,259 @@
+"""launch/moverl.launch's arguments and the values each accepts, checked before any process starts.
+
+The one list of them. Every argument the env (``launch_args=``, ``world=``, ``robot=``, ``shield=``) or a roslaunch
+user (``name:=value``) gives moverl.launch goes through check(): an unknown name is refused with the closest valid one
+(difflib), a value outside its closed set with the valid choices, a world, robot or robot config that does not exist
+with those available, and a robot config with an unknown, missing or malformed key with the file, the key and the
+valid keys (moverl_sim.robot_config). It takes milliseconds; without it a wrong value surfaced as a node's death after
+the graph started (``roslaunch exited with code 0:``), a 60 s wait for services that never came, or not at all (an
+unknown value or name silently meant the default).
+
+Who checks with it:
+
+* The env (MoveRLReachEnv, before it makes a backend) and LaunchedGraph (before its reaper starts anything), in
+  process.
+* roslaunch: moverl.launch's first tag after its arguments is ``<param name="moverl/launch_args" command=...>``,
+  which runs scripts/check_launch_args.py with every argument while roslaunch reads the file; roslaunch starts nothing
+  (no master, no node) when the command fails. roslaunch ignores a command-line argument that the file does not
+  declare (``obstacle:=sensed``); the script checks those names too (from roslaunch's command line) when roslaunch
+  was asked to launch moverl.launch itself.
+
+Why a Python module, and not a commented YAML list in config/ read through roslaunch's ``$(eval)``: roslaunch cannot
+refuse a value by itself (``<arg>`` has no choices; ``$(eval)`` has no imports and fails with nothing better than the
+exception of its expression), but it does run a command param while it reads a launch file, before it starts anything;
+and the check is code anyway (suggestions, paths, robot configs). A YAML list would need this code plus a loader, for
+this one reader. The nodes that parse a value themselves keep their own check (defence in depth: other launch files
+start them too); test_launch_args.py compares each such list with CHOICES (the shield's C++, the simulator node), and
+moverl.launch's arguments and their comments with ARGS, so they cannot diverge silently.
+
+Nothing here imports ROS or runs moverl_gym's __init__ (which registers the gym ids, 0.3 s of gymnasium):
+scripts/check_launch_args.py loads this module on every roslaunch.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import json
+import math
+import os
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from xml.etree import ElementTree
+
+import yaml
+
+from moverl_sim.robot_config import RobotConfigError, load_robot_config
+
+from .paths import launch_file, repo_root, robot_config_file, world_file
+
+#: The values roslaunch treats as booleans everywhere (``if=``, ``$(eval)``, a ``<param>``), any case. "1" and "0"
+#: are not: a <param> then holds an int, which the C++ nodes' bool parameters refuse.
+BOOL = ("true", "false")
+
+#: Arguments with a closed set of values -> the values. Where a node parses the value too, its own list is named in
+#: the comment; test_launch_args.py checks that the two agree (add a value in both places, e.g. a new strategy).
+CHOICES: dict[str, tuple[str, ...]] = {
+    "shield": BOOL,
+    "simulator": BOOL,
+    "gui": BOOL,
+    "markers": BOOL,
+    "rviz": BOOL,
+    "strategy": ("plan", "discard", "last_safe"),  # moverl_shield/src/shield_core.cpp: strategyName, parseStrategy
+    "driver": ("sim_service", "follow_joint_trajectory"),  # moverl_shield/src/shield_node.cpp
+    "profile": ("linear", "min_jerk"),  # moverl_shield/src/trajectory.cpp: profileName, parseProfile
+    "obstacles": ("objects", "octomap", "both", "sensed"),  # moverl_planning_scene/src/scene_server.cpp
+    "scene_process": ("shield", "own"),  # launch files only: moverl.launch maps it onto shield.launch's scene
+    "mode": ("lockstep", "realtime"),  # moverl_sim/scripts/sim_node (moverl.launch derives the sim's mode from it)
+    "control": ("", "kinematic", "dynamic"),  # sim_node and moverl_sim.core; "": config/sim.yaml's
+}
+#: Arguments whose values are not a closed set -> what they take (each is checked: see check()).
+OPEN: dict[str, str] = {
+    "world": "a world name (worlds/<world>.yaml) or a world file's path",
+    "world_file": "a world file's path",
+    "robot": "a robot config name (config/robots/<robot>.yaml)",
+    "robot_config": "a robot config file's path",
+    "action": "a ROS name (the FollowJointTrajectory action)",
+    "joint_states": "a ROS name (the robot's joint-state topic)",
+    "physics_hz": "a positive number, or empty",
+    "initial_positions": "a list of one number per controlled joint, or empty",
+}
+#: Every argument moverl.launch takes (its derived, value= arguments cannot be set).
+ARGS: tuple[str, ...] = tuple(sorted([*CHOICES, *OPEN]))
+
+# A ROS graph resource name (wiki.ros.org/Names): a letter, ~ or / first; then letters, digits, _ and /.
+_ROS_NAME = re.compile(r"^[~/]?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
+
+
+class LaunchArgError(ValueError):
+    """An argument moverl.launch does not take, or a value it does not accept; the message names the valid ones."""
+
+
+def launch_value(value) -> str:
+    """A Python value as roslaunch's ``name:=value`` text: booleans as true/false, sequences as a YAML list."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if hasattr(value, "tolist"):  # numpy
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return json.dumps([float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else x for x in value])
+    return os.fspath(value) if isinstance(value, os.PathLike) else str(value)
+
+
+def robots_available() -> list[str]:
+    """The names of the shipped robot configs."""
+    return sorted(p.stem for p in (repo_root() / "config" / "robots").glob("*.yaml"))
+
+
+def worlds_available() -> list[str]:
+    """The names of the shipped worlds."""
+    return sorted(p.stem for p in (repo_root() / "worlds").glob("*.yaml"))
+
+
+def check(args: Mapping[str, object]) -> dict[str, str]:
+    """Check arguments for launch/moverl.launch; return them as roslaunch's text.
+
+    Args:
+        args: name -> value (a string, a bool, a number, a list for initial_positions, a path).
+
+    Returns:
+        name -> the value as ``name:=value`` text (launch_value), for the same names.
+
+    Raises:
+        LaunchArgError: naming every wrong argument with its valid names or choices.
+    """
+    problems = []
+    values = {}
+    for name, value in args.items():
+        if name in ARGS:
+            values[name] = launch_value(value)
+        else:
+            problems.append(_unknown_name(str(name)))
+    for name, text in values.items():
+        if name in CHOICES:
+            problems.append(_choice(name, text))
+            if CHOICES[name] is BOOL:
+                values[name] = text.lower()
+    problems += _open_values(values)
+    problems = [p for p in problems if p]
+    if len(problems) == 1:
+        raise LaunchArgError(f"launch/moverl.launch: {problems[0]}")
+    if problems:
+        raise LaunchArgError(
+            f"launch/moverl.launch: {len(problems)} wrong arguments:\n" + "\n".join(f"  {p}" for p in problems)
+        )
+    return values
+
+
+def _closest(word: str, valid) -> str:
+    close = difflib.get_close_matches(word, list(valid), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _unknown_name(name: str) -> str:
+    return f"no argument {name!r}{_closest(name, ARGS)}; the arguments are: {', '.join(ARGS)}"
+
+
+def _choice(name: str, text: str) -> str:
+    choices = CHOICES[name]
+    if (text.lower() if choices is BOOL else text) in choices:
+        return ""
+    shown = ", ".join(c if c else '"" (empty: the config default)' for c in choices)
+    return f"{name}={text!r} is not one of: {shown}{_closest(text, [c for c in choices if c])}"
+
+
+def _open_values(values: dict[str, str]) -> list[str]:
+    """The problems of the arguments whose values are not a closed set (worlds, robots, names, numbers)."""
+    problems = []
+    world = None
+    if "world" in values:
+        world = world_file(values["world"])
+        if not world.is_file():
+            known = worlds_available()
+            problems.append(
+                f"world={values['world']!r}: no world file {world} (worlds available: {known})"
+                f"{_closest(values['world'], known)}"
+            )
+    if "world_file" in values:
+        path = Path(values["world_file"]).expanduser().resolve()
+        # moverl.launch's default world_file is worlds/<world>.yaml: a wrong world is reported once, above.
+        if not path.is_file() and path != world:
+            known = worlds_available()
+            problems.append(
+                f"world_file={values['world_file']!r}: no world file {path} (worlds available: {known})"
+                f"{_closest(path.stem, known)}"
+            )
+    configs = {}  # robot config file -> its robot: section, or None when it is wrong
+    robot = None
+    if "robot" in values:
+        path = robot = robot_config_file(values["robot"])
+        if not path.is_file():
+            known = robots_available()
+            problems.append(
+                f"robot={values['robot']!r}: no robot config {values['robot']} (available: {', '.join(known)})"
+                f"{_closest(values['robot'], known)}"
+            )
+        else:
+            problems.append(_robot_config(path, configs))
+    if "robot_config" in values:
+        path = Path(values["robot_config"]).expanduser().resolve()
+        # moverl.launch's default robot_config is config/robots/<robot>.yaml: a wrong robot is reported once, above.
+        if not path.is_file() and path != robot:
+            problems.append(f"robot_config={values['robot_config']!r}: no robot config file {path}")
+        elif path.is_file() and path not in configs:
+            problems.append(_robot_config(path, configs))
+    for name in ("action", "joint_states"):
+        if name in values and not _ROS_NAME.match(values[name]):
+            problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
+    if values.get("physics_hz"):
+        try:
+            hz = float(values["physics_hz"])
+        except ValueError:
+            hz = math.nan
+        if not (math.isfinite(hz) and hz > 0):
+            problems.append(f"physics_hz={values['physics_hz']!r} is not {OPEN['physics_hz']}")
+    if values.get("initial_positions"):
+        # The robot the graph loads: robot_config, whose default is config/robots/<robot>.yaml.
+        if "robot_config" in values:
+            path = Path(values["robot_config"]).expanduser().resolve()
+        else:
+            path = robot_config_file(values.get("robot", launch_defaults()["robot"]))
+        if path not in configs and path.is_file():
+            problems.append(_robot_config(path, configs))
+        problems.append(_initial_positions(values["initial_positions"], configs.get(path)))
+    return problems
+
+
+@functools.cache
+def launch_defaults() -> dict[str, str]:
+    """moverl.launch's literal argument defaults (those without a substitution), by argument."""
+    arguments = ElementTree.parse(launch_file()).getroot().iter("arg")
+    return {a.get("name"): a.get("default") for a in arguments if "$(" not in a.get("default", "$(")}
+
+
+def _robot_config(path: Path, configs: dict) -> str:
+    try:
+        configs[path] = load_robot_config(path)
+    except RobotConfigError as exc:
+        configs[path] = None
+        return f"robot config: {exc}"
+    return ""
+
+
+def _initial_positions(text: str, robot: dict | None) -> str:
+    try:
+        q = yaml.safe_load(text)
+    except yaml.YAMLError:
+        q = None
+    ok = isinstance(q, list) and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in q
+    )
+    if not ok:
+        return f"initial_positions={text!r} is not {OPEN['initial_positions']}"
+    if robot is not None and len(q) != len(robot["joints"]):
+        return (
+            f"initial_positions={text!r} has {len(q)} numbers; robot {robot['name']} has {len(robot['joints'])} "
+            f"controlled joints ({', '.join(robot['joints'])})"
+        )
+    return ""

@@ -118,7 +118,8 @@ def test_every_argument_refused_within_2_s_naming_the_valid_ones(monkeypatch, ca
             value = WRONG[name][0]
             walk = []
             if name != "world_file":  # the env takes a world file's path as world=
-                kwargs = {name: value} if name in ENV_KWARGS else {"launch_args": {name: value}}
+                # graph="launch": attached to a graph, world only names the graph's world and robot is not used.
+                kwargs = {name: value, "graph": "launch"} if name in ENV_KWARGS else {"launch_args": {name: value}}
                 walk.append(("gym.make value", lambda: gym.make(ENV_ID, **kwargs), expected(name)))
             walk.append(("LaunchedGraph value", lambda: LaunchedGraph({name: value}), expected(name)))
             typo = {misspelt(name): value}

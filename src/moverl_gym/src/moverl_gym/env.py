@@ -115,8 +115,9 @@ class MoveRLReachEnv(gym.Env):
         robot: robot config name (config/robots/<robot>.yaml) for a launched graph.
         goal: override the world's goal [x, y, z].
         launch_args: extra roslaunch arguments (gui, mode, ...): launch/moverl.launch's, world, world_file, robot and
-            shield excepted (the arguments above). Checked with the ones above before anything starts
-            (moverl_gym.launch_args): a wrong name or value raises LaunchArgError (a ValueError) naming the valid ones.
+            shield excepted (the arguments above). Checked, with world and robot when a graph is launched, before
+            anything starts (moverl_gym.launch_args): a wrong name or value raises LaunchArgError (a ValueError) naming
+            the valid ones.
         task: overrides of config/env.yaml (dt, kappa, ...).
         recover: when a component of the graph fails (MoveRLError), end the episode (truncated, info["graph_failure"]
             says what failed) instead of raising, and tear the graph down and relaunch it at the next reset()
@@ -167,12 +168,14 @@ class MoveRLReachEnv(gym.Env):
         self._restarts_in_a_row = 0
         self._steps_since_restart = 0
         self._backend = None
-        # Every launch argument, the env's own included, checked before anything starts (moverl_gym.launch_args).
+        # Every launch argument checked before anything starts (moverl_gym.launch_args). world and robot are checked
+        # by the backend that uses them as files (the PyBullet one; the ROS one when it launches a graph): attached to a
+        # graph, world is only the name of the graph's world, and robot is not used.
         launch_args = dict(launch_args or {})
         for name, instead in ENV_LAUNCH_ARGS.items():
             if name in launch_args:
                 raise LaunchArgError(f"launch_args[{name!r}]: give it as the env's argument {instead}")
-        check_launch_args(dict(world=world, robot=robot, shield=shield, **launch_args))
+        check_launch_args(dict(shield=shield, **launch_args))
         try:
             if isinstance(backend, Backend):
                 self._backend = backend

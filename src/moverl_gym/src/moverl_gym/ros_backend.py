@@ -27,6 +27,7 @@ from moverl_sim.world import ObjectMotion
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
 from .errors import MoveRLError
 from .graph import GraphError, LaunchedGraph, master_alive, service_exists
+from .launch_args import check as check_launch_args
 from .paths import world_file
 
 SHIELD_STEP = "/shield/step"
@@ -241,7 +242,8 @@ class RosBackend(Backend):
             )
         self.attached = not (graph == "launch" or (graph == "auto" and not attachable))
         if not self.attached:
-            # moverl.launch's world is a name; world_file takes a path too (LaunchedGraph checks that it exists).
+            check_launch_args(self._launch_args)  # the world and robot too, before anything starts
+            # moverl.launch's world is a name; world_file takes a path too.
             args = {k: v for k, v in self._launch_args.items() if k != "world"}
             args["world_file"] = str(world_file(self._launch_args["world"]))
             port = None

@@ -113,6 +113,7 @@ def test_every_argument_refused_within_2_s_naming_the_valid_ones(monkeypatch, ca
     """The walk: each argument with a wrong value and with a misspelt name, through gym.make (the env's arguments as
     its own keyword arguments) and LaunchedGraph."""
     rows, failures = [], []
+    monkeypatch.delenv("ROS_MASTER_URI", raising=False)  # graph="launch" asks no master whether to attach
     with NoGraph(monkeypatch):
         for name in ARGS:
             value = WRONG[name][0]

@@ -235,7 +235,7 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
         get_world = rospy.ServiceProxy("/planning_scene/get_world", GetWorld)
         get_world.wait_for_service(10.0)
         world = get_world().world
-        self.assertFalse(world.sensed_unknown_occupied, "worlds/sensed_box.yaml does not set it")
+        self.assertFalse(world.sensed_unknown_occupied, "worlds/sensed_box.yaml switches it off")
         world_pub = rospy.Publisher("/sim/world", World, queue_size=1, latch=True)
         rng = np.random.default_rng(16)
         configs = [list(np.asarray(HOME) + rng.uniform(-1.0, 1.0, 7)) for _ in range(150)]

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
 
@@ -22,6 +23,7 @@
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
+#include <fcl/narrowphase/distance.h>
 
 #include "fcl_checker_internal.h"
 
@@ -30,7 +32,13 @@ namespace {
 
 constexpr std::uint64_t kFnvOffset = 1469598103934665603ULL;
 constexpr std::uint64_t kFnvPrime = 1099511628211ULL;
-constexpr int kAcmFileVersion = 2;  // 2: complete hulls, one geometry per mesh piece
+constexpr int kAcmFileVersion = 3;  // 2: complete hulls, one geometry per mesh piece; 3: "never" pairs searched
+// The targeted search that confirms a "never" pair (searchNeverPair): starts per pair (the random samples where the
+// pair's bounding spheres came closest), the first and last step (rad) of the pattern search, distance evaluations
+// per start at most.
+constexpr int kSearchStarts = 4;
+constexpr double kSearchFirstStep = 0.25, kSearchLastStep = 1e-3;
+constexpr int kSearchEvaluations = 800;
 
 void fnv(std::uint64_t* h, const void* data, std::size_t n) {
   const auto* p = static_cast<const unsigned char*>(data);
@@ -152,8 +160,11 @@ void FclCollisionChecker::computeAcm() {
       }
     }
     if (options_.acm_samples > 0 && !candidates.empty()) {
-      // "always": the real shapes touch in every sample; "never": even the padded shapes never touch.
+      // "always": the real shapes touch in every sample; "never": even the padded shapes never touch in the samples
+      // and a search for the pair's closest approach (from the samples where they came closest) finds none either.
       std::vector<int> hits(candidates.size(), 0), padded_hits(candidates.size(), 0);
+      // Per candidate, the kSearchStarts samples of the smallest gap between its links' padded bounding spheres.
+      std::vector<std::vector<std::pair<double, std::vector<double>>>> closest(candidates.size());
       std::mt19937_64 rng(options_.acm_seed);
       const std::size_t dof = model_.dof();
       std::vector<double> q(dof);
@@ -167,14 +178,24 @@ void FclCollisionChecker::computeAcm() {
           if (linkPairCollides(candidates[c].first, candidates[c].second, true)) {
             ++padded_hits[c];
             if (linkPairCollides(candidates[c].first, candidates[c].second, false)) ++hits[c];
+          } else if (padded_hits[c] == 0) {
+            keepClosest(sphereGap(candidates[c].first, candidates[c].second), q, &closest[c]);
           }
         }
       }
       for (std::size_t c = 0; c < candidates.size(); ++c) {
         AcmReason r = AcmReason::kEnabled;
-        if (padded_hits[c] == 0) r = AcmReason::kNever;
-        if (hits[c] == options_.acm_samples) r = AcmReason::kAlways;
         const int a = candidates[c].first, b = candidates[c].second;
+        if (padded_hits[c] == 0) {
+          const double d = searchNeverPair(a, b, closest[c]);
+          if (d > 0.0) {
+            r = AcmReason::kNever;
+            acm_stats_.never_min_distance = std::min(acm_stats_.never_min_distance, d);
+          } else {
+            ++acm_stats_.never_refuted;  // the search found them touching: checked
+          }
+        }
+        if (hits[c] == options_.acm_samples) r = AcmReason::kAlways;
         acm_[a * n + b] = acm_[b * n + a] = r;
       }
     }
@@ -182,6 +203,100 @@ void FclCollisionChecker::computeAcm() {
   }
   rebuildPairLists();
   acm_stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double FclCollisionChecker::sphereGap(int la, int lb) const {
+  double gap = std::numeric_limits<double>::infinity();
+  for (int ga : link_geoms_[la]) {
+    for (int gb : link_geoms_[lb]) {
+      const Geom& a = geoms_[ga];
+      const Geom& b = geoms_[gb];
+      gap = std::min(gap, (a.world_center - b.world_center).norm() - a.padded_radius - b.padded_radius);
+    }
+  }
+  return gap;
+}
+
+void FclCollisionChecker::keepClosest(double gap, const std::vector<double>& q,
+                                      std::vector<std::pair<double, std::vector<double>>>* best) const {
+  if (best->size() < static_cast<std::size_t>(kSearchStarts)) {
+    best->emplace_back(gap, q);
+  } else {
+    auto worst =
+        std::max_element(best->begin(), best->end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    if (gap >= worst->first) return;
+    worst->first = gap;
+    worst->second = q;
+  }
+}
+
+double FclCollisionChecker::linkPairDistance(int la, int lb) {
+  // Distance between the links' padded shapes: <= 0 when they touch (the self check would flag the pair).
+  double best = std::numeric_limits<double>::infinity();
+  for (int ga : link_geoms_[la]) {
+    for (int gb : link_geoms_[lb]) {
+      const Geom& a = geoms_[ga];
+      const Geom& b = geoms_[gb];
+      if (geomPairCollides(a, b, false, nullptr, /*padded=*/true)) return 0.0;
+      fcl::DistanceRequestd req;
+      fcl::DistanceResultd res;
+      const double d = fcl::distance(a.padded.get(), a.world_tf, b.padded.get(), b.world_tf, req, res);
+      // A distance FCL cannot give (negative) falls back on the bounding spheres' gap, a lower bound.
+      best = std::min(
+          best,
+          d >= 0.0 ? d : std::max(0.0, (a.world_center - b.world_center).norm() - a.padded_radius - b.padded_radius));
+    }
+  }
+  return best;
+}
+
+double FclCollisionChecker::searchNeverPair(int la, int lb,
+                                            const std::vector<std::pair<double, std::vector<double>>>& starts) {
+  // The joints that move one link relative to the other (a perturbation changes their relative pose).
+  const std::size_t dof = model_.dof();
+  std::vector<std::size_t> joints;
+  std::vector<double> q0(dof), q1(dof);
+  for (std::size_t i = 0; i < dof; ++i) q0[i] = 0.5 * (model_.lowerLimits()[i] + model_.upperLimits()[i]);
+  model_.computeLinkTransforms(q0.data(), &link_poses_);
+  const Eigen::Isometry3d rel0 = link_poses_[la].inverse() * link_poses_[lb];
+  for (std::size_t i = 0; i < dof; ++i) {
+    q1 = q0;
+    q1[i] += 0.1 * (model_.upperLimits()[i] - model_.lowerLimits()[i]);
+    model_.computeLinkTransforms(q1.data(), &link_poses_);
+    const Eigen::Isometry3d rel = link_poses_[la].inverse() * link_poses_[lb];
+    if ((rel.matrix() - rel0.matrix()).norm() > 1e-9) joints.push_back(i);
+  }
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& start : starts) {
+    // Pattern search: each relevant joint by +-step while the distance drops; halve the step when none does.
+    std::vector<double> q = start.second;
+    updateTransforms(q.data());
+    double d = linkPairDistance(la, lb);
+    int evaluations = 1;
+    for (double step = kSearchFirstStep; step >= kSearchLastStep && d > 0.0 && evaluations < kSearchEvaluations;) {
+      bool improved = false;
+      for (std::size_t i : joints) {
+        for (double sign : {1.0, -1.0}) {
+          const double old = q[i];
+          q[i] = std::min(std::max(old + sign * step, model_.lowerLimits()[i]), model_.upperLimits()[i]);
+          updateTransforms(q.data());
+          const double e = linkPairDistance(la, lb);
+          ++evaluations;
+          if (e < d) {
+            d = e;
+            improved = true;
+            break;  // keep going this way on the next joint
+          }
+          q[i] = old;
+        }
+        if (d <= 0.0) break;
+      }
+      if (!improved) step *= 0.5;
+    }
+    best = std::min(best, d);
+    if (best <= 0.0) break;
+  }
+  return best;
 }
 
 void FclCollisionChecker::rebuildPairLists() {

@@ -122,7 +122,7 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
   return true;
 }
 
-constexpr std::uint8_t kHit = 1, kRobot = 2;
+constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4;
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
@@ -163,7 +163,10 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       end = origin + d * (options_.max_range / range);
       flag = 0;
       ++out->stats.beyond_range;
-    } else if (masked && robot_mask[k] != 0) {
+    } else if (masked && robot_mask[k] == kPointOnFixture) {
+      flag = kFixture;
+      ++out->stats.fixture;
+    } else if (masked && robot_mask[k] != kPointObstacle) {
       flag = kRobot;
       ++out->stats.robot;
     }
@@ -179,10 +182,11 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   const auto& test = testBit;
   const auto& set = setBit;
   // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it); only ends inside
-  // the bounds mark anything.
+  // the bounds mark anything. A cell that holds an obstacle point is hit even when robot or fixture points end in it
+  // too: something else is there (a hand next to a link).
   std::size_t hit_cells = 0;
   for (std::uint64_t packed : order) {
-    if (ends[packed] != kHit) continue;
+    if ((ends[packed] & kHit) == 0) continue;
     const std::int64_t c = cell(packed);
     if (c < 0) continue;
     set(&hit_, c);
@@ -191,7 +195,9 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   }
   // 3. Beams from the origin to each end cell's centre, clipped to the map bounds: the cells from the first one up
   //    to, excluding, the end cell (as octomap's computeRayKeys), each counted once per cloud. A 3D DDA over the
-  //    grid's indices (Amanatides & Woo).
+  //    grid's indices (Amanatides & Woo). A cell where only fixture points end was seen down to the fixture's surface
+  //    (anything above it would have stopped a beam): the end cell counts as seen free too. A robot's end cell marks
+  //    nothing: what was seen there stays (a hand that was seen keeps its cells when it comes within the filter).
   std::size_t free_cells = 0;
   const double inv = 1.0 / options_.resolution;
   const std::int64_t stride[3] = {size_[1] * size_[2], size_[2], 1};
@@ -225,13 +231,15 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     }
     if (!inside) continue;
     std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
-    while (at[0] != last[0] || at[1] != last[1] || at[2] != last[2]) {
+    const bool through_end = ends[packed_end] == kFixture;
+    while (at[0] != last[0] || at[1] != last[1] || at[2] != last[2] || through_end) {
       if (!test(seen_, k) && !test(hit_, k)) {
         set(&seen_, k);
         ++free_cells;
         // A free cell already clamped at clamp_min does not change: the tree is not touched.
         if (updated(value_[k], log_miss_) != value_[k]) out->misses.push_back(packAt(at));
       }
+      if (at[0] == last[0] && at[1] == last[1] && at[2] == last[2]) break;  // a fixture's end cell, done
       const int axis = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
       if (t_max[axis] > 1.0) break;  // rounding: b's cell was not reached exactly
       at[axis] += step[axis];

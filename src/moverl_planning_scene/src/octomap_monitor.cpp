@@ -53,8 +53,14 @@ OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, Planning
   speed_bound_ = -1.0;  // until init or the world sets it
 }
 
-void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied) {
-  if (speed_bound >= 0.0 && std::isfinite(speed_bound)) speed_bound_ = speed_bound;
+void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied,
+                                     const std::vector<std::string>& camera_frames) {
+  world_speed_bound_ = speed_bound >= 0.0 && std::isfinite(speed_bound);
+  if (world_speed_bound_) speed_bound_ = speed_bound;
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    cameras_ = camera_frames;
+  }
   static_known_free_ = true;  // the static objects may have changed
   if (unknown_occupied_.exchange(unknown_occupied) == unknown_occupied || !map_) return;
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
@@ -85,6 +91,9 @@ bool OctomapMonitor::init(std::string* error) {
   try {
     readOccupancyMapTunables(RosTunables(pnh_, kYaml), &mo);
     self_filter_padding_ = requiredParam<double>(pnh_, "octomap/self_filter_padding", kYaml);
+    static_filter_padding_ = requiredParam<double>(pnh_, "octomap/static_filter_padding", kYaml);
+    future_tolerance_ = requiredParam<double>(pnh_, "octomap/future_tolerance", kYaml);
+    camera_wait_ = requiredParam<double>(pnh_, "octomap/camera_wait", kYaml);
     transform_timeout_ = requiredParam<double>(pnh_, "octomap/transform_timeout", kYaml);
     joint_state_wait_ = requiredParam<double>(pnh_, "octomap/joint_state_wait", kYaml);
     cloud_topic = requiredParam<std::string>(pnh_, "octomap/cloud_topic", kYaml);
@@ -101,12 +110,12 @@ bool OctomapMonitor::init(std::string* error) {
     *error = e.what();
     return false;
   }
-  if (!(self_filter_padding_ >= 0.0) || !std::isfinite(self_filter_padding_)) {
-    *error = "octomap/self_filter_padding must be >= 0";
-    return false;
-  }
-  for (const auto& p : {std::make_pair("speed_bound", yaml_speed_bound_), std::make_pair("latency", latency_),
-                        std::make_pair("plan_horizon", plan_horizon_), std::make_pair("stale_wait", stale_wait_)}) {
+  for (const auto& p :
+       {std::make_pair("speed_bound", yaml_speed_bound_), std::make_pair("latency", latency_),
+        std::make_pair("plan_horizon", plan_horizon_), std::make_pair("stale_wait", stale_wait_),
+        std::make_pair("self_filter_padding", self_filter_padding_),
+        std::make_pair("static_filter_padding", static_filter_padding_),
+        std::make_pair("future_tolerance", future_tolerance_), std::make_pair("camera_wait", camera_wait_)}) {
     if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
       *error = std::string("octomap/") + p.first + " must be finite and >= 0";
       return false;
@@ -153,10 +162,19 @@ bool OctomapMonitor::init(std::string* error) {
   joint_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &joint_queue_);
   joint_spinner_->start();
   publishStatus(ros::Time(0), "");
+  std::string cameras;
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    for (const auto& c : cameras_) cameras += (cameras.empty() ? "" : ", ") + c;
+  }
   ROS_INFO(
-      "planning_scene: sensing obstacles from %s (resolution %.3f m, max range %.2f m, self filter %.3f m, "
-      "mapped within +-%.2f m of the base; speed bound %.2f m/s, max age %.2f s; unknown cells count as %s)",
-      cloud_sub_.getTopic().c_str(), mo.resolution, mo.max_range, self_filter_padding_, reach, speed_bound_.load(),
+      "planning_scene: sensing obstacles from %s (cameras %s; resolution %.3f m, max range %.2f m, self filter %.3f m, "
+      "static filter %.3f m, mapped within +-%.2f m of the base; speed bound %.2f m/s (%s), max age %.2f s; unknown "
+      "cells count as %s)",
+      cloud_sub_.getTopic().c_str(), cameras.empty() ? "(none listed by the world)" : cameras.c_str(), mo.resolution,
+      mo.max_range, self_filter_padding_, static_filter_padding_, reach, speed_bound_.load(),
+      world_speed_bound_ ? "the world file's sensing: speed_bound"
+                         : "octomap/speed_bound of config/planning_scene.yaml: the world file gives none",
       max_age_, mo.unknown_occupied ? "occupied" : "free");
   // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
@@ -175,9 +193,33 @@ bool OctomapMonitor::init(std::string* error) {
     }
     ros::WallDuration(0.01).sleep();
   }
+  // Then every camera the world lists, for up to camera_wait more: one still unheard leaves the map blind (every check
+  // fails closed, naming it) until it is heard.
+  const ros::WallTime camera_deadline = ros::WallTime::now() + ros::WallDuration(camera_wait_);
+  std::vector<std::string> unheard = unheardCameras();
+  while (!unheard.empty() && ros::ok() && ros::WallTime::now() < camera_deadline) {
+    ros::WallDuration(0.01).sleep();
+    unheard = unheardCameras();
+  }
+  for (const auto& c : unheard) {
+    ROS_WARN(
+        "planning_scene: camera %s (in the world's cameras:) sent no cloud at start-up: the sensed map is blind "
+        "(every check fails closed) until it does",
+        c.c_str());
+  }
   ROS_INFO("planning_scene: %u clouds integrated at start-up, %zu occupied cells", clouds_.load(),
            map_->occupiedLeafCount());
+  publishStatus(last_cloud_stamp_, last_cloud_frame_);
   return true;
+}
+
+std::vector<std::string> OctomapMonitor::unheardCameras() {
+  std::lock_guard<std::mutex> lock(stamps_mutex_);
+  std::vector<std::string> out;
+  for (const auto& c : cameras_) {
+    if (frame_stamps_.find(c) == frame_stamps_.end()) out.push_back(c);
+  }
+  return out;
 }
 
 void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) {
@@ -248,6 +290,14 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     drop("malformed cloud from '" + msg->header.frame_id + "' dropped: " + bad);
     return;
   }
+  // A cloud stamped in the future (a camera's clock ahead of this one) would make the map look younger than it is.
+  const double ahead = msg->header.stamp.toSec() - ros::Time::now().toSec();
+  if (ahead > future_tolerance_) {
+    drop("cloud from '" + msg->header.frame_id + "' dropped: stamped " + std::to_string(ahead) +
+         " s ahead of this node's clock (octomap/future_tolerance " + std::to_string(future_tolerance_) +
+         " s): synchronise the camera's clock with the robot's");
+    return;
+  }
   if (!history_.around(static_cast<std::int64_t>(msg->header.stamp.toNSec()), joint_state_wait_, &configurations_)) {
     drop("cloud dropped: no joint state stamped at or after it within " + std::to_string(joint_state_wait_) +
          " s (cannot filter the robot's points)");
@@ -273,13 +323,16 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     }
   }
   if (filter_static_) {
-    // Points on the scene's static objects (known exactly: no predictive margin) mark nothing, as the robot's.
+    // Points on the scene's static objects (known exactly: no predictive margin) are the fixture: the space before
+    // them is seen free, down to the fixture's surface (static_filter_padding: the cameras' error).
     {
       std::lock_guard<std::mutex> lock(*scene_mutex_);
-      scene_->checker().staticObjectPointMask(points_, self_filter_padding_, &mask_more_);
+      scene_->checker().staticObjectPointMask(points_, static_filter_padding_, &mask_more_);
     }
-    if (mask_.size() != mask_more_.size()) mask_.assign(points_.size(), 0);
-    for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
+    if (mask_.size() != mask_more_.size()) mask_.assign(points_.size(), kPointObstacle);
+    for (std::size_t k = 0; k < mask_.size(); ++k) {
+      if (mask_[k] == kPointObstacle && mask_more_[k] != 0) mask_[k] = kPointOnFixture;
+    }
   }
   map_->computeUpdate(points_, mask_, pose.translation(), &update_);
   if (map_->unknownOccupied()) addKnownFree();
@@ -315,27 +368,44 @@ void OctomapMonitor::addKnownFree() {
     }
     map_->addKnownFree(free_keys_, &update_);
   };
+  // A cell's centre within half its diagonal of a shape: the cell reaches into the shape. The robot: every cell that
+  // reaches into its padding (the start check inflates it by padding against the cells: an unseen cell there would
+  // block the robot where it stands); a static object: every cell that reaches into its filter zone.
+  const double half_diagonal = 0.5 * std::sqrt(3.0) * map_->options().resolution;
+  const double robot_pad = scene_->checker().options().padding + half_diagonal;
+  const double static_pad = static_filter_padding_ + half_diagonal;
   for (const auto& q : configurations_) {
-    scene_->checker().robotBoundingBoxes(q.data(), self_filter_padding_, &boxes_);
+    scene_->checker().robotBoundingBoxes(q.data(), robot_pad, &boxes_);
     turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      scene_->checker().robotPointMask(q.data(), pts, self_filter_padding_, m);
+      scene_->checker().robotPointMask(q.data(), pts, robot_pad, m);
     });
   }
   if (filter_static_ && static_known_free_.exchange(false)) {
     std::lock_guard<std::mutex> lock(*scene_mutex_);  // the world
-    scene_->checker().staticObjectBoxes(self_filter_padding_, &boxes_);
+    scene_->checker().staticObjectBoxes(static_pad, &boxes_);
     turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      scene_->checker().staticObjectPointMask(pts, self_filter_padding_, m);
+      scene_->checker().staticObjectPointMask(pts, static_pad, m);
     });
   }
 }
 
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
                              const ros::Time& epoch) {
+  // Every camera the world lists counts, heard from or not (one never heard from leaves the map blind), and so does
+  // any other camera whose clouds came in.
+  std::string deciding;
   auto age = [&] {
-    std::vector<double> last;
-    for (const auto& f : frame_stamps_) last.push_back(f.second.toSec());
-    return sensedMapAge(last, stamp.toSec(), epoch.toSec());
+    std::vector<CameraSeen> cameras;
+    for (const auto& c : cameras_) {
+      const auto it = frame_stamps_.find(c);
+      cameras.push_back({c, it == frame_stamps_.end() ? -std::numeric_limits<double>::infinity() : it->second.toSec()});
+    }
+    for (const auto& f : frame_stamps_) {
+      if (std::find(cameras_.begin(), cameras_.end(), f.first) == cameras_.end()) {
+        cameras.push_back({f.first, f.second.toSec()});
+      }
+    }
+    return sensedMapAge(cameras, stamp.toSec(), epoch.toSec(), &deciding);
   };
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
@@ -343,6 +413,7 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     stamps_cv_.wait_for(lock, std::chrono::duration<double>(stale_wait_), [&] { return age() <= max_age_; });
     map_age = age();
   }
+  const bool none = cameras_.empty() && frame_stamps_.empty();
   lock.unlock();
   SensedMarginRule rule;
   rule.speed_bound = speed_bound_;
@@ -350,7 +421,16 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   rule.plan_horizon = plan_horizon_;
   rule.max_age = max_age_;
   rule.max_margin = std::min(FclCollisionChecker::kMaxMargin, max_margin_);
-  return rule.compute(map_age, duration, out, why);
+  if (rule.compute(map_age, duration, out, why)) return true;
+  if (!std::isfinite(map_age)) {
+    *why = none ? "no camera has been heard from: nothing is known to be free"
+                : "camera " + deciding +
+                      " has not been heard from since start-up or the world's motions restarted: "
+                      "nothing is known to be free where only it looks";
+  } else if (map_age > max_age_) {
+    *why += " (the oldest view: camera " + deciding + ")";
+  }
+  return false;
 }
 
 ros::Time OctomapMonitor::newestStamp() {
@@ -409,6 +489,8 @@ void OctomapMonitor::publishStatus(const ros::Time& stamp, const std::string& se
     s.unobserved_cells = static_cast<uint32_t>(map_->unobservedCount());
   }
   s.known_free_cells = static_cast<uint32_t>(u.known_free);
+  s.fixture_points = static_cast<uint32_t>(u.fixture);
+  s.unheard_cameras = unheardCameras();
   status_pub_.publish(s);
 }
 

@@ -231,6 +231,19 @@ void PlanningScene::findLastFree(bool goal_checked, MotionCheck* out) {
 void PlanningScene::validateMotion(const std::vector<double>& start, const std::vector<double>& goal,
                                    bool plan_on_path_collision, MotionCheck* out, bool find_last_free,
                                    double start_time, double duration, const SensedMargins* sensed) {
+  MotionRequest request;
+  request.start = start;
+  request.goal = goal;
+  request.plan_on_path_collision = plan_on_path_collision;
+  request.find_last_free = find_last_free;
+  request.start_time = start_time;
+  request.duration = duration;
+  validateMotion(request, out, sensed);
+}
+
+void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, const SensedMargins* sensed) {
+  const bool plan_on_path_collision = req.plan_on_path_collision, find_last_free = req.find_last_free;
+  const double start_time = req.start_time, duration = req.duration;
   auto t0 = Clock::now();
   // Sensed obstacles: each check with the margin of the time it covers; back to none when done.
   const SensedMargins none;
@@ -245,10 +258,23 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   out->pairs.clear();
   out->message.clear();
   out->state_check_time = out->path_check_time = out->planning_time = 0.0;
-  std::string error = prepare(start, "start", &start_);
-  if (error.empty()) error = prepare(goal, "goal", &goal_);
+  std::string error = prepare(req.start, "start", &start_);
+  if (error.empty()) error = prepare(req.goal, "goal", &goal_);
   if (error.empty() && (!std::isfinite(start_time) || std::isnan(duration) || duration < 0.0)) {
     error = "start_time must be finite and duration >= 0";
+  }
+  const bool measured = !req.measured_start.empty() && req.measured_start != req.start;
+  if (error.empty() && measured) {
+    // Where the robot stands when its driver clamped its state onto a limit: any finite state of the right size (the
+    // shield bounds how far beyond a limit it accepts one).
+    if (req.measured_start.size() != model_->dof()) {
+      error = "measured_start has " + std::to_string(req.measured_start.size()) + " values, expected " +
+              std::to_string(model_->dof());
+    }
+    for (double v : req.measured_start) {
+      if (error.empty() && !std::isfinite(v)) error = "measured_start is not finite";
+    }
+    measured_ = req.measured_start;
   }
   if (!error.empty()) {
     out->outcome = MotionOutcome::kInvalidRequest;
@@ -268,10 +294,30 @@ void PlanningScene::validateMotion(const std::vector<double>& start, const std::
   } else {
     checker_->setOctreeMargin(margin.start);
     checker_->checkState(start_.data(), all_pairs_, &state_result_);
+    const char* which = "start state";
+    if (!state_result_.collision() && measured) {
+      // The robot stands at the measured state, a little beyond a limit: that state, and the way from it to the
+      // clamped start the moves begin at (a controller bridges it), must be free too. A clamp of 0.02 rad moves the
+      // Panda's flange by about 2 cm: more than the padding.
+      which = "measured start state (beyond a joint limit)";
+      checker_->checkState(measured_.data(), all_pairs_, &state_result_);
+      if (!state_result_.collision()) {
+        PathCheckRequest bridge;
+        bridge.state = all_pairs_;
+        bridge.check_start = false;  // both ends checked above
+        bridge.check_goal = false;
+        checker_->checkPath(measured_.data(), start_.data(), bridge, &path_result_);
+        if (path_result_.status != CollisionStatus::kFree) {
+          state_result_.status = path_result_.status;
+          state_result_.pairs = path_result_.pairs;
+          which = "way from the measured start state (beyond a joint limit) to the clamped one";
+        }
+      }
+    }
     checker_->setOctreeMargin(margin.end);
     if (state_result_.collision()) {
       out->outcome = MotionOutcome::kStartInCollision;
-      out->message = std::string("start state not free (") +
+      out->message = std::string(which) + " not free (" +
                      (state_result_.status == CollisionStatus::kSelf ? "self" : "world") +
                      "): " + describe(state_result_.pairs);
     }

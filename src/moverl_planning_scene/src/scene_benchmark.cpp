@@ -75,9 +75,9 @@ int main(int argc, char** argv) {
   const auto& acm = scene->checker().acmStats();
   std::printf(
       "scene built in %.3f s; ACM (%d samples, no cache) %.3f s: adjacent %d rigid %d always %d never %d "
-      "checked %d\n",
+      "checked %d; never pairs: closest approach by search %.1f mm, %d found touching\n",
       std::chrono::duration<double>(Clock::now() - t0).count(), o.checker.acm_samples, acm.seconds, acm.adjacent,
-      acm.rigid, acm.always, acm.never, acm.enabled);
+      acm.rigid, acm.always, acm.never, acm.enabled, acm.never_min_distance * 1e3, acm.never_refuted);
   std::printf("joint radius bounds r_i:");
   for (std::size_t i = 0; i < scene->model().dof(); ++i) std::printf(" %.3f", scene->checker().jointRadiusBound(i));
   std::printf("\n");

@@ -190,9 +190,12 @@ bool SceneServer::init(std::string* error) {
     return false;
   }
   const AcmStats& acm = scene_->checker().acmStats();
-  ROS_INFO("planning_scene: %zu joints, ACM %s in %.2f s (adjacent %d, rigid %d, always %d, never %d, checked %d)%s%s",
-           scene_->model().dof(), acm.from_cache ? "loaded" : "computed", acm.seconds, acm.adjacent, acm.rigid,
-           acm.always, acm.never, acm.enabled, acm.cache_file.empty() ? "" : ", cache ", acm.cache_file.c_str());
+  ROS_INFO(
+      "planning_scene: %zu joints, ACM %s in %.2f s (adjacent %d, rigid %d, always %d, never %d, checked %d; never "
+      "pairs: closest approach found by search %.1f mm, %d found touching and checked)%s%s",
+      scene_->model().dof(), acm.from_cache ? "loaded" : "computed", acm.seconds, acm.adjacent, acm.rigid, acm.always,
+      acm.never, acm.enabled, acm.never_min_distance * 1e3, acm.never_refuted, acm.cache_file.empty() ? "" : ", cache ",
+      acm.cache_file.c_str());
   ROS_INFO("planning_scene: scene built in %.2f s", (ros::WallTime::now() - t0).toSec());
 
   // World: synchronous fetch, then mirror the latched topic.
@@ -213,16 +216,16 @@ bool SceneServer::init(std::string* error) {
   if (obstacles_ != "objects") {
     monitor_ = std::make_unique<OctomapMonitor>(nh_, pnh_, scene_.get(), &mutex_, obstacles_ == "sensed");
     monitor_->setWorldSensing(get_world.response.world.sensed_speed_bound,
-                              get_world.response.world.sensed_unknown_occupied);
+                              get_world.response.world.sensed_unknown_occupied, get_world.response.world.camera_frames);
     if (!monitor_->init(error)) return false;
   }
   world_sub_ = nh_.subscribe(world_topic, 1, &SceneServer::onWorld, this);
 
   services_.push_back(pnh_.advertiseService("check_state", &SceneServer::checkState, this));
   services_.push_back(pnh_.advertiseService("check_path", &SceneServer::checkPath, this));
-  services_.push_back(pnh_.advertiseService("plan", &SceneServer::plan, this));
+  services_.push_back(pnh_.advertiseService("plan", &SceneServer::servePlan, this));
   services_.push_back(pnh_.advertiseService("fk", &SceneServer::fk, this));
-  services_.push_back(pnh_.advertiseService("validate_motion", &SceneServer::validateMotion, this));
+  services_.push_back(pnh_.advertiseService("validate_motion", &SceneServer::serveValidateMotion, this));
   services_.push_back(pnh_.advertiseService("get_world", &SceneServer::getWorld, this));
   // Facts for other processes (a shield that reaches the scene through its services, tools).
   pnh_.setParam("joint_names", scene_->model().jointNames());
@@ -274,7 +277,7 @@ void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
   if (!applyWorld(*msg, &error)) {
     ROS_ERROR("planning_scene: world update '%s' rejected, previous world kept: %s", msg->name.c_str(), error.c_str());
   } else {
-    if (monitor_) monitor_->setWorldSensing(msg->sensed_speed_bound, msg->sensed_unknown_occupied);
+    if (monitor_) monitor_->setWorldSensing(msg->sensed_speed_bound, msg->sensed_unknown_occupied, msg->camera_frames);
     ROS_DEBUG("planning_scene: world '%s' with %zu objects", msg->name.c_str(), msg->objects.size());
   }
 }
@@ -344,27 +347,35 @@ bool SceneServer::checkPath(moverl_msgs::CheckPath::Request& req, moverl_msgs::C
   return true;
 }
 
-bool SceneServer::plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res) {
+void SceneServer::plan(const std::vector<double>& start, const std::vector<double>& goal, const std::string& planner,
+                       double time_limit, PlanResult* out) {
   try {
     double sensed = 0.0;
     std::string blind;
     if (!unstampedMargin(true, &sensed, &blind)) {
-      res.outcome = code(PlanStatus::kMapStale);
-      res.message = "no plan: " + blind;
-      return true;
+      out->status = PlanStatus::kMapStale;
+      out->waypoints.clear();
+      out->message = "no plan: " + blind;
+      return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
     const OctreeMarginScope margin(&scene_->checker(), sensed);
-    scene_->plan(req.start, req.goal, req.planner, req.time_limit, &plan_);
-    res.outcome = static_cast<uint8_t>(plan_.status);
-    toTrajectory(plan_.waypoints, scene_->model().jointNames(), &res.path);
-    res.planning_time = plan_.planning_time;
-    res.path_length = plan_.path_length;
-    res.message = plan_.message;
+    scene_->plan(start, goal, planner, time_limit, out);
   } catch (const std::exception& e) {
-    res.outcome = moverl_msgs::PlanPath::Response::INVALID_REQUEST;
-    res.message = std::string("internal error: ") + e.what();
+    out->status = PlanStatus::kInvalidRequest;
+    out->waypoints.clear();
+    out->message = std::string("internal error: ") + e.what();
   }
+}
+
+bool SceneServer::servePlan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res) {
+  PlanResult result;
+  plan(req.start, req.goal, req.planner, req.time_limit, &result);
+  res.outcome = static_cast<uint8_t>(result.status);
+  toTrajectory(result.waypoints, scene_->model().jointNames(), &res.path);
+  res.planning_time = result.planning_time;
+  res.path_length = result.path_length;
+  res.message = result.message;
   return true;
 }
 
@@ -391,8 +402,7 @@ bool SceneServer::fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Respo
   return true;
 }
 
-bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
-                                 moverl_msgs::ValidateMotion::Response& res) {
+void SceneServer::validate(const MotionRequest& req, MotionCheck* out) {
   try {
     // Sensed obstacles: the margins from the map's age at the state's stamp (may wait for clouds: before the lock,
     // which integration needs).
@@ -400,41 +410,67 @@ bool SceneServer::validateMotion(moverl_msgs::ValidateMotion::Request& req,
     std::string blind;
     // Without a stamp: as of the newest cloud (in lockstep the driver's clock is not this node's).
     // The motions' epoch (the last reset) is stamp - start_time.
-    const double epoch = req.stamp.toSec() - req.start_time;
-    if (monitor_ && !monitor_->margins(req.stamp.isZero() ? monitor_->newestStamp() : req.stamp, req.duration, &sensed,
-                                       &blind, req.stamp.isZero() || !(epoch > 0.0) ? ros::Time() : ros::Time(epoch))) {
-      res.outcome = moverl_msgs::ValidateMotion::Response::MAP_STALE;
-      res.moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
-      res.message = blind + ": failing closed";
-      res.map_age = sensed.map_age;
-      res.last_free_fraction = -1.0;
-      ROS_WARN_THROTTLE(5.0, "planning_scene: %s", res.message.c_str());
-      return true;
+    const double epoch = req.stamp - req.start_time;
+    const bool stamped = req.stamp > 0.0;
+    if (monitor_ && !monitor_->margins(stamped ? ros::Time(req.stamp) : monitor_->newestStamp(), req.duration, &sensed,
+                                       &blind, !stamped || !(epoch > 0.0) ? ros::Time() : ros::Time(epoch))) {
+      *out = MotionCheck();
+      out->outcome = MotionOutcome::kMapStale;
+      out->moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
+      out->message = blind + ": failing closed";
+      out->map_age = sensed.map_age;
+      out->last_free_fraction = -1.0;
+      ROS_WARN_THROTTLE(5.0, "planning_scene: %s", out->message.c_str());
+      return;
     }
-    res.map_age = sensed.map_age;
-    res.sensed_margin = sensed.end;
-    res.plan_horizon = sensed.plan_horizon;
     std::lock_guard<std::mutex> lock(mutex_);
-    scene_->validateMotion(req.start, req.goal, req.plan_on_path_collision, &motion_, req.find_last_free,
-                           req.start_time, req.duration, monitor_ ? &sensed : nullptr);
-    res.moving_obstacles = motion_.moving_obstacles || monitor_ != nullptr;  // sensed obstacles may move
-    res.outcome = static_cast<uint8_t>(motion_.outcome);
-    res.replanned = motion_.replanned;
-    if (motion_.replanned) toTrajectory(motion_.path, scene_->model().jointNames(), &res.path);
-    toPairs(motion_.pairs, &res.pairs);
-    res.message = motion_.message;
-    res.state_check_time = motion_.state_check_time;
-    res.path_check_time = motion_.path_check_time;
-    res.planning_time = motion_.planning_time;
-    res.last_free_fraction = motion_.last_free_fraction;
-    res.last_free_state = motion_.last_free_state;
+    scene_->validateMotion(req, out, monitor_ ? &sensed : nullptr);
+    out->moving_obstacles = out->moving_obstacles || monitor_ != nullptr;  // sensed obstacles may move
+    out->map_age = sensed.map_age;
+    out->sensed_margin = sensed.end;
+    out->plan_horizon = sensed.plan_horizon;
   } catch (const std::exception& e) {
-    res.outcome = moverl_msgs::ValidateMotion::Response::INVALID_REQUEST;
-    res.message = std::string("internal error: ") + e.what();
-    res.last_free_fraction = -1.0;
-    res.last_free_state.clear();
+    *out = MotionCheck();
+    out->outcome = MotionOutcome::kInvalidRequest;
+    out->message = std::string("internal error: ") + e.what();
+    out->last_free_fraction = -1.0;
   }
+}
+
+bool SceneServer::serveValidateMotion(moverl_msgs::ValidateMotion::Request& req,
+                                      moverl_msgs::ValidateMotion::Response& res) {
+  MotionRequest request;
+  request.start = req.start;
+  request.goal = req.goal;
+  request.measured_start = req.measured_start;
+  request.plan_on_path_collision = req.plan_on_path_collision;
+  request.find_last_free = req.find_last_free;
+  request.start_time = req.start_time;
+  request.duration = req.duration;
+  request.stamp = req.stamp.toSec();
+  MotionCheck m;
+  validate(request, &m);
+  res.outcome = static_cast<uint8_t>(m.outcome);
+  res.replanned = m.replanned;
+  res.path = trajectory_msgs::JointTrajectory();
+  if (m.replanned) toTrajectory(m.path, scene_->model().jointNames(), &res.path);
+  toPairs(m.pairs, &res.pairs);
+  res.message = m.message;
+  res.state_check_time = m.state_check_time;
+  res.path_check_time = m.path_check_time;
+  res.planning_time = m.planning_time;
+  res.last_free_fraction = m.last_free_fraction;
+  res.last_free_state = m.last_free_state;
+  res.moving_obstacles = m.moving_obstacles;
+  res.map_age = m.map_age;
+  res.sensed_margin = m.sensed_margin;
+  res.plan_horizon = m.plan_horizon;
   return true;
+}
+
+ros::Time SceneServer::motionEpoch() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return world_msg_.motion_epoch;
 }
 
 }  // namespace moverl_planning_scene

@@ -6,15 +6,29 @@
 
 namespace moverl_planning_scene {
 
-double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch) {
+double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double epoch, std::string* deciding) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  if (last_cloud_stamps.empty()) return kInf;  // nothing seen (start, clear)
+  std::string oldest_frame;
   double oldest = kInf;
-  for (double s : last_cloud_stamps) {
-    if (s < epoch - 1e-3) return kInf;  // seen only before the motions restarted
-    oldest = std::min(oldest, s);
+  for (const CameraSeen& c : cameras) {
+    if (!(c.stamp >= epoch - 1e-3)) {  // never heard from, or seen only before the motions restarted
+      if (deciding != nullptr) *deciding = c.frame;
+      return kInf;
+    }
+    if (c.stamp < oldest) {
+      oldest = c.stamp;
+      oldest_frame = c.frame;
+    }
   }
+  if (deciding != nullptr) *deciding = oldest_frame;
+  if (cameras.empty()) return kInf;  // nothing seen (start, clear)
   return std::max(0.0, stamp - oldest);
+}
+
+double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch) {
+  std::vector<CameraSeen> cameras(last_cloud_stamps.size());
+  for (std::size_t k = 0; k < cameras.size(); ++k) cameras[k].stamp = last_cloud_stamps[k];
+  return sensedMapAge(cameras, stamp, epoch);
 }
 
 bool SensedMarginRule::compute(double map_age, double duration, SensedMargins* out, std::string* why) const {

@@ -105,6 +105,50 @@ TEST(OccupancyMap, HitsFreeSpaceRangeAndRobotPoints) {
   EXPECT_EQ(map->tree()->search(0.0, -1.0, 0.0), nullptr);
 }
 
+/// Issue 23, no blind layer: a point of something else that ends in a cell where robot points end too marks the cell
+/// (a hand held next to a link); the old rule let any robot point silence its cell.
+TEST(OccupancyMap, ACellWithAnObstaclePointIsHitWhateverElseEndsThere) {
+  auto map = makeMap();
+  const Eigen::Vector3d origin(0.0, 0.0, 1.0);
+  // Two points in the cell [0.50, 0.52) x [0, 0.02) x [0, 0.02): one on the robot, one not.
+  integrate(map.get(), {{0.505, 0.005, 0.005}, {0.515, 0.015, 0.015}}, origin,
+            {mps::kPointOnRobot, mps::kPointObstacle});
+  EXPECT_TRUE(map->occupied({0.51, 0.01, 0.01}));
+  // Robot points alone mark nothing, and leave the end cell as it was seen (occupied here: the hand that came close).
+  integrate(map.get(), {{0.505, 0.005, 0.005}}, origin, {mps::kPointOnRobot});
+  EXPECT_TRUE(map->occupied({0.51, 0.01, 0.01}));
+}
+
+/// Issue 23, no blind layer: points on a static object the scene knows (obstacles: sensed) clear the space down to it,
+/// their end cell included: the table's surface cells are seen free, so that only the filter's few millimetres above a
+/// fixture are blind, and a hand lying on the table (its top, centimetres above) marks its cells.
+TEST(OccupancyMap, FixturePointsClearTheirEndCell) {
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-2.0), Eigen::Vector3d::Constant(2.0));
+  o.unknown_occupied = true;
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  const Eigen::Vector3d origin(0.0, 0.0, 1.0);
+  const auto table = plane(0.3, 0.7, -0.2, 0.2, 0.0005, 0.01);  // the table top (z 0.5 mm: cells [0, 0.02))
+  std::vector<std::uint8_t> mask(table.size(), mps::kPointOnFixture);
+  mps::MapUpdate u;
+  map->computeUpdate(table, mask, origin, &u);
+  EXPECT_EQ(u.stats.fixture, table.size());
+  EXPECT_EQ(u.stats.hit_cells, 0u);
+  map->apply(u);
+  EXPECT_FALSE(map->occupied({0.5, 0.0, 0.01}));  // the cell the table's surface points end in: seen free
+  // A hand lying on it, 2.5 cm thick: its top points are obstacles, the table's around it fixture points.
+  auto points = table;
+  for (const auto& p : plane(0.45, 0.55, -0.05, 0.05, 0.025, 0.01)) {
+    points.push_back(p);
+    mask.push_back(mps::kPointObstacle);
+  }
+  integrate(map.get(), points, origin, mask);
+  EXPECT_TRUE(map->occupied({0.5, 0.0, 0.03}));    // the hand's top
+  EXPECT_FALSE(map->occupied({0.35, 0.0, 0.01}));  // the table beside it
+}
+
 /// Something that steps into space seen free many times is occupied in the very next view.
 TEST(OccupancyMap, OneViewMarksAnObstacleInSpaceSeenFree) {
   auto map = makeMap();
@@ -478,11 +522,19 @@ TEST_F(PandaOctomap, UnknownOccupiedAroundTheRobot) {
 /// The margin's arithmetic (README, "A person seen only by cameras"): 1.6 m/s and 0.1 s of map age cost 16 cm.
 TEST(SensedMargin, AgeAndRule) {
   const double inf = std::numeric_limits<double>::infinity();
-  EXPECT_EQ(mps::sensedMapAge({}, 5.0, 0.0), inf);                         // nothing seen
+  EXPECT_EQ(mps::sensedMapAge(std::vector<double>{}, 5.0, 0.0), inf);      // nothing seen
   EXPECT_DOUBLE_EQ(mps::sensedMapAge({4.5, 4.9}, 5.0, 0.0), 0.5);          // the oldest camera decides
   EXPECT_DOUBLE_EQ(mps::sensedMapAge({5.2, 5.1}, 5.0, 0.0), 0.0);          // clouds newer than the state
   EXPECT_EQ(mps::sensedMapAge({4.5, 4.9}, 5.0, 4.7), inf);                 // one camera seen only before the reset
   EXPECT_NEAR(mps::sensedMapAge({4.6995, 4.9}, 5.0, 4.7), 0.3005, 1e-12);  // within the epoch's 1 ms slack
+  // Issue 23: every camera the world lists counts; one never heard from leaves the map blind, and is named.
+  std::string deciding;
+  EXPECT_EQ(mps::sensedMapAge({{"left", 4.9}, {"right", -inf}}, 5.0, 0.0, &deciding), inf);
+  EXPECT_EQ(deciding, "right");
+  EXPECT_NEAR(mps::sensedMapAge({{"left", 4.9}, {"right", 4.6}}, 5.0, 0.0, &deciding), 0.4, 1e-12);
+  EXPECT_EQ(deciding, "right");
+  EXPECT_EQ(mps::sensedMapAge(std::vector<mps::CameraSeen>{}, 5.0, 0.0, &deciding), inf);
+  EXPECT_EQ(deciding, "");
   mps::SensedMarginRule rule;
   rule.speed_bound = 1.6;
   rule.latency = 0.03;

@@ -303,6 +303,56 @@ TEST_F(PandaScene, ValidateMotionLastFree) {
   EXPECT_EQ(mc.last_free_fraction, -1.0);
 }
 
+// Issue 23 item 5: a driver clamps a state a little beyond a limit (0.02 rad of joint 1, about 1.5 cm at the
+// outstretched hand) onto it; the robot stands at the measured state. An obstacle that the measured state touches and
+// the clamped one does not: checked with measured_start, the start is not free.
+TEST_F(PandaScene, TheMeasuredStateBeyondALimitIsChecked) {
+  std::vector<double> clamped = {2.8973, 0.6, 0.0, -1.2, 0.0, 1.8, 0.785};  // joint 1 at its upper limit, reaching out
+  std::vector<double> measured = clamped;
+  measured[0] += 0.02;
+  std::vector<Eigen::Isometry3d> poses;
+  std::string error;
+  ASSERT_TRUE(scene_->fk(clamped, {}, &poses, &error)) << error;
+  const Eigen::Vector3d at_clamped = poses[0].translation();
+  // The measured state is beyond the limit: fk refuses it, so rotate the clamped flange by the same 0.02 rad.
+  const Eigen::Vector3d at_measured = Eigen::AngleAxisd(0.02, Eigen::Vector3d::UnitZ()) * at_clamped;
+  const Eigen::Vector3d u = (at_measured - at_clamped).normalized();
+  // A 10 cm cube in the way, moved away until the clamped state is free: then the measured state still collides.
+  mps::MotionCheck mc;
+  bool found = false;
+  setWorld({});
+  mps::StateCheck free_check;
+  scene_->checkState(clamped, &free_check);
+  ASSERT_EQ(free_check.outcome, mps::CheckOutcome::kValid) << free_check.message;
+  for (double t = 0.0; t < 0.3 && !found; t += 0.001) {
+    const Eigen::Vector3d c = at_clamped + u * (0.05 + t);
+    setWorld({box("cube", 0.1, 0.1, 0.1, c.x(), c.y(), c.z())});
+    mps::StateCheck sc;
+    scene_->checkState(clamped, &sc);
+    if (sc.outcome != mps::CheckOutcome::kValid) continue;
+    mps::MotionRequest req;
+    req.start = clamped;
+    req.goal = clamped;
+    scene_->validateMotion(req, &mc);
+    ASSERT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;  // the clamped state alone: free
+    req.measured_start = measured;
+    scene_->validateMotion(req, &mc);
+    ASSERT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision) << "offset " << t << ": " << mc.message;
+    EXPECT_NE(mc.message.find("measured"), std::string::npos) << mc.message;
+    found = true;
+  }
+  EXPECT_TRUE(found) << "no cube position where the clamped state is free";
+  // A measured state equal to the start changes nothing; a malformed one is an invalid request.
+  mps::MotionRequest req;
+  req.start = req.goal = req.measured_start = kHome;
+  setWorld({});
+  scene_->validateMotion(req, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  req.measured_start = {0.0};
+  scene_->validateMotion(req, &mc);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest);
+}
+
 TEST_F(PandaScene, BadInputsAreInvalidRequests) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   auto with = [](std::size_t i, double v) {
@@ -428,6 +478,38 @@ TEST_F(PandaScene, AcmDisablesAdjacentPairs) {
   EXPECT_EQ(c.acmReason("panda_link0", "panda_hand"), mps::AcmReason::kEnabled);
   EXPECT_EQ(c.acmReason("panda_link1", "panda_hand"), mps::AcmReason::kEnabled);
   EXPECT_EQ(c.acmReason("panda_link8", "panda_hand"), mps::AcmReason::kNoGeometry);
+}
+
+// Issue 23: a pair of links that touch only in a tiny part of the joint space. A 2 m arm (joints about z, then y) ends
+// in a 2 mm ball that meets a 4 mm pin on the base only when both joints are within ~5 mrad of 0: about one in 300,000
+// random configurations, so 20,000 samples call the pair "never" and the old ACM stopped checking it. The search from
+// the samples where the pair came closest finds the touch, and the pair stays checked.
+TEST(Acm, ANeverPairIsConfirmedBySearchNotSampling) {
+  const std::string urdf = R"(<robot name="pin">
+    <link name="base"><collision><origin xyz="2.0 0 0.3"/><geometry><box size="0.004 0.004 0.004"/></geometry>
+      </collision></link>
+    <link name="hub"><collision><geometry><box size="0.02 0.02 0.02"/></geometry></collision></link>
+    <link name="arm"><collision><origin xyz="2.0 0 0"/><geometry><sphere radius="0.001"/></geometry></collision>
+      </link>
+    <joint name="j1" type="revolute"><parent link="base"/><child link="hub"/><axis xyz="0 0 1"/>
+      <limit lower="-3" upper="3" velocity="1" effort="1"/></joint>
+    <joint name="j2" type="revolute"><parent link="hub"/><child link="arm"/><origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>
+      <limit lower="-3" upper="3" velocity="1" effort="1"/></joint>
+  </robot>)";
+  mps::PlanningSceneOptions o = pandaOptions();  // the shipped tunables (self_padding, acm_samples, acm_seed)
+  o.robot = mps::RobotModelOptions();
+  o.robot.joint_names = {"j1", "j2"};
+  std::string error;
+  auto scene = mps::PlanningScene::create(urdf, o, &error);
+  ASSERT_NE(scene, nullptr) << error;
+  EXPECT_EQ(scene->checker().acmReason("base", "arm"), mps::AcmReason::kEnabled);
+  EXPECT_EQ(scene->checker().acmStats().never_refuted, 1);
+  // And the check flags the touch.
+  mps::StateCheck sc;
+  scene->checkState({0.0, 0.0}, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kSelfCollision) << sc.message;
+  scene->checkState({0.1, 0.0}, &sc);
+  EXPECT_EQ(sc.outcome, mps::CheckOutcome::kValid) << sc.message;
 }
 
 TEST(PandaModel, ErrorsNameTheProblem) {

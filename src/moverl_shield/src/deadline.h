@@ -6,6 +6,8 @@
 
 #include <chrono>
 
+#include "moverl_shield/driver_core.h"
+
 namespace moverl_shield {
 
 using SteadyClock = std::chrono::steady_clock;
@@ -21,8 +23,5 @@ inline double wallSeconds() {
 
 /// \brief True when a request's `not_after` (wall seconds, 0: none) has passed: its caller gave up on it.
 inline bool abandoned(double not_after) { return not_after > 0.0 && wallSeconds() > not_after; }
-
-/// \brief How a call with a deadline ended.
-enum class CallEnd { kAnswered, kUnreachable, kTimedOut };
 
 }  // namespace moverl_shield

@@ -56,6 +56,14 @@ std::string clampToLimits(std::vector<double>* q, const std::vector<double>& low
   return "";
 }
 
+std::string clampToLimits(std::vector<double>* q, std::vector<double>* measured, const std::vector<double>& lower,
+                          const std::vector<double>& upper, double tolerance) {
+  *measured = *q;
+  std::string bad = clampToLimits(q, lower, upper, tolerance);
+  if (!bad.empty() || *measured == *q) measured->clear();
+  return bad;
+}
+
 std::vector<double> pathTolerances(double budget, const std::vector<double>& radius_bounds) {
   if (!(budget > 0.0)) throw std::invalid_argument("the tracking budget must be positive");
   std::vector<double> out;

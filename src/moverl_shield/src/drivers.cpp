@@ -26,6 +26,38 @@ trajectory_msgs::JointTrajectory toMsg(const std::vector<std::string>& joints, c
 
 }  // namespace
 
+void fromMsg(const moverl_msgs::ContactReport& msg, ContactReport* out) {
+  out->available = msg.available;
+  out->stamp = toNanos(msg.header.stamp);
+  out->substeps = msg.substeps;
+  out->substeps_in_contact = msg.substeps_in_contact;
+  out->world_contacts = msg.world_contacts;
+  out->self_contacts = msg.self_contacts;
+  out->pairs.resize(msg.pairs.size());
+  for (std::size_t k = 0; k < msg.pairs.size(); ++k) {
+    out->pairs[k].a = msg.pairs[k].a;
+    out->pairs[k].b = msg.pairs[k].b;
+    out->pairs[k].depth = msg.pairs[k].depth;
+  }
+  out->total_contact_substeps = msg.total_contact_substeps;
+}
+
+void toMsg(const ContactReport& r, moverl_msgs::ContactReport* out) {
+  out->available = r.available;
+  out->header.stamp.fromNSec(static_cast<std::uint64_t>(r.stamp));
+  out->substeps = r.substeps;
+  out->substeps_in_contact = r.substeps_in_contact;
+  out->world_contacts = r.world_contacts;
+  out->self_contacts = r.self_contacts;
+  out->pairs.resize(r.pairs.size());
+  for (std::size_t k = 0; k < r.pairs.size(); ++k) {
+    out->pairs[k].a = r.pairs[k].a;
+    out->pairs[k].b = r.pairs[k].b;
+    out->pairs[k].depth = r.pairs[k].depth;
+  }
+  out->total_contact_substeps = r.total_contact_substeps;
+}
+
 // ------------------------------------------------------------------------------------------------ SimServiceDriver
 SimServiceDriver::SimServiceDriver(ros::NodeHandle nh, const std::vector<std::string>& joints,
                                    const std::vector<double>& lower, const std::vector<double>& upper,
@@ -53,12 +85,12 @@ bool SimServiceDriver::adopt(const sensor_msgs::JointState& msg, std::string* er
   RobotState s;
   std::vector<double> v;
   std::string bad = mapper_.extract(msg.name, msg.position, msg.velocity, &s.q, &v);
-  if (bad.empty()) bad = clampToLimits(&s.q, lower_, upper_, options_.limit_tolerance);
+  if (bad.empty()) bad = clampToLimits(&s.q, &s.measured, lower_, upper_, options_.limit_tolerance);
   if (!bad.empty()) {
     *error = bad;
     return false;
   }
-  s.stamp = msg.header.stamp;
+  s.stamp = toNanos(msg.header.stamp);
   state_ = std::move(s);
   have_state_ = true;
   error->clear();
@@ -79,7 +111,7 @@ bool SimServiceDriver::currentState(RobotState* state, std::string* error) {
   return true;
 }
 
-MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, const ros::Time&) {
+MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, double) {
   MoveResult out;
   moverl_msgs::ExecuteTrajectory ex;
   ex.request.trajectory = toMsg(mapper_.joints(), trajectory);
@@ -107,7 +139,7 @@ MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, const ro
       return out;
     }
   }
-  out.contacts = ex.response.contacts;
+  fromMsg(ex.response.contacts, &out.contacts);
   using Res = moverl_msgs::ExecuteTrajectory::Response;
   switch (ex.response.outcome) {
     case Res::SUCCESS:
@@ -126,8 +158,7 @@ MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, const ro
   return out;
 }
 
-bool SimServiceDriver::teleport(const std::vector<double>& q, moverl_msgs::ResetRobot::Response* res,
-                                std::string* error) {
+bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after, std::string* error) {
   moverl_msgs::ResetRobot srv;
   srv.request.positions = q;
   srv.request.not_after = wallSeconds() + options_.result_margin;
@@ -137,13 +168,13 @@ bool SimServiceDriver::teleport(const std::vector<double>& q, moverl_msgs::Reset
              (end == CallEnd::kTimedOut ? " did not answer in time" : " is unreachable (hardware drivers have none)");
     return false;
   }
-  *res = srv.response;
-  if (!res->success) {
-    *error = res->message;
+  if (!srv.response.success) {
+    *error = srv.response.message;
     return false;
   }
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!adopt(res->state, error)) return false;
+  if (!adopt(srv.response.state, error)) return false;
+  *after = state_;
   return true;
 }
 
@@ -261,8 +292,8 @@ bool FollowJointTrajectoryDriver::currentState(RobotState* state, std::string* e
     return false;
   }
   state->q = q_;
-  state->stamp = stamp_;
-  const std::string bad = clampToLimits(&state->q, lower_, upper_, options_.limit_tolerance);
+  state->stamp = toNanos(stamp_);
+  const std::string bad = clampToLimits(&state->q, &state->measured, lower_, upper_, options_.limit_tolerance);
   if (!bad.empty()) {
     *error = "measured state refused: " + bad;
     return false;
@@ -270,7 +301,8 @@ bool FollowJointTrajectoryDriver::currentState(RobotState* state, std::string* e
   return true;
 }
 
-MoveResult FollowJointTrajectoryDriver::execute(const TimedTrajectory& trajectory, const ros::Time& start) {
+MoveResult FollowJointTrajectoryDriver::execute(const TimedTrajectory& trajectory, double start_seconds) {
+  const ros::Time start = start_seconds > 0.0 ? ros::Time(start_seconds) : ros::Time();
   MoveResult out;
   out.contacts.available = false;
   if (!client_->isServerConnected()) {

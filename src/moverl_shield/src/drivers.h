@@ -27,65 +27,29 @@
 
 #include "deadline.h"
 #include "moverl_shield/driver_core.h"
+#include "moverl_shield/shield.h"
 #include "moverl_shield/trajectory.h"
 #include "tcpros.h"
 
 namespace moverl_shield {
 
-/// \brief The robot state a decision starts from.
-struct RobotState {
-  std::vector<double> q;  ///< controlled joints, configured order, clamped into the limits
-  ros::Time stamp;        ///< measurement time on the driver's clock
-};
+/// \brief The joint-state message's stamp as the core's time.
+inline Nanos toNanos(const ros::Time& t) { return static_cast<Nanos>(t.toNSec()); }
+/// \brief moverl_msgs/ContactReport -> the core's (and back).
+void fromMsg(const moverl_msgs::ContactReport& msg, ContactReport* out);
+void toMsg(const ContactReport& report, moverl_msgs::ContactReport* out);
 
-/// \brief How a move ended, as the shield reports it.
-struct MoveResult {
-  DriverEnd end = DriverEnd::kUnreachable;
-  std::int32_t error_code = 0;          ///< control_msgs/FollowJointTrajectoryResult code (0 when none)
-  std::string message;                  ///< the driver's error string, or why the shield gave up
-  moverl_msgs::ContactReport contacts;  ///< ground truth (available=false when the driver has none)
-  double seconds = 0.0;                 ///< wall time spent waiting for the driver
-};
-
-/// \brief Tunables of both drivers (set from config/shield.yaml, where each is commented).
-struct DriverOptions {
-  double result_margin = 2.0;     ///< s a result may come after the move's planned end before the move counts as lost
-  double max_state_age = 0.5;     ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
-  double limit_tolerance = 0.02;  ///< rad (m): states this far beyond a joint limit are clamped onto it
-  double start_lead = 0.02;       ///< s between sending a goal and its start stamp (transport to the controller)
-  double goal_time = 0.5;  ///< s the controller may take after the trajectory's end to settle (goal_time_tolerance)
-  double stopped_velocity_tolerance = 0.01;  ///< rad/s: goal velocity tolerance (at rest)
-};
-
-/// \brief Interface of a robot driver as the shield uses it.
-class Driver {
+/// \brief What both drivers share: the path tolerance sent with every move.
+class RosDriver : public Driver {
  public:
-  virtual ~Driver() = default;
-  /// \brief "follow_joint_trajectory" or "sim_service".
-  virtual std::string name() const = 0;
-  /// \brief Time passes while the shield thinks (moves are stamped ahead and windows cover the latency).
-  virtual bool realTime() const = 0;
-  /// \brief The simulator can place the robot instantly (ResetRobot) and restarts the obstacles' motions then.
-  virtual bool canTeleport() const = 0;
-  /// \brief Contacts are measured (a simulator) rather than unknown.
-  virtual bool sensesContacts() const = 0;
-  /// \brief The state to decide a move from. False with *error (fail closed: no move) when there is none that is fresh,
-  ///        complete and within the limit tolerance. May wait up to max_state_age for a fresh one (real-time drivers).
-  virtual bool currentState(RobotState* state, std::string* error) = 0;
-  /// \brief Execute a timed trajectory whose first point is the current state, starting at `start` (driver clock;
-  ///        ignored by lockstep drivers). Blocks until it ended, failed or passed its deadline (then it is cancelled).
-  virtual MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) = 0;
-  /// \brief Teleport (canTeleport() only). False with *error when the driver is unreachable or refused.
-  virtual bool teleport(const std::vector<double>& q, moverl_msgs::ResetRobot::Response* res, std::string* error) = 0;
-  /// \brief Path (and goal position) tolerance per controlled joint sent with every move from now on.
-  void setPathTolerance(std::vector<double> tolerance) { path_tolerance_ = std::move(tolerance); }
+  void setPathTolerance(const std::vector<double>& tolerance) override { path_tolerance_ = tolerance; }
 
  protected:
   std::vector<double> path_tolerance_;
 };
 
 /// \brief The simulator's lockstep services.
-class SimServiceDriver : public Driver {
+class SimServiceDriver : public RosDriver {
  public:
   SimServiceDriver(ros::NodeHandle nh, const std::vector<std::string>& joints, const std::vector<double>& lower,
                    const std::vector<double>& upper, const std::string& execute_service,
@@ -95,8 +59,8 @@ class SimServiceDriver : public Driver {
   bool canTeleport() const override { return true; }
   bool sensesContacts() const override { return true; }
   bool currentState(RobotState* state, std::string* error) override;
-  MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) override;
-  bool teleport(const std::vector<double>& q, moverl_msgs::ResetRobot::Response* res, std::string* error) override;
+  MoveResult execute(const TimedTrajectory& trajectory, double start) override;
+  bool teleport(const std::vector<double>& q, RobotState* after, std::string* error) override;
 
  private:
   bool adopt(const sensor_msgs::JointState& msg, std::string* error);
@@ -116,7 +80,7 @@ class SimServiceDriver : public Driver {
 };
 
 /// \brief control_msgs/FollowJointTrajectory + sensor_msgs/JointState.
-class FollowJointTrajectoryDriver : public Driver {
+class FollowJointTrajectoryDriver : public RosDriver {
  public:
   /// \param nh a handle whose callbacks run on their own queue and thread (the shield serves its step meanwhile)
   FollowJointTrajectoryDriver(ros::NodeHandle nh, const std::vector<std::string>& joints,
@@ -127,8 +91,8 @@ class FollowJointTrajectoryDriver : public Driver {
   bool canTeleport() const override { return false; }
   bool sensesContacts() const override { return false; }
   bool currentState(RobotState* state, std::string* error) override;
-  MoveResult execute(const TimedTrajectory& trajectory, const ros::Time& start) override;
-  bool teleport(const std::vector<double>&, moverl_msgs::ResetRobot::Response*, std::string* error) override {
+  MoveResult execute(const TimedTrajectory& trajectory, double start) override;
+  bool teleport(const std::vector<double>&, RobotState*, std::string* error) override {
     *error = "a FollowJointTrajectory driver cannot teleport";
     return false;
   }

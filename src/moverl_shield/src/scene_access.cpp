@@ -2,30 +2,36 @@
 
 #include <stdexcept>
 
+#include <moverl_msgs/GetWorld.h>
+#include <moverl_msgs/PlanPath.h>
+#include <moverl_msgs/ValidateMotion.h>
+
 #include "moverl_planning_scene/ros_param.h"
 #include "moverl_planning_scene/scene_server.h"
+#include "tcpros.h"
 
 namespace moverl_shield {
 namespace mps = moverl_planning_scene;
 namespace {
 
-class InProcessScene : public SceneAccess {
+class InProcessScene : public Scene {
  public:
   InProcessScene(ros::NodeHandle nh, const std::string& ns) : server_(nh, ros::NodeHandle(nh, ns)), ns_(ns) {
     std::string error;
     if (!server_.init(&error)) throw std::runtime_error("planning scene (in process, " + ns + "): " + error);
   }
   std::string name() const override { return ns_ + " (in process)"; }
-  CallEnd validate(moverl_msgs::ValidateMotion& vm, double) override {
-    server_.validateMotion(vm.request, vm.response);
+  CallEnd validate(const mps::MotionRequest& request, mps::MotionCheck* answer, double) override {
+    server_.validate(request, answer);
     return CallEnd::kAnswered;
   }
-  CallEnd plan(moverl_msgs::PlanPath& plan, double) override {
-    server_.plan(plan.request, plan.response);
+  CallEnd plan(const std::vector<double>& start, const std::vector<double>& goal, double time_limit,
+               mps::PlanResult* answer, double) override {
+    server_.plan(start, goal, "", time_limit, answer);
     return CallEnd::kAnswered;
   }
-  CallEnd world(moverl_msgs::GetWorld& world, double) override {
-    world.response.world = server_.world();
+  CallEnd motionEpoch(Nanos* epoch, double) override {
+    *epoch = static_cast<Nanos>(server_.motionEpoch().toNSec());
     return CallEnd::kAnswered;
   }
   bool facts(SceneFacts* f, std::string*) override {
@@ -42,7 +48,7 @@ class InProcessScene : public SceneAccess {
   std::string ns_;
 };
 
-class ServiceScene : public SceneAccess {
+class ServiceScene : public Scene {
  public:
   ServiceScene(ros::NodeHandle nh, const std::string& ns)
       : scene_nh_(nh, ns),
@@ -57,9 +63,64 @@ class ServiceScene : public SceneAccess {
     if (!model_) throw std::runtime_error("cannot build the robot model: " + error);
   }
   std::string name() const override { return validate_.name(); }
-  CallEnd validate(moverl_msgs::ValidateMotion& vm, double timeout) override { return validate_.call(vm, timeout); }
-  CallEnd plan(moverl_msgs::PlanPath& plan, double timeout) override { return plan_.call(plan, timeout); }
-  CallEnd world(moverl_msgs::GetWorld& world, double timeout) override { return world_.call(world, timeout); }
+
+  CallEnd validate(const mps::MotionRequest& q, mps::MotionCheck* a, double timeout) override {
+    moverl_msgs::ValidateMotion& vm = vm_;  // reused: no allocation per step once its vectors have grown
+    vm.request.start = q.start;
+    vm.request.goal = q.goal;
+    vm.request.measured_start = q.measured_start;
+    vm.request.plan_on_path_collision = q.plan_on_path_collision;
+    vm.request.find_last_free = q.find_last_free;
+    vm.request.start_time = q.start_time;
+    vm.request.duration = q.duration;
+    vm.request.stamp = q.stamp > 0.0 ? ros::Time(q.stamp) : ros::Time();
+    const CallEnd end = validate_.call(vm, timeout);
+    if (end != CallEnd::kAnswered) return end;
+    const auto& r = vm.response;
+    a->outcome = static_cast<mps::MotionOutcome>(r.outcome);
+    a->replanned = r.replanned;
+    a->path.resize(r.path.points.size());
+    for (std::size_t k = 0; k < r.path.points.size(); ++k) a->path[k] = r.path.points[k].positions;
+    a->pairs.resize(r.pairs.size());
+    for (std::size_t k = 0; k < r.pairs.size(); ++k) {
+      a->pairs[k].a = r.pairs[k].a;
+      a->pairs[k].b = r.pairs[k].b;
+      a->pairs[k].depth = r.pairs[k].depth;
+    }
+    a->message = r.message;
+    a->state_check_time = r.state_check_time;
+    a->path_check_time = r.path_check_time;
+    a->planning_time = r.planning_time;
+    a->last_free_fraction = r.last_free_fraction;
+    a->last_free_state = r.last_free_state;
+    a->moving_obstacles = r.moving_obstacles;
+    a->map_age = r.map_age;
+    a->sensed_margin = r.sensed_margin;
+    a->plan_horizon = r.plan_horizon;
+    return end;
+  }
+  CallEnd plan(const std::vector<double>& start, const std::vector<double>& goal, double time_limit,
+               mps::PlanResult* answer, double timeout) override {
+    moverl_msgs::PlanPath plan;
+    plan.request.start = start;
+    plan.request.goal = goal;
+    plan.request.time_limit = time_limit;
+    const CallEnd end = plan_.call(plan, timeout);
+    if (end != CallEnd::kAnswered) return end;
+    answer->status = static_cast<mps::PlanStatus>(plan.response.outcome);
+    answer->waypoints.clear();
+    for (const auto& p : plan.response.path.points) answer->waypoints.push_back(p.positions);
+    answer->planning_time = plan.response.planning_time;
+    answer->path_length = plan.response.path_length;
+    answer->message = plan.response.message;
+    return end;
+  }
+  CallEnd motionEpoch(Nanos* epoch, double timeout) override {
+    moverl_msgs::GetWorld gw;
+    const CallEnd end = world_.call(gw, timeout);
+    if (end == CallEnd::kAnswered) *epoch = static_cast<Nanos>(gw.response.world.motion_epoch.toNSec());
+    return end;
+  }
   bool facts(SceneFacts* f, std::string* error) override {
     // Published by the scene server once it is up (joint_radius_bounds) or loaded with its YAML (the rest).
     if (!scene_nh_.getParam("joint_radius_bounds", f->joint_radius_bounds) ||
@@ -80,12 +141,13 @@ class ServiceScene : public SceneAccess {
   DirectServiceClient<moverl_msgs::ValidateMotion> validate_;
   DirectServiceClient<moverl_msgs::PlanPath> plan_;
   DirectServiceClient<moverl_msgs::GetWorld> world_;
+  moverl_msgs::ValidateMotion vm_;
   std::unique_ptr<mps::RobotModel> model_;
 };
 
 }  // namespace
 
-std::unique_ptr<SceneAccess> SceneAccess::create(const std::string& mode, ros::NodeHandle nh, const std::string& ns) {
+std::unique_ptr<Scene> createScene(const std::string& mode, ros::NodeHandle nh, const std::string& ns) {
   if (mode == "in_process") return std::make_unique<InProcessScene>(nh, ns);
   if (mode == "service") return std::make_unique<ServiceScene>(nh, ns);
   throw std::runtime_error("unknown ~scene '" + mode + "' (expected in_process or service)");

@@ -89,31 +89,31 @@ std::string validateTarget(const std::vector<double>& target, size_t num_joints)
 Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<double>& start,
                 const std::vector<double>& target) {
   Decision d;
-  const SceneOutcome outcome = answer.outcome;
+  const MotionOutcome outcome = answer.outcome;
   // Unsafe outcomes: what was found, and the verdict when the robot holds still.
   Verdict held;
   switch (outcome) {
-    case SceneOutcome::kValid:
+    case MotionOutcome::kValid:
       d.verdict = Verdict::kSafe;
       d.waypoints = {start, target};
       return d;
-    case SceneOutcome::kSelfCollision:
+    case MotionOutcome::kSelfCollision:
       held = Verdict::kDiscardedSelf;
       break;
-    case SceneOutcome::kPoseCollision:
+    case MotionOutcome::kPoseCollision:
       held = Verdict::kDiscardedPose;
       break;
-    case SceneOutcome::kPathCollision:
+    case MotionOutcome::kPathCollision:
       held = Verdict::kDiscardedPath;
       break;
-    case SceneOutcome::kStartInCollision:
+    case MotionOutcome::kStartInCollision:
       d.verdict = Verdict::kDiscardedStart;
       d.unsafe_cause = static_cast<uint8_t>(outcome);
       return d;
-    case SceneOutcome::kInvalidRequest:
+    case MotionOutcome::kInvalidRequest:
       d.verdict = Verdict::kInvalidRequest;
       return d;
-    case SceneOutcome::kMapStale:  // blind: fail closed, as a discarded action (the episode goes on)
+    case MotionOutcome::kMapStale:  // blind: fail closed, as a discarded action (the episode goes on)
       d.verdict = Verdict::kDiscardedUnseen;
       d.unsafe_cause = static_cast<uint8_t>(outcome);
       return d;
@@ -125,7 +125,7 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
   d.verdict = held;
   switch (strategy) {
     case Strategy::kPlan:
-      if (outcome == SceneOutcome::kPathCollision && answer.replanned && answer.plan.size() >= 2) {
+      if (outcome == MotionOutcome::kPathCollision && answer.replanned && answer.plan.size() >= 2) {
         d.verdict = Verdict::kReplanned;
         d.waypoints = answer.plan;
         // The plan starts at the state the scene checked; execute from the measured state exactly.
@@ -146,7 +146,7 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
   return d;
 }
 
-Decision decide(SceneOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
+Decision decide(MotionOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
                 const std::vector<double>& target) {
   SceneAnswer answer;
   answer.outcome = outcome;

@@ -14,7 +14,7 @@ const std::vector<double> kTarget{0.1, -0.2, 0.05};
 }  // namespace
 
 TEST(Decide, ValidMoveExecutesDirectly) {
-  Decision d = decide(SceneOutcome::kValid, false, {}, kStart, kTarget);
+  Decision d = decide(MotionOutcome::kValid, false, {}, kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kSafe);
   ASSERT_EQ(d.waypoints.size(), 2u);
   EXPECT_EQ(d.waypoints.front(), kStart);
@@ -22,10 +22,10 @@ TEST(Decide, ValidMoveExecutesDirectly) {
 }
 
 TEST(Decide, CollisionsAreDiscardedAndHoldStill) {
-  EXPECT_EQ(decide(SceneOutcome::kSelfCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedSelf);
-  EXPECT_EQ(decide(SceneOutcome::kPoseCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedPose);
-  EXPECT_EQ(decide(SceneOutcome::kStartInCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedStart);
-  Decision path = decide(SceneOutcome::kPathCollision, false, {}, kStart, kTarget);
+  EXPECT_EQ(decide(MotionOutcome::kSelfCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedSelf);
+  EXPECT_EQ(decide(MotionOutcome::kPoseCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedPose);
+  EXPECT_EQ(decide(MotionOutcome::kStartInCollision, false, {}, kStart, kTarget).verdict, Verdict::kDiscardedStart);
+  Decision path = decide(MotionOutcome::kPathCollision, false, {}, kStart, kTarget);
   EXPECT_EQ(path.verdict, Verdict::kDiscardedPath);
   EXPECT_TRUE(path.waypoints.empty());
   EXPECT_TRUE(isDiscarded(path.verdict));
@@ -36,7 +36,7 @@ TEST(Decide, CollisionsAreDiscardedAndHoldStill) {
 TEST(Decide, AStaleSensedMapDiscardsWhateverTheStrategy) {
   for (Strategy s : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe}) {
     SceneAnswer a;
-    a.outcome = SceneOutcome::kMapStale;
+    a.outcome = MotionOutcome::kMapStale;
     a.replanned = true;  // even with a plan or a last free state on offer: nothing is known free
     a.plan = {kStart, kTarget};
     a.last_free_fraction = 0.5;
@@ -45,24 +45,24 @@ TEST(Decide, AStaleSensedMapDiscardsWhateverTheStrategy) {
     EXPECT_EQ(d.verdict, Verdict::kDiscardedUnseen) << strategyName(s);
     EXPECT_TRUE(d.waypoints.empty());
     EXPECT_TRUE(isDiscarded(d.verdict));
-    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(SceneOutcome::kMapStale));
+    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(MotionOutcome::kMapStale));
   }
   EXPECT_EQ(verdictName(Verdict::kDiscardedUnseen), "discarded_unseen");
 }
 
 TEST(Decide, PathCollisionWithPlanExecutesThePlanFromTheMeasuredState) {
   Waypoints plan{{0.001, 0, 0}, {0.05, 0.1, 0}, kTarget};
-  Decision d = decide(SceneOutcome::kPathCollision, true, plan, kStart, kTarget);
+  Decision d = decide(MotionOutcome::kPathCollision, true, plan, kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kReplanned);
   ASSERT_EQ(d.waypoints.size(), 3u);
   EXPECT_EQ(d.waypoints.front(), kStart);
   EXPECT_EQ(d.waypoints.back(), kTarget);
   // A "plan" of fewer than two points cannot be executed: discard.
-  EXPECT_EQ(decide(SceneOutcome::kPathCollision, true, {kTarget}, kStart, kTarget).verdict, Verdict::kDiscardedPath);
+  EXPECT_EQ(decide(MotionOutcome::kPathCollision, true, {kTarget}, kStart, kTarget).verdict, Verdict::kDiscardedPath);
 }
 
 TEST(Decide, UnknownSceneCodeFailsClosed) {
-  Decision d = decide(static_cast<SceneOutcome>(42), false, {}, kStart, kTarget);
+  Decision d = decide(static_cast<MotionOutcome>(42), false, {}, kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kSceneUnavailable);
   EXPECT_TRUE(d.waypoints.empty());
 }
@@ -74,12 +74,12 @@ const std::vector<double> kLastFree{0.04, -0.08, 0.02};  // 40 % of the way to k
 const Strategy kAllStrategies[] = {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe};
 
 // What a scene asked with the strategy's flags would answer (plan / last free state only when requested).
-SceneAnswer answer(Strategy s, SceneOutcome outcome, bool plan_found = true, double last_free = 0.4) {
+SceneAnswer answer(Strategy s, MotionOutcome outcome, bool plan_found = true, double last_free = 0.4) {
   SceneAnswer a;
   a.outcome = outcome;
-  const bool unsafe = outcome == SceneOutcome::kSelfCollision || outcome == SceneOutcome::kPoseCollision ||
-                      outcome == SceneOutcome::kPathCollision;
-  if (outcome == SceneOutcome::kPathCollision && wantsPlan(s) && plan_found) {
+  const bool unsafe = outcome == MotionOutcome::kSelfCollision || outcome == MotionOutcome::kPoseCollision ||
+                      outcome == MotionOutcome::kPathCollision;
+  if (outcome == MotionOutcome::kPathCollision && wantsPlan(s) && plan_found) {
     a.replanned = true;
     a.plan = {kStart, {0.05, 0.1, 0}, kTarget};
   }
@@ -115,23 +115,23 @@ TEST(Strategy, NamesParseAndRoundTrip) {
 
 TEST(Strategy, ValidStartInvalidAndUnknownAreTheSameForEveryStrategy) {
   for (Strategy s : kAllStrategies) {
-    Decision d = decide(s, answer(s, SceneOutcome::kValid), kStart, kTarget);
+    Decision d = decide(s, answer(s, MotionOutcome::kValid), kStart, kTarget);
     EXPECT_EQ(d.verdict, Verdict::kSafe) << strategyName(s);
     EXPECT_EQ(d.waypoints, (Waypoints{kStart, kTarget}));
     EXPECT_EQ(d.unsafe_cause, 0);
     EXPECT_EQ(d.truncated_fraction, -1.0);
     // A start in collision is held even if the scene (wrongly) sent a last free state.
-    SceneAnswer start = answer(s, SceneOutcome::kStartInCollision);
+    SceneAnswer start = answer(s, MotionOutcome::kStartInCollision);
     start.last_free_fraction = 0.5;
     start.last_free_state = kLastFree;
     d = decide(s, start, kStart, kTarget);
     EXPECT_EQ(d.verdict, Verdict::kDiscardedStart);
     EXPECT_TRUE(d.waypoints.empty());
     EXPECT_EQ(d.unsafe_cause, 4);
-    d = decide(s, answer(s, SceneOutcome::kInvalidRequest), kStart, kTarget);
+    d = decide(s, answer(s, MotionOutcome::kInvalidRequest), kStart, kTarget);
     EXPECT_EQ(d.verdict, Verdict::kInvalidRequest);
     EXPECT_TRUE(d.waypoints.empty());
-    d = decide(s, answer(s, static_cast<SceneOutcome>(42)), kStart, kTarget);
+    d = decide(s, answer(s, static_cast<MotionOutcome>(42)), kStart, kTarget);
     EXPECT_EQ(d.verdict, Verdict::kSceneUnavailable);
     EXPECT_TRUE(d.waypoints.empty());
   }
@@ -139,25 +139,25 @@ TEST(Strategy, ValidStartInvalidAndUnknownAreTheSameForEveryStrategy) {
 
 TEST(Strategy, PlanHoldsSelfAndPoseAndReplansThePath) {
   const Strategy s = Strategy::kPlan;
-  Decision d = decide(s, answer(s, SceneOutcome::kSelfCollision), kStart, kTarget);
+  Decision d = decide(s, answer(s, MotionOutcome::kSelfCollision), kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kDiscardedSelf);
   EXPECT_TRUE(d.waypoints.empty());
   EXPECT_EQ(d.unsafe_cause, 1);
-  d = decide(s, answer(s, SceneOutcome::kPoseCollision), kStart, kTarget);
+  d = decide(s, answer(s, MotionOutcome::kPoseCollision), kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kDiscardedPose);
   EXPECT_TRUE(d.waypoints.empty());
   EXPECT_EQ(d.unsafe_cause, 2);
-  d = decide(s, answer(s, SceneOutcome::kPathCollision), kStart, kTarget);
+  d = decide(s, answer(s, MotionOutcome::kPathCollision), kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kReplanned);
   ASSERT_EQ(d.waypoints.size(), 3u);
   EXPECT_EQ(d.waypoints.front(), kStart);
   EXPECT_EQ(d.waypoints.back(), kTarget);
   EXPECT_EQ(d.unsafe_cause, 3);
-  d = decide(s, answer(s, SceneOutcome::kPathCollision, /*plan_found=*/false), kStart, kTarget);
+  d = decide(s, answer(s, MotionOutcome::kPathCollision, /*plan_found=*/false), kStart, kTarget);
   EXPECT_EQ(d.verdict, Verdict::kDiscardedPath);
   EXPECT_TRUE(d.waypoints.empty());
   // A last free state sent anyway is ignored by plan.
-  SceneAnswer a = answer(s, SceneOutcome::kPoseCollision);
+  SceneAnswer a = answer(s, MotionOutcome::kPoseCollision);
   a.last_free_fraction = 0.4;
   a.last_free_state = kLastFree;
   EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, Verdict::kDiscardedPose);
@@ -165,9 +165,9 @@ TEST(Strategy, PlanHoldsSelfAndPoseAndReplansThePath) {
 
 TEST(Strategy, DiscardNeverExecutesAPlanOrATruncatedMove) {
   const Strategy s = Strategy::kDiscard;
-  const std::pair<SceneOutcome, Verdict> cases[] = {{SceneOutcome::kSelfCollision, Verdict::kDiscardedSelf},
-                                                    {SceneOutcome::kPoseCollision, Verdict::kDiscardedPose},
-                                                    {SceneOutcome::kPathCollision, Verdict::kDiscardedPath}};
+  const std::pair<MotionOutcome, Verdict> cases[] = {{MotionOutcome::kSelfCollision, Verdict::kDiscardedSelf},
+                                                     {MotionOutcome::kPoseCollision, Verdict::kDiscardedPose},
+                                                     {MotionOutcome::kPathCollision, Verdict::kDiscardedPath}};
   for (const auto& c : cases) {
     // Even if the scene sent a plan and a last free state (it was not asked to), nothing moves.
     SceneAnswer a = answer(s, c.first);
@@ -186,7 +186,8 @@ TEST(Strategy, DiscardNeverExecutesAPlanOrATruncatedMove) {
 
 TEST(Strategy, LastSafeTruncatesEveryUnsafeActionWithProgress) {
   const Strategy s = Strategy::kLastSafe;
-  for (SceneOutcome o : {SceneOutcome::kSelfCollision, SceneOutcome::kPoseCollision, SceneOutcome::kPathCollision}) {
+  for (MotionOutcome o :
+       {MotionOutcome::kSelfCollision, MotionOutcome::kPoseCollision, MotionOutcome::kPathCollision}) {
     Decision d = decide(s, answer(s, o), kStart, kTarget);
     EXPECT_EQ(d.verdict, Verdict::kTruncated) << static_cast<int>(o);
     EXPECT_EQ(d.waypoints, (Waypoints{kStart, kLastFree}));
@@ -195,7 +196,7 @@ TEST(Strategy, LastSafeTruncatesEveryUnsafeActionWithProgress) {
     EXPECT_TRUE(isDiscarded(d.verdict));  // the action was unsafe: punished
   }
   // A plan sent anyway is never executed by last_safe.
-  SceneAnswer a = answer(s, SceneOutcome::kPathCollision);
+  SceneAnswer a = answer(s, MotionOutcome::kPathCollision);
   a.replanned = true;
   a.plan = {kStart, {0.05, 0.1, 0}, kTarget};
   EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, Verdict::kTruncated);
@@ -203,9 +204,9 @@ TEST(Strategy, LastSafeTruncatesEveryUnsafeActionWithProgress) {
 
 TEST(Strategy, LastSafeWithoutProgressHoldsStill) {
   const Strategy s = Strategy::kLastSafe;
-  const std::pair<SceneOutcome, Verdict> cases[] = {{SceneOutcome::kSelfCollision, Verdict::kDiscardedSelf},
-                                                    {SceneOutcome::kPoseCollision, Verdict::kDiscardedPose},
-                                                    {SceneOutcome::kPathCollision, Verdict::kDiscardedPath}};
+  const std::pair<MotionOutcome, Verdict> cases[] = {{MotionOutcome::kSelfCollision, Verdict::kDiscardedSelf},
+                                                     {MotionOutcome::kPoseCollision, Verdict::kDiscardedPose},
+                                                     {MotionOutcome::kPathCollision, Verdict::kDiscardedPath}};
   for (const auto& c : cases) {
     for (double t : {0.0, -1.0}) {  // no free state beyond the start; not computed
       Decision d = decide(s, answer(s, c.first, true, t), kStart, kTarget);

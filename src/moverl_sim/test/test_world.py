@@ -1,10 +1,11 @@
 import math
 import os
+from pathlib import Path
 
 import pytest
 from conftest import TABLE_WORLD
 
-from moverl_sim.world import World, WorldFileError, load_world, rpy_to_quaternion
+from moverl_sim.world import World, WorldFileError, load_world, rpy_to_quaternion, sensing_problems
 
 
 def test_table_world_is_parsed():
@@ -125,8 +126,10 @@ def test_sensing_unknown_occupied(tmp_path):
     p = tmp_path / "w.yaml"
     p.write_text("name: w\nsensing: {unknown_occupied: true}\n")
     assert load_world(p).sensed_unknown_occupied is True
+    p.write_text("name: w\nsensing: {unknown_occupied: false}\n")
+    assert load_world(p).sensed_unknown_occupied is False  # the file says unknown cells count as free
     p.write_text("name: w\n")
-    assert load_world(p).sensed_unknown_occupied is False  # unknown cells count as free (as in MoveIt)
+    assert load_world(p).sensed_unknown_occupied is True  # fail closed: unseen space may hold a person (issue 23)
 
 
 def test_base_world(tmp_path):
@@ -135,10 +138,55 @@ def test_base_world(tmp_path):
     (tmp_path / "sub" / "b.yaml").write_text("base: ../a.yaml\nname: b\nsensing: {unknown_occupied: true}\n")
     w = load_world(tmp_path / "sub" / "b.yaml")
     assert w.name == "b" and w.goal == (0.1, 0.2, 0.3)  # the base's goal
-    assert w.sensed_speed_bound == 0.16 and w.sensed_unknown_occupied  # sensing: merged key by key
+    # sensing: never from the base (issue 23): the file's own, else the fail-closed defaults
+    assert w.sensed_speed_bound is None and w.sensed_unknown_occupied
     (tmp_path / "a.yaml").write_text("base: sub/b.yaml\nname: a\n")
     with pytest.raises(WorldFileError, match="cycle"):
         load_world(tmp_path / "sub" / "b.yaml")
     (tmp_path / "c.yaml").write_text("base: missing.yaml\nname: c\n")
     with pytest.raises(WorldFileError, match="missing.yaml: world file not found"):
         load_world(tmp_path / "c.yaml")
+
+
+PERSON = """
+  - {id: torso, shape: cylinder, size: [0.58, 0.165], xyz: [0.8, 0.0, 0.43],
+     motion: {type: oscillate, axis: [0, 1, 0], amplitude: 0.15, period: 6.0}}
+"""
+
+
+def test_the_template_cell_does_not_inherit_nothing_moves(tmp_path):
+    """Issue 23: a cell written from the documented template (base: table.yaml, a walking person and cameras added,
+    no sensing:) used to inherit table.yaml's "speed_bound: 0.0  # nothing moves here" and free unknown space. It now
+    gets the scene's default bound (ISO 13855's) and unknown space occupied; its sensing is consistent."""
+    table = Path(__file__).resolve().parents[3] / "worlds" / "table.yaml"
+    cell = tmp_path / "cell.yaml"
+    cell.write_text(
+        "base: %s\nname: cell\nobjects:\n  - {id: table, shape: box, size: [1.5, 0.8, 0.03], xyz: [0.35, 0, -0.015]}"
+        "%s" % (table, PERSON)
+    )
+    w = load_world(cell)
+    assert load_world(table).sensed_speed_bound == 0.0  # the base says nothing moves
+    assert w.sensed_speed_bound is None and w.sensed_unknown_occupied
+    assert len(w.cameras) == 2  # the base's cameras
+    assert sensing_problems(w, 1.6) == []
+
+
+def test_sensing_problems_name_the_file_and_key(tmp_path):
+    p = tmp_path / "w.yaml"
+    cams = (
+        "cameras:\n  - {id: c, xyz: [0, 1, 1], target: [0, 0, 0], width: 4, height: 3, fov: 60, near: 0.1, far: 3, "
+        "rate: 2}\n"
+    )
+    p.write_text("name: w\nobjects:%s%ssensing: {speed_bound: 0.0}\n" % (PERSON, cams))
+    (problem,) = sensing_problems(load_world(p), 1.6)
+    assert str(p) in problem and "'sensing.speed_bound' = 0 m/s" in problem and "torso: 0.1571 m/s" in problem
+    p.write_text("name: w\nobjects:%s%ssensing: {speed_bound: 0.16}\n" % (PERSON, cams))
+    assert sensing_problems(load_world(p), 1.6) == []
+    # No bound in the file: the default applies, and is named when it is too low.
+    p.write_text("name: w\nobjects:%s%s" % (PERSON, cams))
+    (problem,) = sensing_problems(load_world(p), 0.1)
+    assert "no 'sensing.speed_bound'" in problem and "octomap/speed_bound" in problem
+    # No cameras: nothing to sense with.
+    p.write_text("name: w\n")
+    (problem,) = sensing_problems(load_world(p), 1.6)
+    assert "'cameras'" in problem

@@ -63,6 +63,11 @@ struct AcmStats {
   bool from_cache = false;
   double seconds = 0.0;  ///< time spent computing or loading
   int adjacent = 0, rigid = 0, always = 0, never = 0, enabled = 0;
+  /// "Never" pairs: the random samples found them apart, a search for their closest approach (from the samples where
+  /// they came closest) too: the smallest distance (m) it found between two such pairs' padded shapes (not computed
+  /// when loaded from the cache: infinity), and how many pairs it found touching (so checked after all).
+  double never_min_distance = std::numeric_limits<double>::infinity();
+  int never_refuted = 0;
   std::string cache_file;
 };
 
@@ -146,6 +151,16 @@ class FclCollisionChecker : public CollisionChecker {
   void computeAcm();
   bool geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth, bool padded) const;
   bool linkPairCollides(int la, int lb, bool padded);
+  /// Distance (m) between two links' padded shapes at the current transforms; 0 when they touch.
+  double linkPairDistance(int la, int lb);
+  /// Gap (m) between two links' padded bounding spheres at the current transforms (a lower bound of the distance).
+  double sphereGap(int la, int lb) const;
+  /// Keep q among the configurations of the smallest gaps (acm.cpp's kSearchStarts).
+  void keepClosest(double gap, const std::vector<double>& q,
+                   std::vector<std::pair<double, std::vector<double>>>* best) const;
+  /// The smallest distance between two links' padded shapes a pattern search over the joints between them finds,
+  /// from each start configuration (0: they touch).
+  double searchNeverPair(int la, int lb, const std::vector<std::pair<double, std::vector<double>>>& starts);
   void updateTransforms(const double* q);
   std::uint64_t acmKey() const;
   bool loadAcm(const std::string& file);

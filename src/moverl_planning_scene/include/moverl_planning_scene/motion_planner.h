@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "moverl_planning_scene/collision_checker.h"
+#include "moverl_planning_scene/outcomes.h"
 #include "moverl_planning_scene/robot_model.h"
 #include "moverl_planning_scene/unset.h"
 
@@ -22,17 +23,6 @@ struct PlannerOptions {
   double range = kUnset;          ///< max extension of tree planners (rad); 0: OMPL default
   bool simplify = true;           ///< shortcut the solution within the remaining time
   unsigned seed = 0;              ///< OMPL global RNG seed (0: not seeded). Applied once per process.
-};
-
-/// \brief Outcome of a planning call (moverl_msgs/PlanPath's codes). kMapStale: the scene server's sensed map is too
-///        old (or a plan's sensed margin too large) to plan in; the planner itself never returns it.
-enum class PlanStatus {
-  kSuccess = 0,
-  kStartInvalid = 1,
-  kGoalInvalid = 2,
-  kNoSolution = 3,
-  kInvalidRequest = 4,
-  kMapStale = 5
 };
 
 /// \brief Result of a planning call.

@@ -6,10 +6,12 @@
  * marks the cells it crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than
  * max_range mark free space up to max_range only (no-return readings at a camera's far plane clear space this way).
  * Points that belong to the robot itself (a mask computed by the caller, see FclCollisionChecker::robotPointMask) clear
- * the cells before them but mark nothing occupied. Within one cloud a cell hit by any beam stays occupied even when
- * other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to its centre; a cell with
- * any robot point marks nothing). Beams are clipped to `bounds` (the robot's reach and margin). Clearing: when an
- * obstacle moves away, beams now pass through its old cells and turn them free.
+ * the cells before them but mark nothing occupied; points on a static world object the scene knows exactly clear
+ * their end cell too (the beam saw the space down to the object's surface). Within one cloud a cell hit by any beam
+ * stays occupied even when other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to
+ * its centre; a cell where any obstacle point ends is hit, whatever else ends there). Beams are clipped to `bounds`
+ * (the robot's reach and margin). Clearing: when an obstacle moves away, beams now pass through its old cells and turn
+ * them free.
  *
  * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
  * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
@@ -59,11 +61,18 @@ struct OccupancyMapOptions {
   bool unknown_occupied = false;
 };
 
+/// \brief What a point of a cloud is, as computeUpdate's mask says.
+constexpr std::uint8_t kPointObstacle = 0;   ///< anything else: its end cell is hit
+constexpr std::uint8_t kPointOnRobot = 1;    ///< on the robot (self filter): clears the cells before it only
+constexpr std::uint8_t kPointOnFixture = 2;  ///< on a static world object the scene knows exactly (obstacles: sensed):
+                                             ///< clears the cells before it and its end cell
+
 /// \brief What one integration did (logs, tests, the status topic).
 struct MapUpdateStats {
   std::size_t points = 0;         ///< points in the cloud
   std::size_t invalid = 0;        ///< non-finite points (skipped)
   std::size_t robot = 0;          ///< points on the robot (free space before them only)
+  std::size_t fixture = 0;        ///< points on static world objects (free space up to them)
   std::size_t beyond_range = 0;   ///< points beyond max_range (free space only)
   std::size_t hit_cells = 0;      ///< distinct cells marked occupied
   std::size_t free_cells = 0;     ///< distinct cells marked free
@@ -89,8 +98,8 @@ class OccupancyMap {
   static std::unique_ptr<OccupancyMap> create(const OccupancyMapOptions& options, std::string* error);
   ~OccupancyMap();
 
-  /// \brief Beams from origin to every point (all in the map frame). robot_mask: empty, or one flag per point
-  ///        (non-zero: the point is on the robot).
+  /// \brief Beams from origin to every point (all in the map frame). robot_mask: empty, or one value per point
+  ///        (kPointObstacle, kPointOnRobot, kPointOnFixture).
   void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                      const Eigen::Vector3d& origin, MapUpdate* out);
   /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as packed keys from

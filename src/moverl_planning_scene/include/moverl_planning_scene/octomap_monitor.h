@@ -63,8 +63,12 @@ class OctomapMonitor {
   /// \brief The newest integrated cloud's stamp (zero before the first).
   ros::Time newestStamp();
   /// \brief The world's sensing section (World.msg): its speed bound (m/s) replaces octomap/speed_bound (negative:
-  ///        keep it); unknown_occupied switches OccupancyMapOptions::unknown_occupied. Before or after init.
-  void setWorldSensing(double speed_bound, bool unknown_occupied);
+  ///        keep it); unknown_occupied switches OccupancyMapOptions::unknown_occupied; camera_frames are the frames of
+  ///        the cameras it lists, each of which must be heard from (one never heard from leaves the map blind). Before
+  ///        or after init.
+  void setWorldSensing(double speed_bound, bool unknown_occupied, const std::vector<std::string>& camera_frames);
+  /// \brief The world's cameras not heard from since start-up or the last clear.
+  std::vector<std::string> unheardCameras();
 
  private:
   void onJointState(const sensor_msgs::JointState::ConstPtr& msg);
@@ -78,8 +82,9 @@ class OctomapMonitor {
   void drop(const std::string& why);
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
   void publishMarkers();
-  /// Unknown-is-occupied: turns the unobserved cells inside the robot (in the cloud's configurations) and, once per
-  /// world, inside the static world objects free in update_: no camera sees them, no person can be there.
+  /// Unknown-is-occupied: turns free in update_ the unobserved cells that reach into the robot's padding (in the
+  /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it
+  /// stands) and, once per world, into a static object's filter zone. The README states the blind zone this leaves.
   void addKnownFree();
 
   ros::NodeHandle nh_, pnh_;
@@ -102,6 +107,8 @@ class OctomapMonitor {
   std::vector<std::vector<double>> configurations_;
   MapUpdate update_;
   double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;
+  double static_filter_padding_ = 0.0, future_tolerance_ = 0.0, camera_wait_ = 0.0;
+  std::atomic<bool> world_speed_bound_{false};  // the world file gave the speed bound (else octomap/speed_bound)
   std::atomic<uint32_t> clouds_{0}, dropped_{0};
   ros::Time last_cloud_stamp_;  // the last integrated cloud's stamp and frame (reported with drops too)
   std::string last_cloud_frame_;
@@ -117,6 +124,7 @@ class OctomapMonitor {
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
   std::condition_variable stamps_cv_;
   std::map<std::string, ros::Time> frame_stamps_;  // each camera frame's last integrated cloud stamp
+  std::vector<std::string> cameras_;               // the frames of the cameras the world lists
   std::mutex pending_mutex_;                       // guards pending_ and stop_; pending_cv_ wakes the integrator
   std::condition_variable pending_cv_;
   std::map<std::string, sensor_msgs::PointCloud2::ConstPtr> pending_;  // the newest unintegrated cloud per frame

@@ -24,20 +24,6 @@ struct PlanningSceneOptions {
   PlannerOptions planner;
 };
 
-/// \brief Outcome of a state check (values match moverl_msgs/CheckState and CheckPath).
-enum class CheckOutcome { kValid = 0, kSelfCollision = 1, kWorldCollision = 2, kInvalidRequest = 3, kMapStale = 4 };
-
-/// \brief Outcome of validateMotion (values match moverl_msgs/ValidateMotion).
-enum class MotionOutcome {
-  kValid = 0,
-  kSelfCollision = 1,
-  kPoseCollision = 2,
-  kPathCollision = 3,
-  kStartInCollision = 4,
-  kInvalidRequest = 5,
-  kMapStale = 6
-};
-
 /// \brief Result of checkState.
 struct StateCheck {
   CheckOutcome outcome = CheckOutcome::kValid;
@@ -67,6 +53,19 @@ struct SensedMargins {
   double plan_horizon = 0.0;  ///< s (reported: a plan executed slower is not covered)
 };
 
+/// \brief One validateMotion question (moverl_msgs/ValidateMotion's request, whose comments say more).
+struct MotionRequest {
+  std::vector<double> start, goal;
+  /// The state as the driver measured it, when it was clamped onto the joint limits to give `start` (empty: `start`
+  /// is the measured state). The robot stands there, not at `start`: it is checked too, with the segment to `start`.
+  std::vector<double> measured_start;
+  bool plan_on_path_collision = false;
+  bool find_last_free = false;
+  double start_time = 0.0;                                    ///< motion time (s) of the start state
+  double duration = std::numeric_limits<double>::infinity();  ///< s the straight move's window lasts
+  double stamp = 0.0;  ///< absolute time (s, driver clock) of start_time, for the sensed map's age; 0: the newest cloud
+};
+
 /// \brief Result of validateMotion.
 struct MotionCheck {
   MotionOutcome outcome = MotionOutcome::kValid;
@@ -79,7 +78,11 @@ struct MotionCheck {
   /// collision (0: none beyond the start); -1 when not computed. last_free_state is the configuration at t.
   double last_free_fraction = -1.0;
   std::vector<double> last_free_state;
-  bool moving_obstacles = false;  ///< the world has moving obstacles
+  bool moving_obstacles = false;  ///< the world has moving obstacles (or sensed ones, which may move)
+  // Sensed obstacles, as the scene server reports them (0 / -1 without a sensed map):
+  double map_age = -1.0;       ///< s: the map's age at the request's stamp
+  double sensed_margin = 0.0;  ///< m: the predictive margin of the goal and the straight path
+  double plan_horizon = 0.0;   ///< s: a returned plan is covered for a move lasting at most this long (0: any)
 };
 
 /// \brief The planning scene: robot model + FCL checker + OMPL planner. Not thread-safe (callers serialize).
@@ -116,6 +119,8 @@ class PlanningScene {
   ///        by kTimeSlack on both sides); the goal, the start, plans and the last free state against each moving
   ///        obstacle's whole motion envelope. Ignored without moving obstacles. duration = +inf: envelope only.
   /// \param sensed the sensed obstacles' margins (nullptr: none)
+  void validateMotion(const MotionRequest& request, MotionCheck* out, const SensedMargins* sensed = nullptr);
+  /// \brief validateMotion of the request with these fields (tests and tools).
   void validateMotion(const std::vector<double>& start, const std::vector<double>& goal, bool plan_on_path_collision,
                       MotionCheck* out, bool find_last_free = false, double start_time = 0.0,
                       double duration = std::numeric_limits<double>::infinity(), const SensedMargins* sensed = nullptr);
@@ -141,7 +146,7 @@ class PlanningScene {
   std::unique_ptr<RobotModel> model_;
   std::unique_ptr<FclCollisionChecker> checker_;
   std::unique_ptr<MotionPlanner> planner_;
-  std::vector<double> start_, goal_;
+  std::vector<double> start_, goal_, measured_;
   CollisionRequest all_pairs_;
   CollisionRequest verdict_only_{true, true, 0, false};  ///< self + world, no pairs (fast)
   CollisionResult state_result_;

@@ -48,9 +48,15 @@ class SceneServer {
   ///        advertise the services. False with *error (nothing advertised) when something is missing or wrong.
   bool init(std::string* error);
 
-  /// \brief The ValidateMotion and PlanPath services, callable in-process (thread-safe).
-  bool validateMotion(moverl_msgs::ValidateMotion::Request& req, moverl_msgs::ValidateMotion::Response& res);
-  bool plan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res);
+  /// \brief The ValidateMotion question in plain types (what the service answers; thread-safe): the sensed map's
+  ///        margins at the request's stamp, then the scene's validateMotion. A shield hosting the scene calls it
+  ///        directly, without a message.
+  void validate(const MotionRequest& request, MotionCheck* out);
+  /// \brief The PlanPath question in plain types (thread-safe): a plan with the sensed margin of plan_horizon.
+  void plan(const std::vector<double>& start, const std::vector<double>& goal, const std::string& planner,
+            double time_limit, PlanResult* out);
+  /// \brief The obstacles' motion epoch of the current world (driver clock).
+  ros::Time motionEpoch() const;
   /// \brief The world as its source describes it (objects included in octomap mode), with its motion epoch.
   moverl_msgs::World world() const;
 
@@ -71,6 +77,8 @@ class SceneServer {
   bool fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Response& res);
   bool getWorld(moverl_msgs::GetWorld::Request& req, moverl_msgs::GetWorld::Response& res);
   bool unstampedMargin(bool plan, double* margin, std::string* why);
+  bool serveValidateMotion(moverl_msgs::ValidateMotion::Request& req, moverl_msgs::ValidateMotion::Response& res);
+  bool servePlan(moverl_msgs::PlanPath::Request& req, moverl_msgs::PlanPath::Response& res);
 
   ros::NodeHandle nh_, pnh_;
   std::string obstacles_;
@@ -84,8 +92,6 @@ class SceneServer {
   ros::Publisher ready_pub_;
   StateCheck state_;
   PathCheck path_;
-  PlanResult plan_;
-  MotionCheck motion_;
 };
 
 }  // namespace moverl_planning_scene

@@ -6,6 +6,7 @@
  */
 #pragma once
 
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -13,10 +14,22 @@
 
 namespace moverl_planning_scene {
 
+/// \brief A camera as the map's age sees it: its frame and the stamp (s) of its last integrated cloud (-infinity: none
+///        since start-up or the last clear).
+struct CameraSeen {
+  std::string frame;
+  double stamp = -std::numeric_limits<double>::infinity();
+};
+
 /// \brief Map age (s) at time `stamp`: the oldest camera's last integrated cloud decides (a region only one camera
-///        sees is as old as that camera's view). Infinite (blind) when no camera has been seen, or when a camera was
-///        last seen before `epoch` (the world's motions restarted then: its view tells nothing about where moving
-///        things are now; 1 ms of slack, as the epoch is computed from doubles). A cloud newer than the state: 0.
+///        sees is as old as that camera's view). Infinite (blind) when there is no camera, when one has never been
+///        heard from (every camera the world lists counts, also before its first cloud), or when one was last seen
+///        before `epoch` (the world's motions restarted then: its view tells nothing about where moving things are
+///        now; 1 ms of slack, as the epoch is computed from doubles). A cloud newer than the state: 0.
+/// \param deciding set to the camera that decides the age (the first blind one when blind; "" when there is none)
+double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double epoch,
+                    std::string* deciding = nullptr);
+/// \brief sensedMapAge of cameras known only by their stamps (unnamed).
 double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch);
 
 /// \brief The margin rule: an obstacle moving at up to speed_bound (m/s) may have come speed_bound x (map age + the

@@ -35,12 +35,19 @@ class JointStateMapper {
 ///         and its limits (q unchanged).
 std::string clampToLimits(std::vector<double>* q, const std::vector<double>& lower, const std::vector<double>& upper,
                           double tolerance);
+/// \brief clampToLimits, keeping the measured values in *measured when any was clamped (else *measured is cleared):
+///        the robot stands there, and the scene checks that state too (ValidateMotion.measured_start).
+std::string clampToLimits(std::vector<double>* q, std::vector<double>* measured, const std::vector<double>& lower,
+                          const std::vector<double>& upper, double tolerance);
 
 /// \brief Path tolerance per joint (rad or m) that keeps every robot point within `budget` metres of the checked path:
 ///        a joint error e_i moves no robot point more than r_i * e_i (r_i: the scene's bound on the distance of any
 ///        robot point from joint i, 1 for prismatic joints), so giving each of the n joints an equal share,
 ///        e_i = budget / (n * r_i), bounds the sum. \throws std::invalid_argument for a non-positive budget or bound.
 std::vector<double> pathTolerances(double budget, const std::vector<double>& radius_bounds);
+
+/// \brief How a call with a deadline ended.
+enum class CallEnd { kAnswered, kUnreachable, kTimedOut };
 
 /// \brief control_msgs/FollowJointTrajectoryResult error codes (checked against the message in the node).
 enum class TrajectoryError : std::int32_t {

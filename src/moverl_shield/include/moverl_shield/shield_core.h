@@ -11,7 +11,12 @@
 #include <string>
 #include <vector>
 
+#include "moverl_planning_scene/outcomes.h"
+
 namespace moverl_shield {
+
+/// The planning scene's ValidateMotion outcome (its one definition: moverl_planning_scene/outcomes.h).
+using moverl_planning_scene::MotionOutcome;
 
 /// Verdicts of one shield step. Values equal the constants of moverl_msgs/ShieldStep.srv.
 enum class Verdict : uint8_t {
@@ -32,17 +37,6 @@ enum class Verdict : uint8_t {
   kStateUnavailable = 14,   ///< no fresh, complete, in-limits joint state: fail closed
 };
 
-/// Outcome codes of moverl_msgs/ValidateMotion.srv, as the scene reports them.
-enum class SceneOutcome : uint8_t {
-  kValid = 0,
-  kSelfCollision = 1,
-  kPoseCollision = 2,
-  kPathCollision = 3,
-  kStartInCollision = 4,
-  kInvalidRequest = 5,
-  kMapStale = 6,
-};
-
 /// What the shield does with an unsafe action (param ~strategy).
 enum class Strategy : uint8_t {
   kPlan = 0,      ///< "plan" (the paper's): self/pose collisions held still; a path collision replaced by a plan
@@ -61,7 +55,7 @@ using Waypoints = std::vector<std::vector<double>>;
 
 /// \brief The planning scene's answer for one move (the fields of ValidateMotion's response the shield uses).
 struct SceneAnswer {
-  SceneOutcome outcome = SceneOutcome::kInvalidRequest;
+  MotionOutcome outcome = MotionOutcome::kInvalidRequest;
   bool replanned = false;               ///< PATH_COLLISION: a replacement plan was found
   Waypoints plan;                       ///< the replacement plan (start..goal) when replanned
   double last_free_fraction = -1;       ///< t of the last free checked state before the first collision; -1: none
@@ -76,7 +70,7 @@ bool wantsLastFree(Strategy strategy);  ///< find_last_free
 struct Decision {
   Verdict verdict = Verdict::kSceneUnavailable;  ///< fail closed unless decided otherwise
   Waypoints waypoints;  ///< joint configurations to execute, current state first; empty: hold still
-  /// The collision that made the action unsafe (SceneOutcome code: 1 self, 2 pose, 3 path, 4 start); 0: none.
+  /// The collision that made the action unsafe (MotionOutcome code: 1 self, 2 pose, 3 path, 4 start); 0: none.
   uint8_t unsafe_cause = 0;
   double truncated_fraction = -1.0;  ///< kTruncated: fraction of the straight path executed; else -1
 };
@@ -110,7 +104,7 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
 /// \param outcome      ValidateMotion outcome
 /// \param replanned    whether the scene found a replacement plan (PATH_COLLISION only)
 /// \param plan         the replacement plan's waypoints (start..goal) when replanned
-Decision decide(SceneOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
+Decision decide(MotionOutcome outcome, bool replanned, const Waypoints& plan, const std::vector<double>& start,
                 const std::vector<double>& target);
 
 /// \brief Decision of a disabled shield: execute the straight move, unchecked.

@@ -155,7 +155,17 @@ class Simulator:
     """
 
     def __init__(
-        self, urdf_path, joints, base_link, fixed_joint_positions=None, world=None, *, physics_hz, control, gui=False
+        self,
+        urdf_path,
+        joints,
+        base_link,
+        fixed_joint_positions=None,
+        world=None,
+        *,
+        physics_hz,
+        control,
+        gui=False,
+        motion_time_scale=1.0,
     ):
         if control not in ("kinematic", "dynamic"):
             raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
@@ -166,6 +176,11 @@ class Simulator:
         self.physics_hz = physics_hz
         self.dt = 1.0 / physics_hz
         self.world = world if world is not None else World(name="empty")
+        # Experiments only (sim.yaml motion_time_scale): the obstacles play their motions this many times faster than
+        # the world file says; nobody else is told (a person faster than the world's declared speed bound).
+        if not (math.isfinite(motion_time_scale) and motion_time_scale > 0):
+            raise ValueError("motion_time_scale must be positive, got %r" % (motion_time_scale,))
+        self._motion_scale = float(motion_time_scale)
         self._substeps_total = 0
         self._motion_epoch = 0  # substeps_total at the last restart_motions()
         self._total_contact_substeps = 0
@@ -423,6 +438,7 @@ class Simulator:
     def _place_movers(self, t):
         """Put every moving obstacle at its pose at motion time t: each group's base object (its links follow)."""
         cid = self._cid if hasattr(self, "_cid") else self._p._client
+        t *= self._motion_scale
         for body, obj, quat in self._movers:
             pybullet.resetBasePositionAndOrientation(body, obj.position_at(t), quat, physicsClientId=cid)
 
@@ -482,7 +498,7 @@ class Simulator:
 
     def obstacle_positions(self):
         """{object id: (x, y, z)} of every obstacle now (moving ones at the current motion time)."""
-        t = self.motion_time
+        t = self.motion_time * self._motion_scale
         return {o.id: o.position_at(t) for o in self.world.objects}
 
     @property

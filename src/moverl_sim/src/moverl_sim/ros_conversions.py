@@ -39,6 +39,7 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
         msg.goal = list(world.goal) if world.goal is not None else []
     msg.sensed_speed_bound = -1.0 if world.sensed_speed_bound is None else world.sensed_speed_bound
     msg.sensed_unknown_occupied = world.sensed_unknown_occupied
+    msg.camera_frames = [c.optical_frame for c in world.cameras]
     for obj in world.objects:
         o = WorldObjectMsg()
         o.id = obj.id

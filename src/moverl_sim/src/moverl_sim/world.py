@@ -26,6 +26,7 @@ __all__ = [
     "SHAPE_SIZES",
     "MOTION_TYPES",
     "OPTICAL_FRAME_SUFFIX",
+    "sensing_problems",
 ]
 
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
@@ -161,13 +162,18 @@ class World:
     #: margin in the sensed mode; None: not given (the scene's octomap/speed_bound applies).
     sensed_speed_bound: Optional[float] = None
     #: ``sensing: unknown_occupied:``: in the sensed mode, map cells no camera has seen count as occupied (except
-    #: inside the robot and the static objects); False: they count as free.
-    sensed_unknown_occupied: bool = False
+    #: inside the robot and the static objects), the default; False (the file says so): they count as free.
+    sensed_unknown_occupied: bool = True
 
     @property
     def moving_objects(self):
         """The objects that have a motion."""
         return tuple(o for o in self.objects if o.motion is not None)
+
+    @property
+    def fastest_object(self):
+        """The moving object of the largest speed (None when nothing moves)."""
+        return max(self.moving_objects, key=lambda o: o.motion.max_speed, default=None)
 
     def object(self, object_id):
         for obj in self.objects:
@@ -188,8 +194,10 @@ def load_world(path):
 
 
 def _read_world(path, chain):
-    """The top-level mapping of a world file, with its ``base:`` chain merged in: keys given replace the base's, a
-    mapping (sensing:) key by key."""
+    """The top-level mapping of a world file, with its ``base:`` chain merged in: keys given replace the base's, except
+    ``sensing:``, which is never taken from a base. What a cell's cameras may see move, and how fast, is a fact of that
+    cell: a file says it itself or gets the fail-closed defaults (the scene's speed bound, ISO 13855's; unknown space
+    occupied). A base's "nothing moves here" must not reach a cell that lists a walking person."""
     if not os.path.isfile(path):
         raise WorldFileError("%s: world file not found" % path)
     try:
@@ -208,13 +216,9 @@ def _read_world(path, chain):
     merged = _read_world(base_path, chain + (os.path.realpath(path),))
     if not isinstance(merged, dict):
         _fail(path, "base", "%s is not a world file (a mapping)" % base)
-    merged = dict(merged)
+    merged = {k: v for k, v in merged.items() if k != "sensing"}
     for key, value in data.items():
-        if key == "base":
-            continue
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):  # sensing: key by key
-            merged[key] = {**merged[key], **value}
-        else:
+        if key != "base":
             merged[key] = value
     return merged
 
@@ -450,7 +454,7 @@ def parse_world(data, source="<memory>"):
         objects.append(WorldObject(id=oid, shape=shape, size=size, xyz=xyz, rpy=rpy, observed=observed, motion=motion))
     cameras = _parse_cameras(data.get("cameras"), source)
     speed_bound = None
-    unknown_occupied = False
+    unknown_occupied = True
     sensing = data.get("sensing")
     if sensing is not None:
         if not isinstance(sensing, dict):
@@ -464,7 +468,7 @@ def parse_world(data, source="<memory>"):
             speed_bound = _numbers([sensing["speed_bound"]], source, "sensing.speed_bound", 1)[0]
             if not (speed_bound >= 0.0 and math.isfinite(speed_bound)):
                 _fail(source, "sensing.speed_bound", "must be finite and >= 0 (m/s), got %r" % (speed_bound,))
-        unknown_occupied = sensing.get("unknown_occupied", False)
+        unknown_occupied = sensing.get("unknown_occupied", True)
         if not isinstance(unknown_occupied, bool):
             _fail(source, "sensing.unknown_occupied", "expected true or false, got %r" % (unknown_occupied,))
     return World(
@@ -477,3 +481,34 @@ def parse_world(data, source="<memory>"):
         sensed_speed_bound=speed_bound,
         sensed_unknown_occupied=unknown_occupied,
     )
+
+
+def sensing_problems(world, default_speed_bound, default_source="config/planning_scene.yaml's octomap/speed_bound"):
+    """What makes a world unusable with sensed obstacles (obstacles: octomap, both or sensed), as messages naming the
+    file and the key ([] when nothing): a speed bound below the fastest motion the world lists (the predictive margin
+    would not cover it: a person would walk into the robot between two views), and no camera to sense with.
+
+    Args:
+        world: a World.
+        default_speed_bound: the bound (m/s) that applies when the world gives none.
+        default_source: where that default lives, for the message.
+    """
+    problems = []
+    fastest = world.fastest_object
+    if world.sensed_speed_bound is None:
+        bound, where = default_speed_bound, "no 'sensing.speed_bound' (so %s)" % default_source
+    else:
+        bound, where = world.sensed_speed_bound, "'sensing.speed_bound'"
+    if fastest is not None and bound < fastest.motion.max_speed - 1e-9:
+        problems.append(
+            "%s: %s = %g m/s is below the fastest motion the world lists (%s: %.4g m/s): the sensed map's predictive "
+            "margin would not cover it. Give 'sensing: speed_bound:' at least %.4g m/s in this file"
+            % (world.source, where, bound, fastest.id, fastest.motion.max_speed, fastest.motion.max_speed)
+        )
+    if not world.cameras:
+        problems.append(
+            "%s: 'cameras': none listed; the sensed modes see only through the cameras a world file lists (their "
+            "frames are <id>%s; with simulator:=false, the real cameras' clouds carry those frames)"
+            % (world.source, OPTICAL_FRAME_SUFFIX)
+        )
+    return problems

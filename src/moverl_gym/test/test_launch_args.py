@@ -60,6 +60,8 @@ WRONG = {
     "joint_states": ("/joint states", ("ROS name",)),
     "physics_hz": ("-240", ("positive number",)),
     "initial_positions": ("[0, 0]", ("7 controlled joints",)),
+    "mute_cameras": ("[nope]", ("no camera nope", "its cameras: left, right")),
+    "motion_time_scale": ("0", ("positive number",)),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")
@@ -363,3 +365,25 @@ def test_check_script_runs_without_the_moverl_gym_package(tmp_path):
     assert r.returncode == 1 and "obstacles='lidar' is not one of" in r.stderr, r.stderr
     r = subprocess.run([sys.executable, str(script), "mode:=realtime"], capture_output=True, text=True, timeout=30)
     assert r.returncode == 0 and r.stdout == "mode: realtime\n", r.stderr
+
+
+def test_a_sensed_world_whose_bound_is_below_its_motion_is_refused(tmp_path):
+    """Issue 23 item 1: a cell from the documented template (base: table.yaml) with a walking person, whose sensing
+    says nothing moves, is refused in the sensed modes before anything starts, naming the file and the key; without
+    sensing: it takes the fail-closed defaults and is accepted; in objects mode the bound is not used."""
+    cell = tmp_path / "cell.yaml"
+    person = (
+        "  - {id: torso, shape: cylinder, size: [0.58, 0.165], xyz: [0.8, 0.0, 0.43],\n"
+        "     motion: {type: oscillate, axis: [0, 1, 0], amplitude: 0.15, period: 6.0}}\n"
+    )
+    base = repo_root() / "worlds" / "table.yaml"
+    cell.write_text(f"base: {base}\nname: cell\nobjects:\n{person}sensing: {{speed_bound: 0.0}}\n")
+    for mode in ("sensed", "octomap", "both"):
+        t0 = time.perf_counter()
+        with pytest.raises(LaunchArgError) as err:
+            check({"obstacles": mode, "world_file": str(cell)})
+        assert time.perf_counter() - t0 < 2.0
+        assert str(cell) in str(err.value) and "'sensing.speed_bound' = 0 m/s" in str(err.value), err.value
+    check({"obstacles": "objects", "world_file": str(cell)})
+    cell.write_text(f"base: {base}\nname: cell\nobjects:\n{person}")
+    check({"obstacles": "sensed", "world_file": str(cell)})  # ISO's bound, unknown space occupied

@@ -78,7 +78,12 @@ OPEN: dict[str, str] = {
     "joint_states": "a ROS name (the robot's joint-state topic)",
     "physics_hz": "a positive number, or empty",
     "initial_positions": "a list of one number per controlled joint, or empty",
+    "mute_cameras": "a list of camera ids of the world file, or empty (fault injection)",
+    "motion_time_scale": "a positive number, or empty (experiments: obstacles faster than declared)",
 }
+#: The obstacle modes that sense (a depth-camera map): their worlds' sensing assumptions are checked
+#: (moverl_sim.world.sensing_problems).
+SENSED_OBSTACLES = ("octomap", "both", "sensed")
 #: Every argument moverl.launch takes (its derived, value= arguments cannot be set).
 ARGS: tuple[str, ...] = tuple(sorted([*CHOICES, *OPEN]))
 
@@ -206,13 +211,15 @@ def _open_values(values: dict[str, str]) -> list[str]:
     for name in ("action", "joint_states"):
         if name in values and not _ROS_NAME.match(values[name]):
             problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
-    if values.get("physics_hz"):
-        try:
-            hz = float(values["physics_hz"])
-        except ValueError:
-            hz = math.nan
-        if not (math.isfinite(hz) and hz > 0):
-            problems.append(f"physics_hz={values['physics_hz']!r} is not {OPEN['physics_hz']}")
+    for name in ("physics_hz", "motion_time_scale"):
+        if values.get(name):
+            try:
+                x = float(values[name])
+            except ValueError:
+                x = math.nan
+            if not (math.isfinite(x) and x > 0):
+                problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
+    problems += _world_problems(values)
     if values.get("initial_positions"):
         # The robot the graph loads: robot_config, whose default is config/robots/<robot>.yaml.
         if "robot_config" in values:
@@ -223,6 +230,48 @@ def _open_values(values: dict[str, str]) -> list[str]:
             problems.append(_robot_config(path, configs))
         problems.append(_initial_positions(values["initial_positions"], configs.get(path)))
     return problems
+
+
+def _world_problems(values: dict[str, str]) -> list[str]:
+    """The world file the graph would load, where the other arguments need it: its sensing in the sensed modes (a
+    speed bound below its fastest motion, no cameras: moverl_sim.world.sensing_problems), and mute_cameras' ids."""
+    from moverl_sim.world import WorldFileError, load_world, sensing_problems
+
+    sensed = values.get("obstacles", launch_defaults()["obstacles"]) in SENSED_OBSTACLES
+    mute = values.get("mute_cameras", "")
+    if not sensed and not mute:
+        return []
+    path = Path(values["world_file"]) if "world_file" in values else world_file(values.get("world", "table"))
+    if not path.expanduser().is_file():
+        return []  # reported by _open_values
+    try:
+        world = load_world(path.expanduser())
+    except WorldFileError as exc:
+        return [f"world: {exc}"]
+    problems = []
+    if sensed:
+        problems += sensing_problems(world, default_speed_bound())
+    if mute:
+        try:
+            ids = yaml.safe_load(mute)
+        except yaml.YAMLError:
+            ids = None
+        known = [c.id for c in world.cameras]
+        if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
+            problems.append(f"mute_cameras={mute!r} is not {OPEN['mute_cameras']}")
+        elif set(ids) - set(known):
+            problems.append(
+                f"mute_cameras={mute!r}: no camera {', '.join(sorted(set(ids) - set(known)))} in {world.source} "
+                f"(its cameras: {', '.join(known) or 'none'})"
+            )
+    return problems
+
+
+@functools.cache
+def default_speed_bound() -> float:
+    """config/planning_scene.yaml's octomap/speed_bound: the sensed mode's bound when a world file gives none."""
+    with open(repo_root() / "config" / "planning_scene.yaml", encoding="utf-8") as fh:
+        return float(yaml.safe_load(fh)["octomap"]["speed_bound"])
 
 
 @functools.cache

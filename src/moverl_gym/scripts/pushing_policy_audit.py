@@ -115,6 +115,7 @@ def worker(
     control: str | None = None,
     obstacles: str | None = None,
     mode: str | None = None,
+    motion_time_scale: float | None = None,
 ) -> dict:
     from gymnasium.wrappers import TimeLimit
 
@@ -156,6 +157,7 @@ def worker(
                 **({"control": control} if control else {}),
                 **({"obstacles": obstacles} if obstacles else {}),
                 **({"mode": mode} if mode else {}),
+                **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
             },
         ),
         max_episode_steps=max_steps,
@@ -193,6 +195,7 @@ def worker(
         "control": control or "",
         "obstacles": obstacles or "objects",
         "mode": mode or "lockstep",
+        **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
         "shield": shield,
         "steps": steps,
         "episodes": episodes,
@@ -232,10 +235,16 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--obstacles",
-        choices=["objects", "octomap", "sensed"],
+        choices=CHOICES["obstacles"],
         default=None,
-        help="what the shield knows: the world file's objects (default), only what the depth cameras see, or the "
-        "static objects plus what the cameras see (sensed)",
+        help="what the shield knows: the world file's objects (default), only what the depth cameras see (octomap), "
+        "both, or the static objects plus what the cameras see (sensed)",
+    )
+    p.add_argument(
+        "--motion-time-scale",
+        type=float,
+        default=None,
+        help="experiments: the simulator plays the obstacles' motions this many times faster than the world says",
     )
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
@@ -257,6 +266,7 @@ def main(argv=None) -> int:
                     args.control,
                     args.obstacles,
                     args.mode,
+                    args.motion_time_scale,
                 )
             )
         )
@@ -293,6 +303,7 @@ def main(argv=None) -> int:
                         *(["--control", args.control] if args.control else []),
                         *(["--obstacles", args.obstacles] if args.obstacles else []),
                         *(["--mode", args.mode] if args.mode else []),
+                        *(["--motion-time-scale", args.motion_time_scale] if args.motion_time_scale else []),
                     ],
                     f"worker {config.name} {world} shield {shield}",
                 )
@@ -313,9 +324,9 @@ def main(argv=None) -> int:
     if args.robot_config:
         cmd += "".join(f" --robot-config {c}" for c in args.robot_config)
     cmd += " --worlds " + " ".join(args.worlds) + f" --steps {args.steps}"
-    for name in ("shield", "seed", "spread", "switch", "noise", "control", "obstacles", "mode"):
+    for name in ("shield", "seed", "spread", "switch", "noise", "control", "obstacles", "mode", "motion_time_scale"):
         if getattr(args, name) != p.get_default(name):
-            cmd += f" --{name} {getattr(args, name)}"
+            cmd += f" --{name.replace('_', '-')} {getattr(args, name)}"
     if args.out:
         cmd += f" --out {args.out}"
     lines = [

@@ -5,9 +5,9 @@ docs/sensed_person (scripts/pushing_policy_audit.py --obstacles sensed):
   from the OctoMap built from the world's three cameras, with the predictive margin), shield on, a policy that keeps
   pushing toward the walking person and the table: no contact, in lockstep and in real time; and the policy does get
   near them (the shield discards many of its steps);
-* the same policy in a world whose person walks faster than the world declares (sensing: speed_bound): the margin no
-  longer covers where the person may be, and the robot is hit (the speed bound is an assumption the shield cannot
-  check: the README says so).
+* the same policy with a person faster than the world declares (the simulator plays the declared lunge 3.69 times
+  faster, motion_time_scale): the margin no longer covers where the person may be, and the robot is hit (for a person
+  the world file does not list, the speed bound is an assumption the shield cannot check: the README says so).
 """
 
 import csv
@@ -64,6 +64,8 @@ def test_pushing_at_the_sensed_person_realtime(tmp_path):
 
 
 def test_a_person_faster_than_the_declared_bound_is_not_covered(tmp_path):
-    proc, row, text = _audit(tmp_path, FAST_WORLD, 600)
+    # The world declares the lunge within its bound; the simulator plays it 3.69 times faster (0.58 m/s), as a person
+    # the world file does not describe (declared as played, the world is refused: test_launch_args.py).
+    proc, row, text = _audit(tmp_path, FAST_WORLD, 600, "--motion-time-scale", "3.69")
     assert int(row["contacts"]) > 0, "the lunging person never reached the robot: " + text[-3000:]
     assert proc.returncode == 1, text[-3000:]  # the audit reports the shielded run's contacts as a failure

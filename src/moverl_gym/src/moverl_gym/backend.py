@@ -63,6 +63,8 @@ class ResetResult:
     stamp: float
     motion_epoch: float  # when motion time is 0 from now on (driver clock, s)
     unreachable: bool = False  # a planned reset found no path to a free target: try another
+    moves: int = 0  # a planned reset: the driver moves it ran in (sensed obstacles: pieces of reset_horizon)
+    path_duration: float = 0.0  # a planned reset: how long (s) its whole path lasts at the reset's timing
 
 
 class Backend(ABC):

@@ -349,7 +349,10 @@ class MoveRLReachEnv(gym.Env):
         self._obstacles = self._obstacles_at(res.stamp)
         self.ee = self._backend.ee_pose(self.q)
         self.distance = self.task.distance(self.ee[:3])
-        return self._observation(), {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
+        info = {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
+        if res.moves:  # a planned reset (a driver that cannot teleport): what it ran
+            info["reset_moves"], info["reset_path_duration"] = res.moves, res.path_duration
+        return self._observation(), info
 
     def _reset_robot(self, start):
         """Bring the robot to the episode's start through the shield: `start` (a configuration), "current" (stay where
@@ -433,6 +436,7 @@ class MoveRLReachEnv(gym.Env):
                 "distance": self.distance,
                 "is_success": False,
                 "driver_error": None,
+                "message": str(exc),
                 "strategy": "",
                 "planning_time": 0.0,
             }
@@ -464,6 +468,7 @@ class MoveRLReachEnv(gym.Env):
             "distance": d,
             "is_success": success,
             "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,
+            "message": res.message,  # the shield's words on the step (why an action was discarded, ...)
             "graph_restarts": self.graph_restarts,
             "graph_failures": self.graph_failures,
         }

@@ -239,8 +239,8 @@ def _world_problems(values: dict[str, str]) -> list[str]:
 
     sensed = values.get("obstacles", launch_defaults()["obstacles"]) in SENSED_OBSTACLES
     mute = values.get("mute_cameras", "")
-    if not sensed and not mute:
-        return []
+    if not sensed and not mute or not ("world" in values or "world_file" in values):
+        return []  # (the env checks its launch_args before it knows the world; the launch checks them all again)
     path = Path(values["world_file"]) if "world_file" in values else world_file(values.get("world", "table"))
     if not path.expanduser().is_file():
         return []  # reported by _open_values

@@ -339,6 +339,8 @@ class RosBackend(Backend):
             stamp=res.state.header.stamp.to_sec(),
             motion_epoch=res.motion_epoch.to_sec(),
             unreachable=res.unreachable,
+            moves=res.moves,
+            path_duration=res.path_duration,
         )
 
     def check_state(self, q: np.ndarray) -> bool:

@@ -83,6 +83,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->value_.assign(static_cast<std::size_t>(cells), std::numeric_limits<float>::quiet_NaN());
   m->seen_.assign(static_cast<std::size_t>((cells + 63) / 64), 0);
   m->hit_.assign(m->seen_.size(), 0);
+  m->threshold_ = m->tree_->getOccupancyThresLog();
   m->log_hit_ = m->tree_->getProbHitLog();
   m->log_miss_ = m->tree_->getProbMissLog();
   m->clamp_min_ = m->tree_->getClampingThresMinLog();
@@ -292,8 +293,10 @@ void OccupancyMap::apply(const MapUpdate& update) {
     for (std::uint64_t packed : *keys) {
       const std::int64_t c = cell(packed);
       if (c < 0) continue;
+      const bool was = seenOccupiedValue(value_[c], testBit(observed_, c));
       value_[c] = updated(value_[c], u);
       setBit(&observed_, c);
+      seen_occupied_ += static_cast<std::int64_t>(value_[c] >= threshold_) - static_cast<std::int64_t>(was);
       tree_->setNodeValue(unpack(packed), value_[c], lazy);
     }
   }
@@ -302,6 +305,7 @@ void OccupancyMap::apply(const MapUpdate& update) {
 
 void OccupancyMap::clear() {
   tree_->clear();
+  seen_occupied_ = 0;
   std::fill(value_.begin(), value_.end(), std::numeric_limits<float>::quiet_NaN());
   std::fill(observed_.begin(), observed_.end(), 0);
   if (options_.unknown_occupied) fillUnobserved(true);
@@ -391,12 +395,6 @@ void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::ve
   }
 }
 
-std::size_t OccupancyMap::occupiedLeafCount() const {
-  std::size_t n = 0;
-  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
-    if (seenOccupied(*it)) ++n;
-  }
-  return n;
-}
+std::size_t OccupancyMap::occupiedLeafCount() const { return static_cast<std::size_t>(seen_occupied_); }
 
 }  // namespace moverl_planning_scene

@@ -128,7 +128,7 @@ class OccupancyMap {
   /// \brief Centre and edge length of every leaf seen occupied (pruned leaves may be larger than the resolution).
   ///        Leaves occupied only because no camera has seen them (unknown_occupied) are left out: unobservedCount.
   void occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const;
-  /// \brief How many leaves occupiedLeaves lists.
+  /// \brief How many cells a camera saw occupied (kept up to date by apply: no walk of the tree).
   std::size_t occupiedLeafCount() const;
   const OccupancyMapOptions& options() const { return options_; }
 
@@ -154,7 +154,11 @@ class OccupancyMap {
   std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
   std::vector<std::uint64_t> observed_;    ///< a bit per cell: hit or seen free at least once since the last clear
   float log_hit_ = 0.0f, log_miss_ = 0.0f, clamp_min_ = 0.0f, clamp_max_ = 0.0f;
-  float prior_ = 0.0f;  ///< log-odds of an unobserved cell under unknown_occupied
+  float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied
+  float threshold_ = 0.0f;          ///< log-odds of occupancy_threshold
+  std::int64_t seen_occupied_ = 0;  ///< observed cells at or above the threshold
+  /// An observed cell's value counts as seen occupied.
+  bool seenOccupiedValue(float v, bool observed) const { return observed && v >= threshold_; }
 };
 
 }  // namespace moverl_planning_scene

@@ -433,6 +433,7 @@ class MoveRLReachEnv(gym.Env):
                 "contacts": 0,
                 "contact_substeps": 0,
                 "cost": 0.0,
+                "cost_contact": 0.0,
                 "distance": self.distance,
                 "is_success": False,
                 "driver_error": None,
@@ -450,7 +451,7 @@ class MoveRLReachEnv(gym.Env):
             self._obstacles = self._obstacles_at(res.stamp)
         d = self.task.distance(self.ee[:3])
         discarded = verdict in DISCARDED
-        reward = self.task.reward(self.distance, d, discarded)
+        reward = self.task.reward(self.distance, d, discarded, res.contacts)
         self.distance = d
         success = self.task.is_success(d)
         contacts = res.contacts
@@ -465,6 +466,8 @@ class MoveRLReachEnv(gym.Env):
             "contacts": int(contacts),
             "contact_substeps": int(res.contact_substeps),
             "cost": float(discarded or contacts > 0),
+            # Ground truth for constrained RL: 1.0 if the step's motion made contact, NaN when contacts are unknown (-1).
+            "cost_contact": float(contacts > 0) if contacts >= 0 else float("nan"),
             "distance": d,
             "is_success": success,
             "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,

@@ -48,6 +48,8 @@ class MoveRLReachGoalEnv(MoveRLReachEnv):
         super().__init__(**kwargs)
 
     def _setup(self, world, shield, goal) -> None:
+        if self.config.contact_penalty:  # goal_reward (what HER recomputes) has no contact term
+            raise ValueError("contact_penalty is for the flat ids' reward; the goal-conditioned ids take only 0")
         super()._setup(world, shield, goal)
         flat = self.observation_space
         keep = np.ones(flat.shape[0], dtype=bool)

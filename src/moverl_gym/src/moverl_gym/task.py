@@ -20,6 +20,7 @@ class TaskConfig:
     goal_reward: float
     step_penalty: float
     safety_penalty: float
+    contact_penalty: float
     goal_tolerance: float
     max_episode_steps: int
     start_noise: float
@@ -47,7 +48,8 @@ class TaskConfig:
 
 
 class ReachTask:
-    """Reward r = kappa * (d_prev - d) + goal_reward at the goal (else step_penalty) + safety_penalty if discarded."""
+    """Reward r = kappa * (d_prev - d) + goal_reward at the goal (else step_penalty) + safety_penalty if discarded
+    + contact_penalty if the step's motion made contact (ground truth; 0 in config/env.yaml, the paper's reward)."""
 
     def __init__(self, config: TaskConfig, goal):
         self.config = config
@@ -62,12 +64,23 @@ class ReachTask:
     def is_success(self, distance: float) -> bool:
         return distance < self.config.goal_tolerance
 
-    def reward(self, d_prev: float, d: float, discarded: bool) -> float:
+    def reward(self, d_prev: float, d: float, discarded: bool, contacts: int = 0) -> float:
+        """The step's reward.
+
+        Args:
+            d_prev: distance to the goal before the step (m).
+            d: distance after it (m).
+            discarded: the shield discarded (or truncated) the action.
+            contacts: ground-truth contact pairs of the step's motion; -1 (unknown: a driver without contact sensing)
+                adds no contact penalty.
+        """
         c = self.config
         r = c.kappa * (d_prev - d)
         r += c.goal_reward if self.is_success(d) else c.step_penalty
         if discarded:
             r += c.safety_penalty
+        if contacts > 0:
+            r += c.contact_penalty
         return float(r)
 
 

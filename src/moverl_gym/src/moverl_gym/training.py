@@ -27,6 +27,7 @@ EPISODE_FIELDS = [
     "contacts",
     "contact_substeps",
     "cost",
+    "cost_contact",
     "wall_time",
     "truncated",
     "graph_failure",
@@ -89,6 +90,7 @@ class EpisodeLogger(BaseCallback):
             ep["contacts"] += max(info.get("contacts", 0), 0)
             ep["contact_substeps"] += max(info.get("contact_substeps", 0), 0)
             ep["cost"] += info.get("cost", 0.0)
+            ep["cost_contact"] += info.get("cost_contact", 0.0)  # steps with contact; NaN if the driver cannot tell
             ep["graph_restarts"] = info.get("graph_restarts", 0)  # relaunches so far (env recovery)
             if verdict == "graph_failed":  # this episode ended because the graph failed
                 ep["graph_failure"] = 1
@@ -120,6 +122,7 @@ class EpisodeLogger(BaseCallback):
             "contacts",
             "contact_substeps",
             "cost",
+            "cost_contact",
             *DISCARDED_COUNTERS,
         ):
             self.totals[key] += row[key]

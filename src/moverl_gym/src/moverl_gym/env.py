@@ -466,7 +466,7 @@ class MoveRLReachEnv(gym.Env):
             "contacts": int(contacts),
             "contact_substeps": int(res.contact_substeps),
             "cost": float(discarded or contacts > 0),
-            # Ground truth for constrained RL: 1.0 if the step's motion made contact, NaN when contacts are unknown (-1).
+            # Ground truth for constrained RL: 1.0 if the step's motion made contact, NaN if contacts are unknown (-1)
             "cost_contact": float(contacts > 0) if contacts >= 0 else float("nan"),
             "distance": d,
             "is_success": success,

@@ -41,7 +41,7 @@ suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/
   src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
   src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py \
   src/moverl_gym/test/test_goal_render_core.py src/moverl_gym/test/test_run_help.py \
-  src/moverl_gym/test/test_launch_args.py
+  src/moverl_gym/test/test_launch_args.py src/moverl_gym/test/test_constrained.py
 suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
   src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.
@@ -62,8 +62,9 @@ if [ "$live" = 1 ]; then
     -p no:cacheprovider src/moverl_gym/test/test_fuzz_live.py
   suite "pytest soak, short (memory, descriptors, processes, latency sampled; the long run is scripts/soak.py)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_soak_short.py
-  suite "pytest train.py smoke (PPO, SAC, TD3, PPO with 2 envs + evaluate), study --quick" python -m pytest -q -p no:cacheprovider \
-    src/moverl_gym/test/test_train_smoke.py src/moverl_gym/test/test_study.py
+  suite "pytest train.py smoke (PPO, SAC, TD3, PPO with 2 envs + evaluate), study --quick, constrained_study --quick" \
+    python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_train_smoke.py src/moverl_gym/test/test_study.py \
+    src/moverl_gym/test/test_constrained_study_live.py
   suite "pytest every shipped robot x scenario live (check_env, determinism, random policy without contact)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_robot_matrix_live.py
   suite "pytest a person seen only by cameras (pushing policy lockstep and real time, a person faster than the bound; a hand by a fixture or a link, a withheld camera)" \

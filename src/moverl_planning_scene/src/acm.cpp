@@ -14,7 +14,6 @@
 #include <sstream>
 
 #include <fcl/geometry/bvh/BVH_model.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>

@@ -21,7 +21,6 @@
 #include <sstream>
 
 #include <fcl/geometry/bvh/BVH_model.h>
-#include <fcl/geometry/octree/octree.h>
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
 #include <fcl/geometry/shape/cone.h>
@@ -30,7 +29,6 @@
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
-#include <octomap/OcTree.h>
 
 namespace moverl_planning_scene {
 namespace {
@@ -148,15 +146,12 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
       if (result->pairs.size() >= request.max_pairs) return;
     }
   }
-  if (!octree_) return;
+  if (occupancy_ == nullptr || !request.check_occupancy) return;
   int last_link = -1;
   for (int gi : world_geoms_) {
     const Geom& g = geoms_[gi];
     if (g.link == last_link) continue;
-    fcl::CollisionRequestd req(1, false);
-    fcl::CollisionResultd res;
-    fcl::collide(octoGeom(geoms_[gi]).get(), g.world_tf, octree_.get(), Eigen::Isometry3d::Identity(), req, res);
-    if (!res.isCollision()) continue;
+    if (!meetsOccupied(octoGeom(geoms_[gi]), g.world_tf)) continue;
     result->status = CollisionStatus::kWorld;
     if (request.max_pairs == 0) return;
     result->pairs.push_back(ContactPair{names[g.link], kOctomapId, 0.0});
@@ -171,7 +166,50 @@ bool FclCollisionChecker::setOctreeMargin(double margin) {
   return true;
 }
 
+bool FclCollisionChecker::occupancyFree(const double* q) {
+  if (occupancy_ == nullptr) return true;
+  updateTransforms(q);
+  for (int gi : world_geoms_) {
+    if (meetsOccupied(octoGeom(geoms_[gi]), geoms_[gi].world_tf)) return false;
+  }
+  return true;
+}
+
+int FclCollisionChecker::clearanceLevel(const double* q, int lo, int hi) {
+  const int saved = inflation_level_;
+  auto free_at = [&](int level) {
+    setOccupancyInflationLevel(level);
+    return occupancyFree(q);
+  };
+  int result = lo - 1;
+  if (free_at(lo)) {
+    // Bisection: free at `result`, not known above; a shape that meets nothing inflated meets nothing less inflated.
+    result = lo;
+    int top = hi + 1;  // not free (or beyond the range)
+    while (top - result > 1) {
+      const int mid = result + (top - result) / 2;
+      if (free_at(mid)) {
+        result = mid;
+      } else {
+        top = mid;
+      }
+    }
+  }
+  inflation_level_ = saved;
+  return result;
+}
+
 const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octoGeom(Geom& g) {
+  if (inflation_level_ >= 0 && g.inflate) {
+    if (inflation_level_ == 0) return g.geom;
+    if (g.raw_levels.size() <= static_cast<std::size_t>(inflation_level_)) g.raw_levels.resize(inflation_level_ + 1);
+    auto& level = g.raw_levels[inflation_level_];
+    if (!level) {
+      level = g.inflate(inflation_level_ * kMarginStep);
+      level->computeLocalAABB();
+    }
+    return level;
+  }
   if (octo_level_ == 0 || !g.inflate) return g.octo;
   if (g.octo_levels.size() <= static_cast<std::size_t>(octo_level_)) g.octo_levels.resize(octo_level_ + 1);
   auto& level = g.octo_levels[octo_level_];
@@ -182,14 +220,28 @@ const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octo
   return level;
 }
 
-void FclCollisionChecker::setOctree(std::shared_ptr<const octomap::OcTree> tree) {
-  if (!tree) {
-    octree_.reset();
-    return;
+bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
+                                        const Eigen::Isometry3d& tf) const {
+  // The shape's world box (its local box's corners, transformed) bounds the cells to look at; its bounding sphere
+  // rejects boxes cheaply before GJK.
+  const fcl::AABBd& local = shape->aabb_local;
+  Eigen::AlignedBox3d region;
+  for (int c = 0; c < 8; ++c) {
+    region.extend(tf * Eigen::Vector3d(c & 1 ? local.max_.x() : local.min_.x(), c & 2 ? local.max_.y() : local.min_.y(),
+                                       c & 4 ? local.max_.z() : local.min_.z()));
   }
-  auto o = std::make_shared<fcl::OcTree<double>>(tree);
-  o->computeLocalAABB();
-  octree_ = o;
+  const Eigen::Vector3d centre = tf * shape->aabb_center;
+  const double radius = shape->aabb_radius;
+  return occupancy_->anyOccupied(region, [&](const Eigen::AlignedBox3d& box) {
+    if (box.exteriorDistance(centre) > radius) return false;
+    const fcl::Boxd cell(box.sizes());
+    fcl::Transform3d at = fcl::Transform3d::Identity();
+    at.translation() = box.center();
+    fcl::CollisionRequestd req(1, false);
+    fcl::CollisionResultd res;
+    fcl::collide(&cell, at, shape.get(), tf, req, res);
+    return res.isCollision();
+  });
 }
 
 void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,

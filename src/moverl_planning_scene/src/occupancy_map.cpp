@@ -1,34 +1,47 @@
 #include "moverl_planning_scene/occupancy_map.h"
 
-#include <octomap/OcTree.h>
-
 #include <algorithm>
 #include <cmath>
-#include <iterator>
 #include <limits>
-#include <unordered_map>
 
 namespace moverl_planning_scene {
 namespace {
 
-// octomap keys are three 16-bit indices: pack them into one integer for hashing and sorting.
-std::uint64_t pack(const octomap::OcTreeKey& k) {
-  return (static_cast<std::uint64_t>(k[0]) << 32) | (static_cast<std::uint64_t>(k[1]) << 16) | k[2];
-}
-
-octomap::OcTreeKey unpack(std::uint64_t v) {
-  return octomap::OcTreeKey(static_cast<octomap::key_type>(v >> 32), static_cast<octomap::key_type>(v >> 16),
-                            static_cast<octomap::key_type>(v));
-}
-
-octomap::point3d toOcto(const Eigen::Vector3d& p) {
-  return octomap::point3d(static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z()));
-}
-
 bool probability(double p) { return std::isfinite(p) && p > 0.0 && p < 1.0; }
+/// Log-odds as octomap computes them (float).
+float logodds(double p) { return static_cast<float>(std::log(p / (1.0 - p))); }
 
-/// The dense grid's largest size (cells): 8 bytes each.
+/// The dense grid's largest size (cells): 4 bytes each, and a few bits.
 constexpr std::int64_t kMaxCells = 64 * 1024 * 1024;
+/// Cells per block (4^3) and superblock (16^3) edge, as shifts.
+constexpr int kBlockShift = 2, kSuperShift = 4;
+
+/// Clips the segment a -> b to the box: the parameters [*t0, *t1] of the part inside. False when it misses the box.
+bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::AlignedBox3d& box, double* t0,
+               double* t1) {
+  *t0 = 0.0;
+  *t1 = 1.0;
+  const Eigen::Vector3d d = b - a;
+  for (int i = 0; i < 3; ++i) {
+    if (std::fabs(d[i]) < 1e-12) {
+      if (a[i] < box.min()[i] || a[i] > box.max()[i]) return false;
+      continue;
+    }
+    double u0 = (box.min()[i] - a[i]) / d[i], u1 = (box.max()[i] - a[i]) / d[i];
+    if (u0 > u1) std::swap(u0, u1);
+    *t0 = std::max(*t0, u0);
+    *t1 = std::min(*t1, u1);
+    if (*t0 > *t1) return false;
+  }
+  return true;
+}
+
+// The flags of the points that end in a cell (end_): kPresent marks a cell as listed in order_.
+constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4, kPresent = 0x80;
+
+bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
+void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
+void clearBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] &= ~(std::uint64_t{1} << (k & 63)); }
 
 }  // namespace
 
@@ -54,85 +67,67 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
         "one hit must make a cell clamped at clamp_min occupied: logit(prob_hit) + logit(clamp_min) > "
         "logit(occupancy_threshold) (an obstacle stepping into space seen free would show views later)");
   }
-  std::unique_ptr<OccupancyMap> m(new OccupancyMap());
-  m->options_ = o;
-  m->tree_ = std::make_shared<octomap::OcTree>(o.resolution);
-  m->tree_->setProbHit(o.prob_hit);
-  m->tree_->setProbMiss(o.prob_miss);
-  m->tree_->setClampingThresMin(o.clamp_min);
-  m->tree_->setClampingThresMax(o.clamp_max);
-  m->tree_->setOccupancyThres(o.occupancy_threshold);
   if (o.bounds.isEmpty() || !o.bounds.min().allFinite() || !o.bounds.max().allFinite()) {
     return bad("bounds (the mapped box) must be set");
   }
-  octomap::OcTreeKey lo, hi;
-  if (!m->tree_->coordToKeyChecked(toOcto(o.bounds.min()), lo) ||
-      !m->tree_->coordToKeyChecked(toOcto(o.bounds.max()), hi)) {
-    return bad("bounds lie beyond the octree's extent at this resolution");
-  }
+  std::unique_ptr<OccupancyMap> m(new OccupancyMap());
+  m->options_ = o;
+  m->inv_resolution_ = 1.0 / o.resolution;
   std::int64_t cells = 1;
   for (int i = 0; i < 3; ++i) {
-    m->key_min_[i] = lo[i];
-    m->size_[i] = static_cast<std::int64_t>(hi[i]) - lo[i] + 1;
+    const double lo = std::floor(o.bounds.min()[i] * m->inv_resolution_);
+    const double hi = std::floor(o.bounds.max()[i] * m->inv_resolution_);
+    if (!(hi - lo < 1e6)) return bad("bounds hold too many cells at this resolution");
+    m->offset_[i] = static_cast<std::int64_t>(lo);
+    m->size_[i] = static_cast<std::int64_t>(hi - lo) + 1;
     cells *= m->size_[i];
+    if (cells > kMaxCells) break;
   }
   if (cells > kMaxCells) {
     return bad("bounds hold " + std::to_string(cells) + " cells at this resolution (at most " +
                std::to_string(kMaxCells) + ")");
   }
+  const std::size_t words = static_cast<std::size_t>((cells + 63) / 64);
   m->value_.assign(static_cast<std::size_t>(cells), std::numeric_limits<float>::quiet_NaN());
-  m->seen_.assign(static_cast<std::size_t>((cells + 63) / 64), 0);
-  m->hit_.assign(m->seen_.size(), 0);
-  m->threshold_ = m->tree_->getOccupancyThresLog();
-  m->log_hit_ = m->tree_->getProbHitLog();
-  m->log_miss_ = m->tree_->getProbMissLog();
-  m->clamp_min_ = m->tree_->getClampingThresMinLog();
-  m->clamp_max_ = m->tree_->getClampingThresMaxLog();
+  m->seen_.assign(words, 0);
+  m->hit_.assign(words, 0);
+  m->observed_.assign(words, 0);
+  m->occupied_.assign(words, 0);
+  m->clamped_.assign(words, 0);
+  m->end_.assign(static_cast<std::size_t>(cells), 0);
+  std::int64_t blocks = 1, supers = 1;
+  for (int i = 0; i < 3; ++i) {
+    m->blocks_[i] = ((m->size_[i] - 1) >> kBlockShift) + 1;
+    m->supers_[i] = ((m->size_[i] - 1) >> kSuperShift) + 1;
+    blocks *= m->blocks_[i];
+    supers *= m->supers_[i];
+  }
+  m->block_count_.assign(static_cast<std::size_t>(blocks), 0);
+  m->block_dirty_.assign(static_cast<std::size_t>(blocks), 0);
+  m->super_count_.assign(static_cast<std::size_t>(supers), 0);
+  m->log_hit_ = logodds(o.prob_hit);
+  m->log_miss_ = logodds(o.prob_miss);
+  m->clamp_min_ = logodds(o.clamp_min);
+  m->clamp_max_ = logodds(o.clamp_max);
+  m->threshold_ = logodds(o.occupancy_threshold);
   // Unobserved under unknown_occupied: half a miss above the threshold, so one miss turns the cell free and one hit
   // keeps it occupied (octomap's isNodeOccupied: log-odds >= the threshold's).
-  m->prior_ = m->tree_->getOccupancyThresLog() - 0.5f * m->log_miss_;
-  if (!(m->prior_ < m->clamp_max_))
+  m->prior_ = m->threshold_ - 0.5f * m->log_miss_;
+  if (!(m->prior_ < m->clamp_max_)) {
     return bad("occupancy_threshold too close to clamp_max for unknown_occupied's prior");
-  m->observed_.assign(m->seen_.size(), 0);
-  m->options_.unknown_occupied = false;
-  m->setUnknownOccupied(o.unknown_occupied);
+  }
+  m->options_.unknown_occupied = o.unknown_occupied;
+  m->fillUnobserved(o.unknown_occupied);
   return m;
 }
 
 OccupancyMap::~OccupancyMap() = default;
 
-namespace {
-
-/// Clips the segment a -> b to the box: the parameters [*t0, *t1] of the part inside. False when it misses the box.
-bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::AlignedBox3d& box, double* t0,
-               double* t1) {
-  *t0 = 0.0;
-  *t1 = 1.0;
-  const Eigen::Vector3d d = b - a;
-  for (int i = 0; i < 3; ++i) {
-    if (std::fabs(d[i]) < 1e-12) {
-      if (a[i] < box.min()[i] || a[i] > box.max()[i]) return false;
-      continue;
-    }
-    double u0 = (box.min()[i] - a[i]) / d[i], u1 = (box.max()[i] - a[i]) / d[i];
-    if (u0 > u1) std::swap(u0, u1);
-    *t0 = std::max(*t0, u0);
-    *t1 = std::min(*t1, u1);
-    if (*t0 > *t1) return false;
-  }
-  return true;
+std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
+  const std::int64_t i = indexOf(p.x(), 0), j = indexOf(p.y(), 1), k = indexOf(p.z(), 2);
+  if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
+  return (i * size_[1] + j) * size_[2] + k;
 }
-
-constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4;
-
-bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
-void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
-/// apply: beyond this many changed cells, update lazily and fix the inner nodes once.
-constexpr std::size_t kLazyAbove = 20000;
-/// octomap's key of coordinate x is floor(x / resolution) + this (its tree_max_val for 16 levels).
-constexpr std::int64_t kKeyOffset = 32768;
-
-}  // namespace
 
 void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
                                  const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
@@ -142,14 +137,10 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
-  // 1. End points (beyond max_range: cut there, free space only), grouped by cell as octomap's discretized
-  //    insertion does: one beam per end cell. A cell with any robot point marks nothing.
-  // ends: each end cell's flags; order: the end cells in the order of their first point (neighbouring pixels cast
-  // neighbouring beams one after another, which keeps the grid's cells in cache).
-  std::unordered_map<std::uint64_t, std::uint8_t> ends;
-  std::vector<std::uint64_t> order;
-  ends.reserve(points.size());
-  order.reserve(points.size());
+  // 1. End points (beyond max_range: cut there, free space only), grouped by cell as octomap's discretized insertion
+  //    does: one beam per end cell. end_ holds the flags of each cell's points (reset at the end), order_ the cells in
+  //    the order of their first point (neighbouring pixels cast neighbouring beams one after another: cache).
+  order_.clear();
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
     if (!p.allFinite()) {
@@ -171,28 +162,27 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       flag = kRobot;
       ++out->stats.robot;
     }
-    octomap::OcTreeKey key;
-    if (!tree_->coordToKeyChecked(toOcto(end), key)) continue;
-    const auto slot = ends.emplace(pack(key), 0);
-    if (slot.second) order.push_back(pack(key));
-    slot.first->second |= flag;
+    // The end point's cell from float coordinates, as octomap's keys of point3d (a point on a cell boundary in
+    // double may lie across it in float). volatile: g++ -O3 was seen to skip the rounding to float otherwise.
+    const volatile float fx = static_cast<float>(end.x()), fy = static_cast<float>(end.y()),
+                         fz = static_cast<float>(end.z());
+    const std::int64_t c = cellOf(Eigen::Vector3d(fx, fy, fz));
+    if (c < 0) continue;
+    if (end_[c] == 0) order_.push_back(c);
+    end_[c] |= flag | kPresent;
   }
-  // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit" (small enough to stay in cache).
+  // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
   std::fill(seen_.begin(), seen_.end(), 0);
   std::fill(hit_.begin(), hit_.end(), 0);
-  const auto& test = testBit;
-  const auto& set = setBit;
-  // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it); only ends inside
-  // the bounds mark anything. A cell that holds an obstacle point is hit even when robot or fixture points end in it
-  // too: something else is there (a hand next to a link).
+  // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it). A cell that holds an
+  // obstacle point is hit even when robot or fixture points end in it too: something else is there (a hand next to a
+  // link).
   std::size_t hit_cells = 0;
-  for (std::uint64_t packed : order) {
-    if ((ends[packed] & kHit) == 0) continue;
-    const std::int64_t c = cell(packed);
-    if (c < 0) continue;
-    set(&hit_, c);
+  for (std::int64_t c : order_) {
+    if ((end_[c] & kHit) == 0) continue;
+    setBit(&hit_, c);
     ++hit_cells;
-    if (updated(value_[c], log_hit_) != value_[c]) out->hits.push_back(packed);
+    if (!(value_[c] == clamp_max_)) out->hits.push_back(static_cast<std::uint64_t>(c));  // a hit changes it
   }
   // 3. Beams from the origin to each end cell's centre, clipped to the map bounds: the cells from the first one up
   //    to, excluding, the end cell (as octomap's computeRayKeys), each counted once per cloud. A 3D DDA over the
@@ -200,11 +190,13 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   //    (anything above it would have stopped a beam): the end cell counts as seen free too. A robot's end cell marks
   //    nothing: what was seen there stays (a hand that was seen keeps its cells when it comes within the filter).
   std::size_t free_cells = 0;
-  const double inv = 1.0 / options_.resolution;
+  const double inv = inv_resolution_;
   const std::int64_t stride[3] = {size_[1] * size_[2], size_[2], 1};
-  for (std::uint64_t packed_end : order) {
-    const octomap::point3d c = tree_->keyToCoord(unpack(packed_end));
-    const Eigen::Vector3d end(c.x(), c.y(), c.z());
+  for (std::int64_t c_end : order_) {
+    const std::int64_t ek = c_end % size_[2], ej = (c_end / size_[2]) % size_[1], ei = c_end / (size_[1] * size_[2]);
+    const Eigen::Vector3d end = centre(ei, ej, ek);
+    const bool through_end = (end_[c_end] & ~kPresent) == kFixture;
+    end_[c_end] = 0;  // reset for the next cloud
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
     const Eigen::Vector3d a = origin + t0 * (end - origin), b = origin + t1 * (end - origin), d = b - a;
@@ -212,10 +204,9 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     double t_max[3], t_delta[3];
     bool inside = true;
     for (int i = 0; i < 3; ++i) {
-      // The grid index of a coordinate, as octomap's coordToKey computes keys.
       const double fa = std::floor(a[i] * inv), fb = std::floor(b[i] * inv);
-      at[i] = static_cast<std::int64_t>(fa) + kKeyOffset - key_min_[i];
-      last[i] = static_cast<std::int64_t>(fb) + kKeyOffset - key_min_[i];
+      at[i] = static_cast<std::int64_t>(fa) - offset_[i];
+      last[i] = static_cast<std::int64_t>(fb) - offset_[i];
       inside = inside && at[i] >= 0 && at[i] < size_[i];
       if (d[i] > 0.0) {
         step[i] = 1;
@@ -232,15 +223,64 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     }
     if (!inside) continue;
     std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
-    const bool through_end = ends[packed_end] == kFixture;
-    while (at[0] != last[0] || at[1] != last[1] || at[2] != last[2] || through_end) {
-      if (!test(seen_, k) && !test(hit_, k)) {
-        set(&seen_, k);
-        ++free_cells;
-        // A free cell already clamped at clamp_min does not change: the tree is not touched.
-        if (updated(value_[k], log_miss_) != value_[k]) out->misses.push_back(packAt(at));
+    const double res = options_.resolution;
+    for (;;) {
+      const bool at_last = at[0] == last[0] && at[1] == last[1] && at[2] == last[2];
+      if (at_last && !through_end) break;
+      const std::int64_t block =
+          ((at[0] >> kBlockShift) * blocks_[1] + (at[1] >> kBlockShift)) * blocks_[2] + (at[2] >> kBlockShift);
+      if (block_dirty_[block] == 0 && !at_last) {
+        // Every cell of this block is clamped at clamp_min (the free space the cameras keep seeing): a miss changes
+        // none of them. Jump to where the beam leaves the block, unless it ends in it.
+        bool ends_here = true;
+        for (int i = 0; i < 3; ++i) ends_here = ends_here && (last[i] >> kBlockShift) == (at[i] >> kBlockShift);
+        if (!ends_here) {
+          double t_exit = std::numeric_limits<double>::infinity();
+          for (int i = 0; i < 3; ++i) {
+            if (step[i] == 0) continue;
+            const std::int64_t edge =
+                step[i] > 0 ? ((at[i] >> kBlockShift) + 1) << kBlockShift : (at[i] >> kBlockShift) << kBlockShift;
+            t_exit = std::min(t_exit, ((edge + offset_[i]) * res - a[i]) / d[i]);
+          }
+          if (!(t_exit < 1.0)) break;  // rounding: the end lies beyond b
+          // Restart the traversal just past the block's face (the cells there are the ones the beam enters).
+          const double t = t_exit + 1e-9;
+          std::int64_t next[3];
+          bool same = true, out = false;
+          for (int i = 0; i < 3; ++i) {
+            const double x = a[i] + t * d[i];
+            const double f = std::floor(x * inv);
+            next[i] = static_cast<std::int64_t>(f) - offset_[i];
+            out = out || next[i] < 0 || next[i] >= size_[i];
+            same = same && (next[i] >> kBlockShift) == (at[i] >> kBlockShift);
+            if (step[i] > 0) {
+              t_max[i] = t + ((f + 1.0) * res - x) / d[i];
+            } else if (step[i] < 0) {
+              t_max[i] = t + (f * res - x) / d[i];
+            }
+          }
+          if (out) break;
+          if (!same) {
+            for (int i = 0; i < 3; ++i) at[i] = next[i];
+            k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+            continue;
+          }
+          // Rounding kept the point in the block: fall back to the cell steps from it.
+          for (int i = 0; i < 3; ++i) at[i] = next[i];
+          k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+        }
+      } else {
+        const std::uint64_t bit = std::uint64_t{1} << (k & 63);
+        std::uint64_t& seen = seen_[k >> 6];
+        if ((seen & bit) == 0 && (hit_[k >> 6] & bit) == 0) {
+          seen |= bit;
+          ++free_cells;
+          // A free cell already clamped at clamp_min does not change: nothing to apply (a bit, not the value: the
+          // values are 4 bytes a cell, too many for the cache).
+          if ((clamped_[k >> 6] & bit) == 0) out->misses.push_back(static_cast<std::uint64_t>(k));
+        }
+        if (at_last) break;  // a fixture's end cell, done
       }
-      if (at[0] == last[0] && at[1] == last[1] && at[2] == last[2]) break;  // a fixture's end cell, done
       const int axis = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
       if (t_max[axis] > 1.0) break;  // rounding: b's cell was not reached exactly
       at[axis] += step[axis];
@@ -254,61 +294,70 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   out->stats.changed_cells = out->hits.size() + out->misses.size();
 }
 
-std::uint64_t OccupancyMap::packAt(const std::int64_t* at) const {
-  return (static_cast<std::uint64_t>(at[0] + key_min_[0]) << 32) |
-         (static_cast<std::uint64_t>(at[1] + key_min_[1]) << 16) | static_cast<std::uint64_t>(at[2] + key_min_[2]);
-}
-
-std::int64_t OccupancyMap::cell(std::uint64_t packed) const {
-  const std::int64_t i = static_cast<std::int64_t>((packed >> 32) & 0xffff) - key_min_[0];
-  const std::int64_t j = static_cast<std::int64_t>((packed >> 16) & 0xffff) - key_min_[1];
-  const std::int64_t k = static_cast<std::int64_t>(packed & 0xffff) - key_min_[2];
-  if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
-  return (i * size_[1] + j) * size_[2] + k;
-}
-
 // As octomap's updateNode: a new node starts at log-odds 0, then the update is added and clamped.
 float OccupancyMap::updated(float v, float update) const {
   const float base = std::isnan(v) ? 0.0f : v;
   return std::min(std::max(base + update, clamp_min_), clamp_max_);
 }
 
+void OccupancyMap::setValue(std::int64_t c, float v) {
+  const bool was_dirty = !(value_[c] == clamp_min_), dirty = !(v == clamp_min_);  // NaN (unknown) is dirty
+  value_[c] = v;
+  if (dirty) {
+    clearBit(&clamped_, c);
+  } else {
+    setBit(&clamped_, c);
+  }
+  const bool now = v >= threshold_;  // false for NaN (unknown)
+  if (now == testBit(occupied_, c) && was_dirty == dirty) return;
+  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
+  const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+  block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
+  if (now == testBit(occupied_, c)) return;
+  const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  if (now) {
+    setBit(&occupied_, c);
+    ++block_count_[b];
+    ++super_count_[s];
+  } else {
+    clearBit(&occupied_, c);
+    --block_count_[b];
+    --super_count_[s];
+  }
+}
+
 void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out) {
-  for (std::uint64_t packed : keys) {
-    const std::int64_t c = cell(packed);
-    if (c < 0 || testBit(observed_, c) || testBit(hit_, c) || testBit(seen_, c)) continue;
+  for (std::uint64_t key : keys) {
+    const auto c = static_cast<std::int64_t>(key);
+    if (c < 0 || c >= static_cast<std::int64_t>(value_.size()) || testBit(observed_, c) || testBit(hit_, c) ||
+        testBit(seen_, c)) {
+      continue;
+    }
     setBit(&seen_, c);
-    out->misses.push_back(packed);  // prior + one miss: free
+    out->misses.push_back(key);  // prior + one miss: free
     ++out->stats.known_free;
     ++out->stats.changed_cells;
   }
 }
 
 void OccupancyMap::apply(const MapUpdate& update) {
-  // Few changes (the usual cloud once the scene is known): each update fixes its parents on the way (and prunes).
-  // Many (the first views): lazy updates, then one pass over the inner nodes.
-  const bool lazy = update.hits.size() + update.misses.size() > kLazyAbove;
-  for (const auto* keys : {&update.hits, &update.misses}) {
-    const float u = keys == &update.hits ? log_hit_ : log_miss_;
-    for (std::uint64_t packed : *keys) {
-      const std::int64_t c = cell(packed);
-      if (c < 0) continue;
-      const bool was = seenOccupiedValue(value_[c], testBit(observed_, c));
-      value_[c] = updated(value_[c], u);
+  for (const auto* cells : {&update.hits, &update.misses}) {
+    const float u = cells == &update.hits ? log_hit_ : log_miss_;
+    for (std::uint64_t key : *cells) {
+      const auto c = static_cast<std::int64_t>(key);
+      if (c < 0 || c >= static_cast<std::int64_t>(value_.size())) continue;
+      const bool was = testBit(observed_, c) && value_[c] >= threshold_;
+      setValue(c, updated(value_[c], u));
       setBit(&observed_, c);
       seen_occupied_ += static_cast<std::int64_t>(value_[c] >= threshold_) - static_cast<std::int64_t>(was);
-      tree_->setNodeValue(unpack(packed), value_[c], lazy);
     }
   }
-  if (lazy) tree_->updateInnerOccupancy();  // inner nodes hold their children's maximum (FCL prunes free subtrees)
 }
 
 void OccupancyMap::clear() {
-  tree_->clear();
-  seen_occupied_ = 0;
-  std::fill(value_.begin(), value_.end(), std::numeric_limits<float>::quiet_NaN());
   std::fill(observed_.begin(), observed_.end(), 0);
-  if (options_.unknown_occupied) fillUnobserved(true);
+  seen_occupied_ = 0;
+  fillUnobserved(options_.unknown_occupied);
 }
 
 void OccupancyMap::setUnknownOccupied(bool on) {
@@ -318,21 +367,28 @@ void OccupancyMap::setUnknownOccupied(bool on) {
 }
 
 void OccupancyMap::fillUnobserved(bool on) {
-  // The tree is rebuilt from the grid (deleting single leaves of pruned nodes trips octomap's node assertions).
   const float unknown = std::numeric_limits<float>::quiet_NaN();
-  tree_->clear();
+  std::fill(occupied_.begin(), occupied_.end(), 0);
+  std::fill(block_count_.begin(), block_count_.end(), 0);
+  std::fill(super_count_.begin(), super_count_.end(), 0);
+  // Every cell counts as dirty (unknown) until setValue says otherwise.
   std::int64_t at[3];
-  std::int64_t k = 0;
-  for (at[0] = 0; at[0] < size_[0]; ++at[0]) {
-    for (at[1] = 0; at[1] < size_[1]; ++at[1]) {
-      for (at[2] = 0; at[2] < size_[2]; ++at[2], ++k) {
-        if (!testBit(observed_, k)) value_[k] = on ? prior_ : unknown;
-        if (!std::isnan(value_[k])) tree_->setNodeValue(unpack(packAt(at)), value_[k], /*lazy_eval=*/true);
+  for (at[0] = 0; at[0] < blocks_[0]; ++at[0]) {
+    for (at[1] = 0; at[1] < blocks_[1]; ++at[1]) {
+      for (at[2] = 0; at[2] < blocks_[2]; ++at[2]) {
+        std::int64_t n = 1;
+        for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << kBlockShift) - (at[i] << kBlockShift);
+        block_dirty_[(at[0] * blocks_[1] + at[1]) * blocks_[2] + at[2]] = static_cast<std::uint8_t>(n);
       }
     }
   }
-  tree_->updateInnerOccupancy();
-  tree_->prune();  // blocks of equal cells (the prior, space clamped free) collapse into larger leaves
+  const auto cells = static_cast<std::int64_t>(value_.size());
+  for (std::int64_t c = 0; c < cells; ++c) {
+    if (!testBit(observed_, c)) value_[c] = on ? prior_ : unknown;
+    const float v = value_[c];
+    value_[c] = unknown;  // setValue counts from an unoccupied, dirty cell
+    setValue(c, v);
+  }
 }
 
 void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
@@ -344,22 +400,18 @@ void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<E
   const double r = options_.resolution;
   std::int64_t lo[3], hi[3];
   for (int i = 0; i < 3; ++i) {
-    lo[i] = std::max<std::int64_t>(
-        0, static_cast<std::int64_t>(std::ceil(box.min()[i] / r - 0.5)) + kKeyOffset - key_min_[i]);
-    hi[i] = std::min<std::int64_t>(
-        size_[i] - 1, static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) + kKeyOffset - key_min_[i]);
+    lo[i] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(box.min()[i] / r - 0.5)) - offset_[i]);
+    hi[i] = std::min<std::int64_t>(size_[i] - 1,
+                                   static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) - offset_[i]);
     if (lo[i] > hi[i]) return;
   }
-  std::int64_t at[3];
-  for (at[0] = lo[0]; at[0] <= hi[0]; ++at[0]) {
-    for (at[1] = lo[1]; at[1] <= hi[1]; ++at[1]) {
-      for (at[2] = lo[2]; at[2] <= hi[2]; ++at[2]) {
-        const std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
-        if (testBit(observed_, k)) continue;
-        const std::uint64_t packed = packAt(at);
-        const octomap::point3d c = tree_->keyToCoord(unpack(packed));
-        centers->emplace_back(c.x(), c.y(), c.z());
-        keys->push_back(packed);
+  for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
+      for (std::int64_t k = lo[2]; k <= hi[2]; ++k) {
+        const std::int64_t c = (i * size_[1] + j) * size_[2] + k;
+        if (testBit(observed_, c)) continue;
+        centers->push_back(centre(i, j, k));
+        keys->push_back(static_cast<std::uint64_t>(c));
       }
     }
   }
@@ -372,29 +424,95 @@ std::size_t OccupancyMap::unobservedCount() const {
   return value_.size() - seen;
 }
 
-std::shared_ptr<const octomap::OcTree> OccupancyMap::tree() const { return tree_; }
-
 bool OccupancyMap::occupied(const Eigen::Vector3d& p) const {
-  const octomap::OcTreeNode* n = tree_->search(toOcto(p));
-  return n != nullptr && tree_->isNodeOccupied(n);
+  const std::int64_t c = cellOf(p);
+  return c >= 0 && testBit(occupied_, c);
 }
 
-// Unobserved cells hold exactly the prior (pruned blocks of them too); an observed cell's log-odds is the prior or 0
-// plus hits and misses, clamped, never the prior itself in practice.
-bool OccupancyMap::seenOccupied(const octomap::OcTreeNode& node) const {
-  return tree_->isNodeOccupied(node) && !(options_.unknown_occupied && node.getLogOdds() == prior_);
+bool OccupancyMap::observed(const Eigen::Vector3d& p) const {
+  const std::int64_t c = cellOf(p);
+  return c >= 0 && testBit(observed_, c);
+}
+
+float OccupancyMap::logOdds(const Eigen::Vector3d& p) const {
+  const std::int64_t c = cellOf(p);
+  return c >= 0 ? value_[c] : std::numeric_limits<float>::quiet_NaN();
 }
 
 void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const {
   centers->clear();
   if (sizes != nullptr) sizes->clear();
-  for (auto it = tree_->begin_leafs(), end = tree_->end_leafs(); it != end; ++it) {
-    if (!seenOccupied(*it)) continue;
-    centers->emplace_back(it.getX(), it.getY(), it.getZ());
-    if (sizes != nullptr) sizes->push_back(it.getSize());
+  for (std::size_t w = 0; w < occupied_.size(); ++w) {
+    std::uint64_t bits = occupied_[w] & observed_[w];  // seen occupied: not the unknown_occupied prior
+    while (bits != 0) {
+      const auto c = static_cast<std::int64_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits)));
+      bits &= bits - 1;
+      centers->push_back(centre(c / (size_[1] * size_[2]), (c / size_[2]) % size_[1], c % size_[2]));
+      if (sizes != nullptr) sizes->push_back(options_.resolution);
+    }
   }
 }
 
 std::size_t OccupancyMap::occupiedLeafCount() const { return static_cast<std::size_t>(seen_occupied_); }
+
+bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const {
+  std::int64_t lo[3], hi[3];
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = std::max<std::int64_t>(0, indexOf(region.min()[i], i));
+    hi[i] = std::min<std::int64_t>(size_[i] - 1, indexOf(region.max()[i], i));
+    if (lo[i] > hi[i]) return false;
+  }
+  const double r = options_.resolution;
+  // The box of grid cells [a, b] (inclusive) per axis.
+  auto box = [&](const std::int64_t* a, const std::int64_t* b) {
+    return Eigen::AlignedBox3d(
+        Eigen::Vector3d((a[0] + offset_[0]) * r, (a[1] + offset_[1]) * r, (a[2] + offset_[2]) * r),
+        Eigen::Vector3d((b[0] + offset_[0] + 1) * r, (b[1] + offset_[1] + 1) * r, (b[2] + offset_[2] + 1) * r));
+  };
+  // The cells [a, b] of a (super)block at index (bi, bj, bk) with edge 2^shift, clipped to the grid.
+  auto span = [&](const std::int64_t* at, int shift, std::int64_t* a, std::int64_t* b) {
+    std::int64_t n = 1;
+    for (int i = 0; i < 3; ++i) {
+      a[i] = at[i] << shift;
+      b[i] = std::min(size_[i] - 1, ((at[i] + 1) << shift) - 1);
+      n *= b[i] - a[i] + 1;
+    }
+    return n;
+  };
+  std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3];
+  for (s[0] = lo[0] >> kSuperShift; s[0] <= hi[0] >> kSuperShift; ++s[0]) {
+    for (s[1] = lo[1] >> kSuperShift; s[1] <= hi[1] >> kSuperShift; ++s[1]) {
+      for (s[2] = lo[2] >> kSuperShift; s[2] <= hi[2] >> kSuperShift; ++s[2]) {
+        const std::uint16_t sc = super_count_[(s[0] * supers_[1] + s[1]) * supers_[2] + s[2]];
+        if (sc == 0) continue;
+        const std::int64_t cells = span(s, kSuperShift, sa, sb);
+        if (!meets(box(sa, sb))) continue;
+        if (sc == cells) return true;  // full: the shape meets one of its cells
+        for (bl[0] = std::max(lo[0], sa[0]) >> kBlockShift; bl[0] <= std::min(hi[0], sb[0]) >> kBlockShift; ++bl[0]) {
+          for (bl[1] = std::max(lo[1], sa[1]) >> kBlockShift; bl[1] <= std::min(hi[1], sb[1]) >> kBlockShift; ++bl[1]) {
+            for (bl[2] = std::max(lo[2], sa[2]) >> kBlockShift; bl[2] <= std::min(hi[2], sb[2]) >> kBlockShift;
+                 ++bl[2]) {
+              const std::uint8_t bc = block_count_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]];
+              if (bc == 0) continue;
+              const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
+              if (!meets(box(ba, bb))) continue;
+              if (bc == bcells) return true;
+              for (std::int64_t i = std::max(lo[0], ba[0]); i <= std::min(hi[0], bb[0]); ++i) {
+                for (std::int64_t j = std::max(lo[1], ba[1]); j <= std::min(hi[1], bb[1]); ++j) {
+                  for (std::int64_t k = std::max(lo[2], ba[2]); k <= std::min(hi[2], bb[2]); ++k) {
+                    if (!testBit(occupied_, (i * size_[1] + j) * size_[2] + k)) continue;
+                    const std::int64_t c[3] = {i, j, k};
+                    if (meets(box(c, c))) return true;
+                  }
+                }
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+  return false;
+}
 
 }  // namespace moverl_planning_scene

@@ -140,7 +140,7 @@ bool OctomapMonitor::init(std::string* error) {
   if (!map_) return false;
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
-    scene_->checker().setOctree(map_->tree());
+    scene_->checker().setOccupancy(map_.get());
   }
   joints_ = scene_->model().jointNames();
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));

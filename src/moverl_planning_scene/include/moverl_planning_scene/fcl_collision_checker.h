@@ -4,6 +4,7 @@
  */
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -11,18 +12,14 @@
 #include <vector>
 
 #include "moverl_planning_scene/collision_checker.h"
+#include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/robot_model.h"
 #include "moverl_planning_scene/unset.h"
 
 namespace fcl {
 template <typename S>
 class CollisionGeometry;
-template <typename S>
-class OcTree;
 }  // namespace fcl
-namespace octomap {
-class OcTree;
-}
 
 namespace moverl_planning_scene {
 
@@ -86,20 +83,29 @@ class FclCollisionChecker : public CollisionChecker {
   void checkPath(const double* q0, const double* q1, const PathCheckRequest& request, PathCheckResult* result) override;
   std::size_t interiorStateCount(const double* q0, const double* q1) const override;
 
-  /// \brief Sensed obstacles: an occupancy octree in the base frame (occupied cells are obstacles, unknown cells
-  ///        free). Robot links are inflated by `padding` against it (its cells cannot be). nullptr removes it.
-  ///        The tree is read by every check: callers must not modify it while a check runs.
-  void setOctree(std::shared_ptr<const octomap::OcTree> tree);
-  bool hasOctree() const { return static_cast<bool>(octree_); }
+  /// \brief Sensed obstacles: an occupancy map in the base frame (its occupied cells are obstacles). Robot links are
+  ///        inflated by `padding` against it (its cells cannot be). nullptr removes it. The map is read by every check:
+  ///        callers must not modify it while a check runs; it must outlive its use here.
+  void setOccupancy(const OccupancyMap* map) { occupancy_ = map; }
+  bool hasOccupancy() const { return occupancy_ != nullptr; }
   /// \brief The sensed obstacles' predictive margin (m, >= 0): robot links are inflated by padding + margin against
-  ///        the octree in the checks that follow (where a sensed obstacle may have moved since it was seen). Rounded
-  ///        up to a multiple of kMarginStep; each link's inflated shapes are built the first time a level is used.
-  ///        False (margin unchanged) when the margin is not finite, negative or above kMaxMargin.
+  ///        the occupancy map in the checks that follow (where a sensed obstacle may have moved since it was seen).
+  ///        Rounded up to a multiple of kMarginStep; each link's inflated shapes are built the first time a level is
+  ///        used. False (margin unchanged) when the margin is not finite, negative or above kMaxMargin.
   bool setOctreeMargin(double margin);
-  /// \brief The margin (m) the octree checks now use (the requested one rounded up).
+  /// \brief The margin (m) the occupancy checks now use (the requested one rounded up).
   double octreeMargin() const { return octo_level_ * kMarginStep; }
-  static constexpr double kMarginStep = 0.01;  ///< m between the sensed margin's levels
-  static constexpr double kMaxMargin = 1.0;    ///< m: the largest margin (100 levels)
+  /// \brief Occupancy checks against links inflated by level * kMarginStep from their raw shapes (no padding), for
+  ///        clearance measures; -1 returns to the padded shapes of setOctreeMargin.
+  void setOccupancyInflationLevel(int level) { inflation_level_ = std::min(level, kMaxInflationLevel); }
+  /// \brief True when no moving link's shape (as the occupancy checks now inflate it) meets an occupied cell in q.
+  bool occupancyFree(const double* q);
+  /// \brief The largest level in [lo, hi] at which q is occupancyFree with links inflated by level * kMarginStep from
+  ///        their raw shapes; lo - 1 when not free at lo. Leaves the inflation level as it found it.
+  int clearanceLevel(const double* q, int lo, int hi);
+  static constexpr double kMarginStep = 0.01;     ///< m between the sensed margin's levels
+  static constexpr double kMaxMargin = 1.0;       ///< m: the largest margin (100 levels)
+  static constexpr int kMaxInflationLevel = 100;  ///< the largest clearance level (kMaxMargin)
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
@@ -175,9 +181,12 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
-  std::shared_ptr<fcl::OcTree<double>> octree_;  // sensed obstacles (may be null)
-  int octo_level_ = 0;                           // sensed margin: octoGeom's level (kMarginStep each)
-  /// The shape of g checked against the octree at the current margin.
+  const OccupancyMap* occupancy_ = nullptr;  // sensed obstacles (may be null)
+  int octo_level_ = 0;                       // sensed margin: octoGeom's level (kMarginStep each)
+  int inflation_level_ = -1;                 // >= 0: clearance checks' raw inflation level (octoGeom)
+  /// True when the shape at tf meets an occupied cell of the occupancy map.
+  bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf) const;
+  /// The shape of g checked against the occupancy map at the current margin.
   const std::shared_ptr<fcl::CollisionGeometry<double>>& octoGeom(Geom& g);
   std::vector<std::size_t> moving_;  // indices into world_ of moving obstacles
   double window_t0_ = 0.0, window_t1_ = std::numeric_limits<double>::infinity();

@@ -1,6 +1,6 @@
 /**
  * \file occupancy_map.h
- * \brief Sensed obstacles: an OctoMap occupancy octree updated from depth-camera point clouds. ROS-free.
+ * \brief Sensed obstacles: an occupancy grid (OctoMap's sensor model) updated from depth-camera point clouds. ROS-free.
  *
  * Update rule (octomap_server's sensor model, discretized insertion): every beam from the sensor origin to a point
  * marks the cells it crosses as free (a miss) and the cell of its end point as occupied (a hit). Beams longer than
@@ -19,26 +19,25 @@
  * keeps occupied, so the update rule is unchanged. Space no camera can see but that holds no obstacle (inside the
  * robot's links, inside static world objects) is turned free by the caller with addKnownFree.
  *
- * Cost: a dense grid over `bounds` mirrors the tree's leaves (one log-odds value per cell). It deduplicates the cells
- * that a cloud's beams cross without sorting, and it tells which of them the update would change: a cell already
- * clamped at clamp_min stays where it is when seen free again, so the tree only receives the cells that change. Once
- * the static scene has been seen, a cloud changes the few thousand cells around what moved instead of the ~800,000
- * cells its beams cross (`rosrun moverl_planning_scene map_benchmark`).
+ * Representation: a dense grid over `bounds` holds each cell's log-odds (octomap's sensor model and its keys: the cell
+ * of coordinate x is floor(x / resolution)), a bit per cell for "occupied" (log-odds at or above the threshold, the
+ * unknown_occupied prior included) and, for the collision checks, how many cells are occupied in every block of 4^3
+ * cells and every superblock of 16^3 (anyOccupied: empty blocks are skipped whole, full ones tested as one box). The
+ * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
+ * cell already clamped at clamp_min stays where it is when seen free again. Nothing else is kept up to date: an update
+ * costs its beams and the cells it changes (`rosrun moverl_planning_scene map_benchmark`).
  */
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cmath>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "moverl_planning_scene/unset.h"
-
-namespace octomap {
-class OcTree;
-class OcTreeNode;
-}  // namespace octomap
 
 namespace moverl_planning_scene {
 
@@ -82,16 +81,15 @@ struct MapUpdateStats {
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.
 struct MapUpdate {
-  std::vector<std::uint64_t> hits;    ///< packed octomap keys of the hit cells the update changes
-  std::vector<std::uint64_t> misses;  ///< packed octomap keys of the free cells it changes (hits removed)
+  std::vector<std::uint64_t> hits;    ///< cell ids of the hit cells the update changes
+  std::vector<std::uint64_t> misses;  ///< cell ids of the free cells it changes (hits removed)
   MapUpdateStats stats;
 };
 
-/// \brief Occupancy octree in the robot base frame.
-///        computeUpdate, addKnownFree and unobservedCells read the map (not the tree) and may run concurrently with
-///        collision checks that read tree(), but not with apply, clear or setUnknownOccupied; those modify the tree
-///        and the map and must be serialized with every reader by the caller. One thread integrates clouds
-///        (computeUpdate uses the map's scratch space).
+/// \brief Occupancy grid in the robot base frame.
+///        computeUpdate, addKnownFree and unobservedCells read the map and may run concurrently with collision checks
+///        (anyOccupied), but not with apply, clear or setUnknownOccupied; those modify the map and must be serialized
+///        with every reader by the caller. One thread integrates clouds (computeUpdate uses the map's scratch space).
 class OccupancyMap {
  public:
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).
@@ -102,63 +100,88 @@ class OccupancyMap {
   ///        (kPointObstacle, kPointOnRobot, kPointOnFixture).
   void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                      const Eigen::Vector3d& origin, MapUpdate* out);
-  /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as packed keys from
+  /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as cell ids from
   ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
   ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
   void addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out);
-  /// \brief Apply an update to the tree (hits, then misses).
+  /// \brief Apply an update to the map (hits, then misses).
   void apply(const MapUpdate& update);
   /// \brief Forget everything (all cells unknown: occupied under unknown_occupied).
   void clear();
   /// \brief Switch the unknown-is-occupied rule. On: every unobserved cell gets the prior (occupied); off: they turn
-  ///        unknown (free) again. Modifies the tree: serialize with readers as apply.
+  ///        unknown (free) again. Modifies the map: serialize with readers as apply.
   void setUnknownOccupied(bool on);
   bool unknownOccupied() const { return options_.unknown_occupied; }
-  /// \brief Centres and packed keys of the cells whose centre lies in `box` and that were never observed. Empty
-  ///        unless unknown_occupied.
+  /// \brief Centres and ids of the cells whose centre lies in `box` and that were never observed. Empty unless
+  ///        unknown_occupied.
   void unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
                        std::vector<std::uint64_t>* keys) const;
   /// \brief How many cells count as occupied only because no camera has seen them (0 unless unknown_occupied).
   std::size_t unobservedCount() const;
 
-  /// \brief The tree (for FCL). Stays the same object for the map's lifetime.
-  std::shared_ptr<const octomap::OcTree> tree() const;
-  /// \brief True when the cell containing p (map frame) is occupied.
+  /// \brief True when the cell containing p (map frame) is occupied (seen so, or unobserved under unknown_occupied).
   bool occupied(const Eigen::Vector3d& p) const;
-  /// \brief Centre and edge length of every leaf seen occupied (pruned leaves may be larger than the resolution).
-  ///        Leaves occupied only because no camera has seen them (unknown_occupied) are left out: unobservedCount.
+  /// \brief True when the cell containing p has been hit or seen free since the last clear.
+  bool observed(const Eigen::Vector3d& p) const;
+  /// \brief Log-odds of the cell containing p (NaN: unknown, or outside the map).
+  float logOdds(const Eigen::Vector3d& p) const;
+  /// \brief Centre and edge length of every cell seen occupied. Cells occupied only because no camera has seen them
+  ///        (unknown_occupied) are left out: unobservedCount.
   void occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const;
-  /// \brief How many cells a camera saw occupied (kept up to date by apply: no walk of the tree).
+  /// \brief How many cells a camera saw occupied (kept up to date by apply).
   std::size_t occupiedLeafCount() const;
+
+  /// \brief What anyOccupied asks of a box (map frame) that holds occupied cells: does the box meet the caller's shape?
+  using BoxTest = std::function<bool(const Eigen::AlignedBox3d& box)>;
+  /// \brief True when the caller's shape meets an occupied cell within `region` (map frame): superblocks and blocks
+  ///        without occupied cells are skipped, a full one that meets the shape answers at once (one of its cells
+  ///        meets it), a partial one is looked into, down to the occupied cells themselves. `meets` is asked about
+  ///        boxes that hold occupied cells only; it must be exact for cell boxes (the answer is as exact as it is).
+  bool anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const;
+  /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
+  double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
   const OccupancyMapOptions& options() const { return options_; }
 
  private:
   OccupancyMap() = default;
-  /// Index of a packed key in the dense grid, or -1 outside it.
-  std::int64_t cell(std::uint64_t packed) const;
-  /// The packed key of grid cell (at[0], at[1], at[2]).
-  std::uint64_t packAt(const std::int64_t* at) const;
+  /// The cell of a coordinate (octomap's key convention), or -1 outside the map.
+  std::int64_t cellOf(const Eigen::Vector3d& p) const;
+  /// Grid index of a coordinate along axis i (may lie outside [0, size)).
+  std::int64_t indexOf(double x, int i) const {
+    return static_cast<std::int64_t>(std::floor(x * inv_resolution_)) - offset_[i];
+  }
+  /// Centre of grid cell (i, j, k).
+  Eigen::Vector3d centre(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return Eigen::Vector3d((i + offset_[0] + 0.5) * options_.resolution, (j + offset_[1] + 0.5) * options_.resolution,
+                           (k + offset_[2] + 0.5) * options_.resolution);
+  }
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
-  /// A leaf occupied by what a camera saw (not only by the unknown_occupied prior).
-  bool seenOccupied(const octomap::OcTreeNode& node) const;
-  /// Every unobserved cell at the prior (on) or unknown (off), in value_ and the tree.
+  /// Set cell c's value, keeping the occupied bit and the block counts.
+  void setValue(std::int64_t c, float v);
+  /// Every unobserved cell at the prior (on) or unknown (off).
   void fillUnobserved(bool on);
 
   OccupancyMapOptions options_;
-  std::shared_ptr<octomap::OcTree> tree_;
-  // Dense mirror of the tree's leaves inside bounds: cell (i, j, k) holds the key key_min_ + (i, j, k).
-  std::uint16_t key_min_[3] = {0, 0, 0};
+  double inv_resolution_ = 0.0;
+  std::int64_t offset_[3] = {0, 0, 0};  ///< floor(x / resolution) of the grid's cell 0, per axis
   std::int64_t size_[3] = {0, 0, 0};
-  std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed (no node in the tree)
+  std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed
   std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
+  std::vector<std::uint8_t> end_;          ///< computeUpdate's scratch: the flags of the points ending in a cell
+  std::vector<std::int64_t> order_;        ///< computeUpdate's scratch: the end cells, in the order of their points
   std::vector<std::uint64_t> observed_;    ///< a bit per cell: hit or seen free at least once since the last clear
+  std::vector<std::uint64_t> occupied_;    ///< a bit per cell: log-odds >= the threshold
+  std::vector<std::uint64_t> clamped_;     ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
+  // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.
+  std::vector<std::uint8_t> block_count_;
+  std::vector<std::uint8_t> block_dirty_;  ///< per block: cells not at clamp_min (unknown ones included)
+  std::vector<std::uint16_t> super_count_;
+  std::int64_t blocks_[3] = {0, 0, 0}, supers_[3] = {0, 0, 0};
   float log_hit_ = 0.0f, log_miss_ = 0.0f, clamp_min_ = 0.0f, clamp_max_ = 0.0f;
   float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied
   float threshold_ = 0.0f;          ///< log-odds of occupancy_threshold
   std::int64_t seen_occupied_ = 0;  ///< observed cells at or above the threshold
-  /// An observed cell's value counts as seen occupied.
-  bool seenOccupiedValue(float v, bool observed) const { return observed && v >= threshold_; }
 };
 
 }  // namespace moverl_planning_scene

@@ -112,6 +112,8 @@ def worker_graph(
             "steps": steps,
             "verdicts": _count(i["verdict"] for i, _ in infos),
             "contacts": int(sum(max(i["contacts"], 0) for i, _ in infos)),
+            "contacts_moving": int(sum(max(i["contacts_moving"], 0) for i, _ in infos)),
+            "contacts_resting": int(sum(max(i["contacts_resting"], 0) for i, _ in infos)),
             "round_trip": _percentiles([t["round_trip"] for _, t in infos]),
         }
         if shield:
@@ -327,9 +329,12 @@ def main(argv=None) -> int:
     contacts = {"shield on (all repetitions)": sum(r["contacts"] for r in on + human)}
     for name in ("shield_scene_own", "shield_standard", "shield_octomap", "shield_off", "bullet"):
         if name in results:
-            contacts[name] = results[name]["contacts"]
+            r = results[name]
+            contacts[name] = (
+                f"{r['contacts']} ({r.get('contacts_moving', 0)} moving, {r.get('contacts_resting', 0)} at rest)"
+            )
     print(
-        "ground-truth contacts: "
+        "ground-truth contacts (the robot moving, at rest): "
         + ", ".join(f"{k} {v}" for k, v in contacts.items())
         + " (the standard driver has no ground truth: -1 per step, counted as 0)"
     )

@@ -167,6 +167,7 @@ def worker(
         policy = PushingPolicy(targets, inner.scaler.max_delta, rng, noise=noise, switch=switch)
         env.reset(seed=seed)
         contacts_total = contact_steps = episodes = unsensed = unsensed_moves = at_limit = 0
+        moving = resting = 0  # who moved: contact pairs while the robot moved / rested
         lower, upper = inner.scaler.limits.lower, inner.scaler.limits.upper
         verdicts: dict[str, int] = {}
         t0 = time.perf_counter()
@@ -180,6 +181,8 @@ def worker(
                 unsensed_moves += not info["discarded"]
             policy.feedback(info["discarded"])
             contacts_total += max(info["contacts"], 0)
+            moving += max(info["contacts_moving"], 0)
+            resting += max(info["contacts_resting"], 0)
             contact_steps += info["contacts"] > 0
             verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
             if term or trunc:
@@ -200,6 +203,8 @@ def worker(
         "steps": steps,
         "episodes": episodes,
         "contacts": contacts_total,
+        "contacts_moving": moving,
+        "contacts_resting": resting,
         "steps_with_contact": contact_steps,
         "unsensed_steps": unsensed,
         "unsensed_moves": unsensed_moves,
@@ -309,7 +314,8 @@ def main(argv=None) -> int:
                 )
                 rows.append(r)
                 print(
-                    f"  contacts {r['contacts']} in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
+                    f"  contacts {r['contacts']} ({r['contacts_moving']} with the robot moving, "
+                    f"{r['contacts_resting']} at rest) in {r['steps_with_contact']} steps; verdicts {r['verdicts']}; "
                     f"targets per object {r['targets']}; {r['steps_per_s']} steps/s",
                     flush=True,
                 )

@@ -15,6 +15,7 @@ class GroundTruthContacts:
         self._lock = threading.Lock()
         self.pairs = {}  # (a, b) -> deepest penetration (m)
         self.substeps_in_contact = 0
+        self.moving = self.resting = 0  # who moved: contact pairs per report while the robot moved / rested
         self.reports = 0
         self._sub = rospy.Subscriber(topic, ContactReport, self._on_report, queue_size=100)
 
@@ -22,6 +23,8 @@ class GroundTruthContacts:
         with self._lock:
             self.reports += 1
             self.substeps_in_contact += msg.substeps_in_contact
+            self.moving += msg.moving_contacts
+            self.resting += msg.resting_contacts
             for p in msg.pairs:
                 self.pairs[(p.a, p.b)] = max(self.pairs.get((p.a, p.b), 0.0), p.depth)
 

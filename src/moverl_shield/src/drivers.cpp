@@ -33,6 +33,8 @@ void fromMsg(const moverl_msgs::ContactReport& msg, ContactReport* out) {
   out->substeps_in_contact = msg.substeps_in_contact;
   out->world_contacts = msg.world_contacts;
   out->self_contacts = msg.self_contacts;
+  out->moving_contacts = msg.moving_contacts;
+  out->resting_contacts = msg.resting_contacts;
   out->pairs.resize(msg.pairs.size());
   for (std::size_t k = 0; k < msg.pairs.size(); ++k) {
     out->pairs[k].a = msg.pairs[k].a;
@@ -49,6 +51,8 @@ void toMsg(const ContactReport& r, moverl_msgs::ContactReport* out) {
   out->substeps_in_contact = r.substeps_in_contact;
   out->world_contacts = r.world_contacts;
   out->self_contacts = r.self_contacts;
+  out->moving_contacts = r.moving_contacts;
+  out->resting_contacts = r.resting_contacts;
   out->pairs.resize(r.pairs.size());
   for (std::size_t k = 0; k < r.pairs.size(); ++k) {
     out->pairs[k].a = r.pairs[k].a;

@@ -21,9 +21,9 @@ Shield::Shield(const ShieldOptions& options, Driver* driver, Scene* scene, const
 }
 
 std::string Shield::describe(CallEnd end, double timeout) const {
-  return end == CallEnd::kTimedOut ? "service " + scene_->name() + " did not answer within its deadline of " +
-                                         std::to_string(timeout) + " s"
-                                   : "service " + scene_->name() + " is unreachable";
+  return end == CallEnd::kTimedOut
+             ? "service " + scene_->name() + " did not answer within its deadline of " + std::to_string(timeout) + " s"
+             : "service " + scene_->name() + " is unreachable";
 }
 
 bool Shield::lastState(RobotState* state) const {
@@ -83,6 +83,7 @@ void Shield::step(const StepRequest& req, StepResult* res, bool record_executed)
   res->contacts.stamp = 0;
   res->contacts.substeps = res->contacts.substeps_in_contact = 0;
   res->contacts.world_contacts = res->contacts.self_contacts = 0;
+  res->contacts.moving_contacts = res->contacts.resting_contacts = 0;
   res->contacts.pairs.clear();
   res->state_check_time = res->path_check_time = res->planning_time = res->execution_time = 0.0;
   res->unsafe_cause = 0;
@@ -123,8 +124,9 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
     res->message = "planning scene: " + error + ": failing closed, robot held";
     return Verdict::kSceneUnavailable;
   }
-  if (!options_.enabled) return move(passThrough(s.q, req.target).waypoints, Verdict::kUnchecked, req.duration,
-                                     options_.limits, res, record_executed);
+  if (!options_.enabled)
+    return move(passThrough(s.q, req.target).waypoints, Verdict::kUnchecked, req.duration, options_.limits, res,
+                record_executed);
   mps::MotionRequest& q = query_;
   q.start = s.q;
   q.goal = req.target;
@@ -133,9 +135,9 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
   q.find_last_free = wantsLastFree(options_.strategy);
   double straight;
   try {
-    straight = timeTrajectory(options_.profile, {s.q, req.target}, options_.limits, req.duration,
-                              options_.sample_period)
-                   .duration();
+    straight =
+        timeTrajectory(options_.profile, {s.q, req.target}, options_.limits, req.duration, options_.sample_period)
+            .duration();
   } catch (const std::exception& e) {
     res->message = std::string("cannot time the move: ") + e.what();
     return Verdict::kExecutionFailed;
@@ -184,9 +186,9 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
     // goal_time after it; a longer window is not covered by that check.
     double planned = 0.0;
     try {
-      planned = timeTrajectory(options_.profile, decision.waypoints, options_.limits, req.duration,
-                               options_.sample_period)
-                    .duration();
+      planned =
+          timeTrajectory(options_.profile, decision.waypoints, options_.limits, req.duration, options_.sample_period)
+              .duration();
     } catch (const std::exception& e) {
       res->message = std::string("cannot time the plan: ") + e.what();
       return Verdict::kExecutionFailed;
@@ -215,9 +217,9 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
 
 void Shield::setWindow(const RobotState& s, double check_begin, double duration, mps::MotionRequest* q) const {
   if (driver_->realTime()) {
-    const MotionWindow w = realTimeWindow(seconds(s.stamp), seconds(motion_epoch_),
-                                          check_begin + options_.check_budget + options_.start_lead, duration,
-                                          options_.goal_time);
+    const MotionWindow w =
+        realTimeWindow(seconds(s.stamp), seconds(motion_epoch_),
+                       check_begin + options_.check_budget + options_.start_lead, duration, options_.goal_time);
     q->start_time = w.start_time;
     q->duration = w.duration;
   } else {
@@ -250,7 +252,8 @@ Verdict Shield::move(const Waypoints& waypoints, Verdict decided, double min_dur
   }
   const Verdict verdict = verdictForDriverEnd(decided, r.end, r.error_code);
   if (verdict != decided) {
-    res->message = "driver " + driver_->name() + ": " + r.message + (res->message.empty() ? "" : " (" + res->message + ")");
+    res->message =
+        "driver " + driver_->name() + ": " + r.message + (res->message.empty() ? "" : " (" + res->message + ")");
   }
   if (r.end != DriverEnd::kTimedOut && r.end != DriverEnd::kUnreachable) {
     RobotState after;
@@ -459,11 +462,11 @@ void Shield::plannedReset(const std::vector<double>& target, ResetResult* res) {
       if (a.outcome != MotionOutcome::kValid || clock_->now() - begin > options_.check_budget) {
         res->unreachable = a.outcome != MotionOutcome::kValid && a.outcome != MotionOutcome::kStartInCollision &&
                            a.outcome != MotionOutcome::kInvalidRequest;
-        res->message = "reset stopped after " + std::to_string(res->moves) + " of its moves: the next one is not "
-                       "free with the sensed margin of its window (" +
-                       (a.outcome == MotionOutcome::kValid ? std::string("the check took beyond check_budget")
-                                                           : a.message) +
-                       ")";
+        res->message =
+            "reset stopped after " + std::to_string(res->moves) +
+            " of its moves: the next one is not "
+            "free with the sensed margin of its window (" +
+            (a.outcome == MotionOutcome::kValid ? std::string("the check took beyond check_budget") : a.message) + ")";
         return;
       }
       const Verdict v = move({s.q, piece_end}, Verdict::kSafe, 0.0, limits, &step, false);

@@ -1,6 +1,6 @@
 // Unit tests of the shield's decisions (moverl_shield/shield.h), without ROS: a fake driver, scene and clock inject
-// every answer and every fault, and the tests check the verdict, what the driver was asked to do, and what the scene was
-// asked. One test (at least) per verdict and per failure path of a step and a reset.
+// every answer and every fault, and the tests check the verdict, what the driver was asked to do, and what the scene
+// was asked. One test (at least) per verdict and per failure path of a step and a reset.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -78,10 +78,9 @@ class FakeDriver : public Driver {
     } else {
       r.end = DriverEnd::kSucceeded;
     }
-    r.error_code = r.end == DriverEnd::kAborted ? static_cast<std::int32_t>(TrajectoryError::kPathToleranceViolated)
-                                                : r.end == DriverEnd::kRejected
-                                                      ? static_cast<std::int32_t>(TrajectoryError::kInvalidGoal)
-                                                      : 0;
+    r.error_code = r.end == DriverEnd::kAborted    ? static_cast<std::int32_t>(TrajectoryError::kPathToleranceViolated)
+                   : r.end == DriverEnd::kRejected ? static_cast<std::int32_t>(TrajectoryError::kInvalidGoal)
+                                                   : 0;
     r.message = "fake end";
     r.contacts = contacts;
     if (real_time) clock_->now_ = std::max(clock_->now_, start) + t.duration();
@@ -152,8 +151,8 @@ class FakeScene : public Scene {
     clock_->now_ += check_delay;
     return CallEnd::kAnswered;
   }
-  CallEnd plan(const std::vector<double>& start, const std::vector<double>& goal, double time_limit,
-               mps::PlanResult* a, double) override {
+  CallEnd plan(const std::vector<double>& start, const std::vector<double>& goal, double time_limit, mps::PlanResult* a,
+               double) override {
     plans.push_back({start, goal});
     plan_limits.push_back(time_limit);
     if (plan_end != CallEnd::kAnswered) return plan_end;
@@ -264,7 +263,7 @@ TEST_F(ShieldTest, SafeMoveExecutesTheStraightMoveAtLeastDtLong) {
   EXPECT_EQ(driver.executed[0].positions.front(), kStart);
   EXPECT_EQ(driver.executed[0].positions.back(), kTarget);
   EXPECT_NEAR(driver.executed[0].duration(), kDt, 1e-12);  // 0.05 rad at 1 rad/s: the step's duration binds
-  EXPECT_EQ(driver.starts[0], 0.0);                         // lockstep: no start stamp
+  EXPECT_EQ(driver.starts[0], 0.0);                        // lockstep: no start stamp
   ASSERT_EQ(scene.requests.size(), 1u);
   const mps::MotionRequest& q = scene.requests[0];
   EXPECT_EQ(q.start, kStart);
@@ -457,7 +456,9 @@ TEST_F(ShieldTest, SceneThatDoesNotAnswerFailsClosed) {
 
 TEST_F(ShieldTest, UnknownSceneCodeFailsClosed) {
   make();
-  scene.answer = [](const mps::MotionRequest&, mps::MotionCheck* a) { a->outcome = static_cast<mps::MotionOutcome>(42); };
+  scene.answer = [](const mps::MotionRequest&, mps::MotionCheck* a) {
+    a->outcome = static_cast<mps::MotionOutcome>(42);
+  };
   EXPECT_EQ(step().verdict, Verdict::kSceneUnavailable);
   scene.answer = outcome(mps::MotionOutcome::kInvalidRequest);
   EXPECT_EQ(step().verdict, Verdict::kInvalidRequest);

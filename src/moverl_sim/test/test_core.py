@@ -197,7 +197,7 @@ def test_bad_configuration_is_reported(panda_urdf, table_world):
     with pytest.raises(ValueError, match="nope_joint"):
         Simulator(panda_urdf, JOINTS, "panda_link0", {"nope_joint": 0.0}, table_world, **kw)
     with pytest.raises(ValueError, match="control"):
-        Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, table_world, physics_hz=240, control="magic")
+        Simulator(panda_urdf, JOINTS, "panda_link0", FIXED, table_world, **{**kw, "control": "magic"})
 
 
 def test_link_poses(home_sim):

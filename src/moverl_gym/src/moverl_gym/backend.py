@@ -48,6 +48,8 @@ class StepResult:
     ee: np.ndarray  # end-effector pose after the step (x, y, z, qx, qy, qz, qw)
     contacts: int  # ground-truth contact pairs of the step's motion; -1 when unknown
     contact_substeps: int  # physics substeps in contact; -1 when unknown
+    contacts_moving: int = -1  # of the contact pairs, those that touched while the robot moved; -1 when unknown
+    contacts_resting: int = -1  # those that touched while it rested (something came to it); -1 when unknown
     unsafe_cause: int = 0  # ShieldStep.unsafe_cause
     strategy: str = ""
     planning_time: float = 0.0

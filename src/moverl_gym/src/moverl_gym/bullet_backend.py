@@ -98,6 +98,8 @@ class BulletBackend(Backend):
             ee=self._ee_now(),
             contacts=c.world_contacts + c.self_contacts,
             contact_substeps=c.substeps_in_contact,
+            contacts_moving=c.moving_contacts,
+            contacts_resting=c.resting_contacts,
         )
 
     def reset(self, q: "np.ndarray | None") -> ResetResult:

@@ -432,6 +432,8 @@ class MoveRLReachEnv(gym.Env):
                 "replanned": False,
                 "contacts": 0,
                 "contact_substeps": 0,
+                "contacts_moving": 0,
+                "contacts_resting": 0,
                 "cost": 0.0,
                 "cost_contact": 0.0,
                 "distance": self.distance,
@@ -465,6 +467,9 @@ class MoveRLReachEnv(gym.Env):
             "planning_time": float(res.planning_time),
             "contacts": int(contacts),
             "contact_substeps": int(res.contact_substeps),
+            # Who moved: the contact pairs that touched while the robot moved, and while it rested (-1: unknown).
+            "contacts_moving": int(res.contacts_moving),
+            "contacts_resting": int(res.contacts_resting),
             "cost": float(discarded or contacts > 0),
             # Ground truth for constrained RL: 1.0 if the step's motion made contact, NaN if contacts are unknown (-1)
             "cost_contact": float(contacts > 0) if contacts >= 0 else float("nan"),

@@ -41,6 +41,8 @@ ENV_NAME = "moverl"
 #: env_runners/moverl/<name>.
 LIFETIME_COUNTERS = (
     "contacts",
+    "contacts_moving",
+    "contacts_resting",
     "contact_substeps",
     "cost",
     "interventions",
@@ -103,6 +105,8 @@ def metrics_callback():
                     log(("moverl", "steps_without_ground_truth"), 1, reduce="lifetime_sum")
                 else:
                     log(("moverl", "contacts"), contacts, reduce="lifetime_sum")
+                    log(("moverl", "contacts_moving"), max(info.get("contacts_moving", 0), 0), reduce="lifetime_sum")
+                    log(("moverl", "contacts_resting"), max(info.get("contacts_resting", 0), 0), reduce="lifetime_sum")
                     log(("moverl", "contact_substeps"), max(info.get("contact_substeps", 0), 0), reduce="lifetime_sum")
             if info.get("cost"):
                 log(("moverl", "cost"), info["cost"], reduce="lifetime_sum")

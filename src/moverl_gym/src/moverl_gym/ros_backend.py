@@ -318,6 +318,8 @@ class RosBackend(Backend):
             ee=_pose_array(res.ee_pose),
             contacts=(c.world_contacts + c.self_contacts) if known else -1,
             contact_substeps=c.substeps_in_contact if known else -1,
+            contacts_moving=c.moving_contacts if known else -1,
+            contacts_resting=c.resting_contacts if known else -1,
             unsafe_cause=res.unsafe_cause,
             strategy=res.strategy,
             planning_time=res.planning_time,

@@ -25,6 +25,8 @@ EPISODE_FIELDS = [
     *DISCARDED_COUNTERS,
     "replanned",
     "contacts",
+    "contacts_moving",
+    "contacts_resting",
     "contact_substeps",
     "cost",
     "cost_contact",
@@ -88,6 +90,8 @@ class EpisodeLogger(BaseCallback):
             if info.get("discarded"):
                 ep["interventions"] += 1
             ep["contacts"] += max(info.get("contacts", 0), 0)
+            ep["contacts_moving"] += max(info.get("contacts_moving", 0), 0)  # who moved (ground truth)
+            ep["contacts_resting"] += max(info.get("contacts_resting", 0), 0)
             ep["contact_substeps"] += max(info.get("contact_substeps", 0), 0)
             ep["cost"] += info.get("cost", 0.0)
             ep["cost_contact"] += info.get("cost_contact", 0.0)  # steps with contact; NaN if the driver cannot tell
@@ -120,6 +124,8 @@ class EpisodeLogger(BaseCallback):
             "replanned",
             "truncated",
             "contacts",
+            "contacts_moving",
+            "contacts_resting",
             "contact_substeps",
             "cost",
             "cost_contact",
@@ -144,6 +150,8 @@ class EpisodeLogger(BaseCallback):
             "truncated": int(self.totals["truncated"]),
             "by_type": {k: int(self.totals[k]) for k in DISCARDED_COUNTERS},
             "contacts": int(self.totals["contacts"]),
+            "contacts_moving": int(self.totals["contacts_moving"]),
+            "contacts_resting": int(self.totals["contacts_resting"]),
             "contact_substeps": int(self.totals["contact_substeps"]),
             "graph_failures": int(sum(self.failure_counts.values())),  # incl. those a reset found between episodes
             "graph_restarts": int(sum(self.restarts.values())),

@@ -50,6 +50,7 @@ struct ContactReport {
   bool available = false;  ///< the driver measures contacts (a simulator)
   Nanos stamp = 0;         ///< simulation time at the end of the motion; 0: no motion reported
   std::uint32_t substeps = 0, substeps_in_contact = 0, world_contacts = 0, self_contacts = 0;
+  std::uint32_t moving_contacts = 0, resting_contacts = 0;  ///< who moved (ContactReport.msg)
   std::vector<moverl_planning_scene::ContactPair> pairs;
   std::uint64_t total_contact_substeps = 0;
 };
@@ -65,11 +66,11 @@ struct MoveResult {
 
 /// \brief Tunables of the drivers (set from config/shield.yaml, where each is commented; no defaults here).
 struct DriverOptions {
-  double result_margin = 0.0;     ///< s a result may come after the move's planned end before the move counts as lost
-  double max_state_age = 0.0;     ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
-  double limit_tolerance = 0.0;   ///< rad (m): states this far beyond a joint limit are clamped onto it
-  double start_lead = 0.0;        ///< s between sending a goal and its start stamp (transport to the controller)
-  double goal_time = 0.0;         ///< s the controller may take after the trajectory's end to settle
+  double result_margin = 0.0;    ///< s a result may come after the move's planned end before the move counts as lost
+  double max_state_age = 0.0;    ///< s: older joint states (by arrival, and by stamp vs this node's clock) are refused
+  double limit_tolerance = 0.0;  ///< rad (m): states this far beyond a joint limit are clamped onto it
+  double start_lead = 0.0;       ///< s between sending a goal and its start stamp (transport to the controller)
+  double goal_time = 0.0;        ///< s the controller may take after the trajectory's end to settle
   double stopped_velocity_tolerance = 0.0;  ///< rad/s: goal velocity tolerance (at rest)
 };
 
@@ -160,10 +161,10 @@ struct StepResult {
   RobotState start;                                       ///< the state the step decided from (empty q: none)
   ContactReport contacts;  ///< ground truth of the step's motion (stamp 0 when nothing moved)
   double state_check_time = 0.0, path_check_time = 0.0, planning_time = 0.0, execution_time = 0.0;
-  std::uint8_t unsafe_cause = 0;      ///< MotionOutcome code of what made the action unsafe; 0: none
-  double truncated_fraction = -1.0;   ///< TRUNCATED: fraction of the straight path executed; else -1
+  std::uint8_t unsafe_cause = 0;       ///< MotionOutcome code of what made the action unsafe; 0: none
+  double truncated_fraction = -1.0;    ///< TRUNCATED: fraction of the straight path executed; else -1
   std::int32_t driver_error_code = 0;  ///< control_msgs/FollowJointTrajectoryResult code, 0: none
-  TimedTrajectory executed;  ///< what was sent to the driver (filled only when StepRequest asks: see step())
+  TimedTrajectory executed;            ///< what was sent to the driver (filled only when StepRequest asks: see step())
 };
 
 /// \brief An episode's reset (moverl_msgs/ResetRobot's request): empty positions: start where the robot stands.
@@ -177,8 +178,8 @@ struct ResetResult {
   bool success = false;
   bool unreachable = false;  ///< no collision-free path to the target (the env samples another start)
   std::string message;
-  Nanos motion_epoch = 0;  ///< when the obstacles' motions last restarted (driver clock)
-  std::uint32_t moves = 0;  ///< planned resets: the moves the reset was executed in
+  Nanos motion_epoch = 0;         ///< when the obstacles' motions last restarted (driver clock)
+  std::uint32_t moves = 0;        ///< planned resets: the moves the reset was executed in
   double planned_duration = 0.0;  ///< planned resets: s the executed path lasts at its timing (0: teleport / none)
 };
 
@@ -227,7 +228,7 @@ class Shield {
   bool scene_facts_ = false;
   RobotState last_;  ///< the latest state the shield knows
   bool have_state_ = false;
-  Nanos motion_epoch_ = 0;  ///< when the obstacles' motion time was 0 (driver clock)
+  Nanos motion_epoch_ = 0;    ///< when the obstacles' motion time was 0 (driver clock)
   bool epoch_known_ = false;  ///< from a teleport, or else from the scene's world (ensureSceneFacts)
   std::uint64_t total_contact_substeps_ = 0;
   moverl_planning_scene::MotionRequest query_;  ///< scratch of the step's question and answer (no allocation per step)

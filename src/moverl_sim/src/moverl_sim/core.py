@@ -52,6 +52,11 @@ class ContactStats:
     world_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
     self_pairs: Dict[Tuple[str, str], float] = field(default_factory=dict)
     total_contact_substeps: int = 0  # running total since the simulator started
+    #: Who moved: the pairs (world and self) that touched at a substep where the robot moved (a commanded joint speed
+    #: above the simulator's moving_speed), and those that touched while it rested (held still: whatever touched it
+    #: came to it). A pair can be in both.
+    moving_pairs: set = field(default_factory=set)
+    resting_pairs: set = field(default_factory=set)
 
     @property
     def world_contacts(self):
@@ -64,6 +69,14 @@ class ContactStats:
     @property
     def in_contact(self):
         return self.substeps_in_contact > 0
+
+    @property
+    def moving_contacts(self):
+        return len(self.moving_pairs)
+
+    @property
+    def resting_contacts(self):
+        return len(self.resting_pairs)
 
 
 class ExecutionResult(NamedTuple):
@@ -165,6 +178,7 @@ class Simulator:
         physics_hz,
         control,
         gui=False,
+        moving_speed,
         motion_time_scale=1.0,
     ):
         if control not in ("kinematic", "dynamic"):
@@ -181,6 +195,11 @@ class Simulator:
         if not (math.isfinite(motion_time_scale) and motion_time_scale > 0):
             raise ValueError("motion_time_scale must be positive, got %r" % (motion_time_scale,))
         self._motion_scale = float(motion_time_scale)
+        # rad/s (m/s): a substep whose commanded joint speeds are all at most this is one where the robot rests
+        # (ContactStats.resting_pairs: it did not go to what touched it).
+        if not (math.isfinite(moving_speed) and moving_speed >= 0):
+            raise ValueError("moving_speed must be finite and >= 0, got %r" % (moving_speed,))
+        self._moving_speed = float(moving_speed)
         self._substeps_total = 0
         self._motion_epoch = 0  # substeps_total at the last restart_motions()
         self._total_contact_substeps = 0
@@ -538,7 +557,7 @@ class Simulator:
         stats = ContactStats()
         self._p.performCollisionDetection()
         pts = pybullet.getContactPoints(self.robot, physicsClientId=self._cid)
-        if pts and self._accumulate(pts, stats):
+        if pts and self._accumulate(pts, stats, moving=False):
             stats.substeps_in_contact = 1
         stats.total_contact_substeps = self._total_contact_substeps
         return stats
@@ -727,6 +746,7 @@ class Simulator:
             if motion.setpoints is None:
                 motion.setpoints = [[v[0] for v in t] for t in motion.targets]
         accumulate = self._accumulate
+        moving_speed = self._moving_speed
         stats = motion.stats
         targets, vels, setpoints = motion.targets, motion.velocities, motion.setpoints
         k0 = motion.k
@@ -757,7 +777,7 @@ class Simulator:
                 )
                 step(physicsClientId=cid)
             pts = get_contacts(robot, physicsClientId=cid)
-            if pts and accumulate(pts, stats):
+            if pts and accumulate(pts, stats, max(abs(v[0]) for v in vels[k]) > moving_speed):
                 in_contact += 1
             k += 1
             if tolerance is not None:
@@ -836,7 +856,7 @@ class Simulator:
                     pybullet.performCollisionDetection(physicsClientId=cid)
                 if stats is not None:
                     pts = pybullet.getContactPoints(robot, physicsClientId=cid)
-                    if pts and self._accumulate(pts, stats):
+                    if pts and self._accumulate(pts, stats, moving=False):
                         in_contact += 1
             if stats is not None:
                 stats.substeps += substeps
@@ -847,8 +867,9 @@ class Simulator:
         if self._movers:
             self._place_movers(self.motion_time)
 
-    def _accumulate(self, pts, stats):
-        """Record penetrating contacts; True when at least one counted."""
+    def _accumulate(self, pts, stats, moving):
+        """Record penetrating contacts (as touched while the robot moved, or rested); True when at least one
+        counted."""
         robot = self.robot
         names = self.link_names
         link_object = self._link_object
@@ -877,5 +898,6 @@ class Simulator:
             depth = -dist
             if depth > pairs.get(key, 0.0):
                 pairs[key] = depth
+            (stats.moving_pairs if moving else stats.resting_pairs).add(key)
             found = True
         return found

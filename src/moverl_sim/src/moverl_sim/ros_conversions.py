@@ -70,6 +70,8 @@ def contacts_to_msg(stats, stamp_sec):
     msg.substeps_in_contact = stats.substeps_in_contact
     msg.world_contacts = stats.world_contacts
     msg.self_contacts = stats.self_contacts
+    msg.moving_contacts = stats.moving_contacts
+    msg.resting_contacts = stats.resting_contacts
     msg.total_contact_substeps = stats.total_contact_substeps
     for (a, b), depth in sorted(stats.world_pairs.items()):
         msg.pairs.append(CollisionPair(a=a, b=b, depth=depth))

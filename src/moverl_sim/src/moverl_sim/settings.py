@@ -16,7 +16,11 @@ _ROOT = os.environ.get("MOVERL_ROOT") or os.path.dirname(
 
 
 def sim_settings(path: str | None = None) -> dict:
-    """physics_hz and control from config/sim.yaml (or `path`), as keyword arguments of Simulator."""
+    """physics_hz, control and moving_speed from config/sim.yaml (or `path`), as keyword arguments of Simulator."""
     with open(path or os.path.join(_ROOT, "config", "sim.yaml"), encoding="utf-8") as f:
         cfg = yaml.safe_load(f)
-    return {"physics_hz": float(cfg["physics_hz"]), "control": str(cfg["control"])}
+    return {
+        "physics_hz": float(cfg["physics_hz"]),
+        "control": str(cfg["control"]),
+        "moving_speed": float(cfg["moving_speed"]),
+    }

@@ -40,8 +40,6 @@ struct FclCollisionChecker::Geom {
   std::function<std::shared_ptr<fcl::CollisionGeometry<double>>(double)> inflate;
   // octo_levels[k]: the shape inflated by padding + k * kMarginStep (built when first needed; [0] unused).
   std::vector<std::shared_ptr<fcl::CollisionGeometry<double>>> octo_levels;
-  // raw_levels[k]: the shape inflated by k * kMarginStep from its raw size (clearance checks; [0] unused: geom).
-  std::vector<std::shared_ptr<fcl::CollisionGeometry<double>>> raw_levels;
 };
 
 struct FclCollisionChecker::Obstacle {

@@ -8,6 +8,7 @@
 #include "fcl_checker_internal.h"
 
 #include <unistd.h>
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -29,6 +30,7 @@
 #include <fcl/geometry/shape/sphere.h>
 #include <fcl/math/bv/OBBRSS.h>
 #include <fcl/narrowphase/collision.h>
+#include <fcl/narrowphase/distance.h>
 
 namespace moverl_planning_scene {
 namespace {
@@ -175,41 +177,53 @@ bool FclCollisionChecker::occupancyFree(const double* q) {
   return true;
 }
 
-int FclCollisionChecker::clearanceLevel(const double* q, int lo, int hi) {
-  const int saved = inflation_level_;
-  auto free_at = [&](int level) {
-    setOccupancyInflationLevel(level);
-    return occupancyFree(q);
-  };
-  int result = lo - 1;
-  if (free_at(lo)) {
-    // Bisection: free at `result`, not known above; a shape that meets nothing inflated meets nothing less inflated.
-    result = lo;
-    int top = hi + 1;  // not free (or beyond the range)
-    while (top - result > 1) {
-      const int mid = result + (top - result) / 2;
-      if (free_at(mid)) {
-        result = mid;
-      } else {
-        top = mid;
-      }
+double FclCollisionChecker::occupancyDistance(const double* q, double below, double above) {
+  if (occupancy_ == nullptr) return std::numeric_limits<double>::infinity();
+  updateTransforms(q);
+  double best = above;
+  fcl::DistanceRequestd request;
+  request.distance_tolerance = 1e-4;  // m: far below the cells' size
+  for (int gi : world_geoms_) {
+    const Geom& g = geoms_[gi];
+    // The link's world box (its local box's corners, transformed) and bounding sphere: both bound the distance to a
+    // box of cells from below.
+    const fcl::AABBd& local = g.geom->aabb_local;
+    Eigen::AlignedBox3d link_box;
+    for (int c = 0; c < 8; ++c) {
+      link_box.extend(g.world_tf * Eigen::Vector3d(c & 1 ? local.max_.x() : local.min_.x(),
+                                                   c & 2 ? local.max_.y() : local.min_.y(),
+                                                   c & 4 ? local.max_.z() : local.min_.z()));
+    }
+    auto lower = [&](const Eigen::AlignedBox3d& box) {
+      const Eigen::Vector3d gap =
+          (box.min() - link_box.max()).cwiseMax(link_box.min() - box.max()).cwiseMax(Eigen::Vector3d::Zero());
+      return std::max(gap.norm(), box.exteriorDistance(g.world_center) - g.radius);
+    };
+    // The boxes of occupied cells nearer than the best so far, nearest first: GJK only until the next cannot beat it.
+    near_boxes_.clear();
+    const Eigen::AlignedBox3d region(link_box.min().array() - best, link_box.max().array() + best);
+    occupancy_->visitOccupied(
+        region, [&](const Eigen::AlignedBox3d& box) { return lower(box) < best; },
+        [&](const Eigen::AlignedBox3d& box) {
+          near_boxes_.emplace_back(lower(box), box);
+          return false;
+        });
+    std::sort(near_boxes_.begin(), near_boxes_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [bound, box] : near_boxes_) {
+      if (bound >= best) break;
+      const fcl::Boxd cells(box.sizes());
+      fcl::Transform3d at = fcl::Transform3d::Identity();
+      at.translation() = box.center();
+      fcl::DistanceResultd result;
+      const double d = fcl::distance(&cells, at, g.geom.get(), g.world_tf, request, result);
+      best = std::min(best, std::max(d, 0.0));  // FCL reports a negative value (or -1) for shapes that meet
+      if (best < below) return best;
     }
   }
-  inflation_level_ = saved;
-  return result;
+  return best;
 }
 
 const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octoGeom(Geom& g) {
-  if (inflation_level_ >= 0 && g.inflate) {
-    if (inflation_level_ == 0) return g.geom;
-    if (g.raw_levels.size() <= static_cast<std::size_t>(inflation_level_)) g.raw_levels.resize(inflation_level_ + 1);
-    auto& level = g.raw_levels[inflation_level_];
-    if (!level) {
-      level = g.inflate(inflation_level_ * kMarginStep);
-      level->computeLocalAABB();
-    }
-    return level;
-  }
   if (octo_level_ == 0 || !g.inflate) return g.octo;
   if (g.octo_levels.size() <= static_cast<std::size_t>(octo_level_)) g.octo_levels.resize(octo_level_ + 1);
   auto& level = g.octo_levels[octo_level_];

@@ -456,6 +456,11 @@ void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::ve
 std::size_t OccupancyMap::occupiedLeafCount() const { return static_cast<std::size_t>(seen_occupied_); }
 
 bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const {
+  // A box of occupied cells that the shape meets: one of them meets it.
+  return visitOccupied(region, meets, [](const Eigen::AlignedBox3d&) { return true; });
+}
+
+bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit) const {
   std::int64_t lo[3], hi[3];
   for (int i = 0; i < 3; ++i) {
     lo[i] = std::max<std::int64_t>(0, indexOf(region.min()[i], i));
@@ -486,8 +491,12 @@ bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest&
         const std::uint16_t sc = super_count_[(s[0] * supers_[1] + s[1]) * supers_[2] + s[2]];
         if (sc == 0) continue;
         const std::int64_t cells = span(s, kSuperShift, sa, sb);
-        if (!meets(box(sa, sb))) continue;
-        if (sc == cells) return true;  // full: the shape meets one of its cells
+        const Eigen::AlignedBox3d super_box = box(sa, sb);
+        if (!near(super_box)) continue;
+        if (sc == cells) {  // full
+          if (visit(super_box)) return true;
+          continue;
+        }
         for (bl[0] = std::max(lo[0], sa[0]) >> kBlockShift; bl[0] <= std::min(hi[0], sb[0]) >> kBlockShift; ++bl[0]) {
           for (bl[1] = std::max(lo[1], sa[1]) >> kBlockShift; bl[1] <= std::min(hi[1], sb[1]) >> kBlockShift; ++bl[1]) {
             for (bl[2] = std::max(lo[2], sa[2]) >> kBlockShift; bl[2] <= std::min(hi[2], sb[2]) >> kBlockShift;
@@ -495,14 +504,19 @@ bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest&
               const std::uint8_t bc = block_count_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]];
               if (bc == 0) continue;
               const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
-              if (!meets(box(ba, bb))) continue;
-              if (bc == bcells) return true;
+              const Eigen::AlignedBox3d block_box = box(ba, bb);
+              if (!near(block_box)) continue;
+              if (bc == bcells) {  // full
+                if (visit(block_box)) return true;
+                continue;
+              }
               for (std::int64_t i = std::max(lo[0], ba[0]); i <= std::min(hi[0], bb[0]); ++i) {
                 for (std::int64_t j = std::max(lo[1], ba[1]); j <= std::min(hi[1], bb[1]); ++j) {
                   for (std::int64_t k = std::max(lo[2], ba[2]); k <= std::min(hi[2], bb[2]); ++k) {
                     if (!testBit(occupied_, (i * size_[1] + j) * size_[2] + k)) continue;
                     const std::int64_t c[3] = {i, j, k};
-                    if (meets(box(c, c))) return true;
+                    const Eigen::AlignedBox3d cell_box = box(c, c);
+                    if (near(cell_box) && visit(cell_box)) return true;
                   }
                 }
               }

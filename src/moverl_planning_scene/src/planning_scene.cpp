@@ -1,8 +1,10 @@
 #include "moverl_planning_scene/planning_scene.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <sstream>
 
 namespace moverl_planning_scene {
@@ -258,12 +260,24 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
   out->pairs.clear();
   out->message.clear();
   out->state_check_time = out->path_check_time = out->planning_time = 0.0;
+  out->threatened = false;
+  out->clearance = out->retreat_clearance = -1.0;
+  out->retreat_state.clear();
   std::string error = prepare(req.start, "start", &start_);
   if (error.empty()) error = prepare(req.goal, "goal", &goal_);
   if (error.empty() && (!std::isfinite(start_time) || std::isnan(duration) || duration < 0.0)) {
     error = "start_time must be finite and duration >= 0";
   }
   const bool measured = !req.measured_start.empty() && req.measured_start != req.start;
+  if (error.empty() && !req.retreat_reach.empty()) {
+    if (req.retreat_reach.size() != model_->dof()) {
+      error = "retreat_reach has " + std::to_string(req.retreat_reach.size()) + " values, expected " +
+              std::to_string(model_->dof());
+    }
+    for (double v : req.retreat_reach) {
+      if (error.empty() && !(std::isfinite(v) && v >= 0.0)) error = "retreat_reach must be finite and >= 0";
+    }
+  }
   if (error.empty() && measured) {
     // Where the robot stands when its driver clamped its state onto a limit: any finite state of the right size (the
     // shield bounds how far beyond a limit it accepts one).
@@ -337,6 +351,7 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
       findLastFree(/*goal_checked=*/false, out);
       out->path_check_time = since(t0);
     }
+    if (!measured) retreat(req, margin.end, out);
     return;
   }
   // Straight path (interior states only: both ends are free).
@@ -380,6 +395,144 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
     }
   }
   out->message = m.str();
+  if (!out->replanned && !measured) retreat(req, margin.end, out);
+}
+
+void PlanningScene::retreat(const MotionRequest& req, double end_margin, MotionCheck* out) {
+  FclCollisionChecker& c = *checker_;
+  if (req.retreat_reach.empty() || !c.hasOccupancy()) return;
+  const auto t0 = Clock::now();
+  checker_->setOctreeMargin(end_margin);
+  if (out->outcome == MotionOutcome::kStartInCollision) {
+    // Within the start's own margin. Only the seen cells may stand in the way: backing away does not help a start in
+    // self collision or in a world object.
+    if (state_result_.status != CollisionStatus::kWorld) return;
+    for (const ContactPair& p : state_result_.pairs) {
+      if (p.b != FclCollisionChecker::kOctomapId) return;
+    }
+  } else if (c.occupancyFree(start_.data())) {
+    return;  // resting here for the move's duration is covered by the margin
+  }
+  out->threatened = true;
+  // Not free at padding + end margin: the clearance is below that (plus the inflation's rounding).
+  const double clearance =
+      c.occupancyDistance(start_.data(), 0.0, c.options().padding + end_margin + FclCollisionChecker::kMarginStep);
+  std::ostringstream m;
+  m << out->message << (out->message.empty() ? "" : "; ") << "the robot rests within the sensed margin";
+  if (!(clearance > 0.0)) {
+    m << " touching the seen cells: no move is known to back away, held";
+    out->message = m.str();
+    out->path_check_time += since(t0);
+    return;
+  }
+  out->clearance = clearance;
+  m << " (" << clearance << " m clear)";
+  // The commanded move itself, when it backs away: accepted as it is.
+  double g = clearanceAbove(goal_, clearance);
+  if (g >= clearance + kRetreatGain && pathBacksAway(goal_, clearance)) {
+    out->outcome = MotionOutcome::kValid;
+    out->pairs.clear();
+    out->last_free_fraction = -1.0;
+    out->last_free_state.clear();
+    out->retreat_clearance = g;
+    m << "; the commanded move backs away (to " << g << " m clear)";
+    out->message = m.str();
+    out->path_check_time += since(t0);
+    return;
+  }
+  // Candidates within reach: each joint alone (both ways) and seeded random directions, then the joints that gained
+  // alone combined; ranked by the clearance they end at, the first whose path backs away. Then the same at half the
+  // reach (a wall or a limit may be nearer than the full reach).
+  const std::size_t dof = start_.size();
+  std::vector<std::vector<double>> candidates;
+  std::vector<double> ends;
+  for (double scale : {1.0, 0.5}) {
+    candidates.clear();
+    ends.clear();
+    auto add = [&](std::vector<double> q) {
+      for (std::size_t i = 0; i < dof; ++i) {
+        q[i] = std::min(std::max(q[i], model_->lowerLimits()[i]), model_->upperLimits()[i]);
+      }
+      if (q == start_) return;
+      ends.push_back(clearanceAbove(q, clearance));
+      candidates.push_back(std::move(q));
+    };
+    std::vector<double> gain(dof, 0.0);  // per joint: the gain of its move alone, signed by its direction
+    for (std::size_t i = 0; i < dof; ++i) {
+      for (double f : {scale, -scale}) {
+        std::vector<double> q = start_;
+        q[i] += f * req.retreat_reach[i];
+        const std::size_t before = candidates.size();
+        add(std::move(q));
+        if (candidates.size() > before && ends.back() - clearance > std::fabs(gain[i])) {
+          gain[i] = std::copysign(ends.back() - clearance, f);
+        }
+      }
+    }
+    std::mt19937 rng(1234567u);  // the same directions every time: a decision is repeatable
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    for (int k = 0; k < kRetreatDirections; ++k) {
+      std::vector<double> q = start_;
+      for (std::size_t i = 0; i < dof; ++i) q[i] += scale * unit(rng) * req.retreat_reach[i];
+      add(std::move(q));
+    }
+    double best_gain = 0.0;
+    for (double v : gain) best_gain = std::max(best_gain, std::fabs(v));
+    if (best_gain > 0.0) {
+      std::vector<double> q = start_;
+      for (std::size_t i = 0; i < dof; ++i) q[i] = start_[i] + scale * gain[i] / best_gain * req.retreat_reach[i];
+      add(std::move(q));
+    }
+    std::vector<std::size_t> order;
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      if (ends[k] >= clearance + kRetreatGain) order.push_back(k);
+    }
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return ends[a] > ends[b]; });
+    for (std::size_t k : order) {
+      if (!pathBacksAway(candidates[k], clearance)) continue;
+      out->retreat_state = candidates[k];
+      out->retreat_clearance = ends[k];
+      m << "; a move backs away (to " << ends[k] << " m clear)";
+      out->message = m.str();
+      out->path_check_time += since(t0);
+      return;
+    }
+  }
+  m << "; no move within reach backs away (boxed in), held";
+  out->message = m.str();
+  out->path_check_time += since(t0);
+}
+
+double PlanningScene::clearanceAbove(const std::vector<double>& q, double clearance) {
+  double motion = 0.0;
+  for (std::size_t i = 0; i < q.size(); ++i) motion += checker_->jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
+  // No robot point moved more than `motion`: the clearance grew by at most that.
+  return checker_->occupancyDistance(q.data(), clearance + kRetreatGain, clearance + motion + kRetreatGain);
+}
+
+bool PlanningScene::pathBacksAway(const std::vector<double>& q, double clearance) {
+  FclCollisionChecker& c = *checker_;
+  CollisionRequest fixed = verdict_only_;
+  fixed.check_occupancy = false;  // the seen cells: by clearance below
+  c.checkState(q.data(), fixed, &retreat_result_);
+  if (retreat_result_.collision()) return false;
+  PathCheckRequest request;
+  request.state = fixed;
+  request.check_start = false;
+  request.check_goal = false;
+  request.find_first = false;
+  c.checkPath(start_.data(), q.data(), request, &retreat_path_);
+  if (retreat_path_.status != CollisionStatus::kFree) return false;
+  double motion = 0.0;
+  for (std::size_t i = 0; i < q.size(); ++i) motion += c.jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
+  const int n = static_cast<int>(std::ceil(motion / kRetreatResolution));
+  std::vector<double> s(q.size());
+  for (int k = 1; k < n; ++k) {
+    const double t = static_cast<double>(k) / n;
+    for (std::size_t i = 0; i < q.size(); ++i) s[i] = start_[i] + t * (q[i] - start_[i]);
+    if (c.occupancyDistance(s.data(), clearance, clearance) < clearance) return false;
+  }
+  return true;
 }
 
 }  // namespace moverl_planning_scene

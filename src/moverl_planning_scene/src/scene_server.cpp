@@ -448,6 +448,7 @@ bool SceneServer::serveValidateMotion(moverl_msgs::ValidateMotion::Request& req,
   request.start_time = req.start_time;
   request.duration = req.duration;
   request.stamp = req.stamp.toSec();
+  request.retreat_reach = req.retreat_reach;
   MotionCheck m;
   validate(request, &m);
   res.outcome = static_cast<uint8_t>(m.outcome);
@@ -465,6 +466,10 @@ bool SceneServer::serveValidateMotion(moverl_msgs::ValidateMotion::Request& req,
   res.map_age = m.map_age;
   res.sensed_margin = m.sensed_margin;
   res.plan_horizon = m.plan_horizon;
+  res.threatened = m.threatened;
+  res.clearance = m.clearance;
+  res.retreat_state = m.retreat_state;
+  res.retreat_clearance = m.retreat_clearance;
   return true;
 }
 

@@ -340,6 +340,9 @@ TEST_F(PandaOctomap, SensedTableBlocksTheRobot) {
   mps::MotionCheck mc;
   scene_->validateMotion(kHome, kIntoTable, /*plan=*/false, &mc);
   EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  // The planner's and last_safe's quick check (no pairs) sees the map too.
+  EXPECT_FALSE(scene_->checker().isStateValid(kIntoTable.data()));
+  EXPECT_TRUE(scene_->checker().isStateValid(kHome.data()));
 
   // Speed of checks against the octree (printed, not asserted).
   const int n = 200;
@@ -411,6 +414,133 @@ TEST_F(PandaOctomap, SensedMarginInflatesTheRobotAgainstTheMap) {
   EXPECT_EQ(mc.outcome, mps::MotionOutcome::kStartInCollision) << mc.message;
   EXPECT_DOUBLE_EQ(scene_->checker().octreeMargin(), 0.0) << "validateMotion leaves no margin behind";
   scene_->checker().setOccupancy(nullptr);
+}
+
+/// Out of a person's way (strategy retreat): the hand rests near a sensed wall, within the margin of the move's end (a
+/// hold would not be covered). A refused move is answered with a move that backs away: every state of its path at
+/// least as clear of the wall as the start, its goal clearer, free of the world and of self collisions. A commanded
+/// move that backs away is accepted; a robot that cannot move (no reach) is boxed in; a covered hold asks for nothing.
+TEST_F(PandaOctomap, ARobotRestingWithinTheMarginBacksAway) {
+  auto map = makeMap();
+  std::vector<Eigen::Vector3d> wall;
+  for (double y = -0.4; y <= 0.4; y += 0.01) {
+    for (double z = 0.0; z <= 0.8; z += 0.01) wall.emplace_back(0.75, y, z);
+  }
+  integrate(map.get(), wall, Eigen::Vector3d(-0.5, 0.0, 0.6));
+  auto& checker = scene_->checker();
+  checker.setOccupancy(map.get());
+  constexpr double kFar = 1.0;
+  std::vector<double> lean = kHome;
+  lean[1] = 0.3;
+  lean[3] = -1.8;  // reaches towards the wall: 5-6 cm from it
+  const double lean_clear = checker.occupancyDistance(lean.data(), 0.0, kFar);
+  ASSERT_GT(lean_clear, 0.02);
+  ASSERT_LT(lean_clear, 0.12) << "the wall is a few cm from the arm";
+  // The distance agrees with collision checks of the padded links inflated by the margin (the octree's levels).
+  const double padding = checker.options().padding;
+  ASSERT_TRUE(checker.setOctreeMargin(lean_clear - padding - 0.015));
+  EXPECT_TRUE(checker.occupancyFree(lean.data()));
+  ASSERT_TRUE(checker.setOctreeMargin(lean_clear - padding + 0.01));
+  EXPECT_FALSE(checker.occupancyFree(lean.data()));
+  ASSERT_TRUE(checker.setOctreeMargin(0.0));
+  // Towards the wall (refused) and away from it: one joint moved by 0.15 rad, whichever way loses (gains) most.
+  std::vector<double> closer = lean, back = lean;
+  double closer_clear = lean_clear, back_clear = lean_clear;
+  for (std::size_t i = 0; i < 7; ++i) {
+    for (double d : {-0.15, 0.15}) {
+      std::vector<double> q = lean;
+      q[i] += d;
+      const double c = checker.occupancyDistance(q.data(), 0.0, kFar);
+      if (c < closer_clear) closer_clear = c, closer = q;
+      if (c > back_clear) back_clear = c, back = q;
+    }
+  }
+  ASSERT_LT(closer_clear, lean_clear - 0.01);
+  ASSERT_GT(back_clear, lean_clear + 0.01);
+  mps::SensedMargins sm;
+  sm.end = sm.plan = lean_clear + 0.02;  // within the end margin, free of the start margin (0)
+  mps::MotionRequest req;
+  req.start = lean;
+  req.goal = closer;
+  req.plan_on_path_collision = true;
+  req.duration = 0.05;
+  mps::MotionCheck mc;
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  EXPECT_FALSE(mc.threatened) << "no retreat asked for: nothing computed";
+  EXPECT_TRUE(mc.retreat_state.empty());
+
+  req.retreat_reach.assign(7, 0.1);
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+  EXPECT_TRUE(mc.threatened) << mc.message;
+  EXPECT_NEAR(mc.clearance, lean_clear, 1e-9);
+  ASSERT_EQ(mc.retreat_state.size(), 7u) << mc.message;
+  EXPECT_GE(mc.retreat_clearance, mc.clearance + mps::PlanningScene::kRetreatGain);
+  EXPECT_NE(mc.message.find("backs away"), std::string::npos) << mc.message;
+  // Checked independently, finely: no state of the path comes closer than the start by more than half the retreat
+  // resolution; the goal is as clear as reported; the world and self collisions are checked like every move.
+  const std::vector<double> away = mc.retreat_state;
+  for (std::size_t i = 0; i < 7; ++i) EXPECT_LE(std::fabs(away[i] - lean[i]), 0.1 + 1e-12);
+  std::vector<double> q(7);
+  for (int k = 0; k <= 200; ++k) {
+    for (std::size_t i = 0; i < 7; ++i) q[i] = lean[i] + k / 200.0 * (away[i] - lean[i]);
+    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar), lean_clear - mps::PlanningScene::kRetreatResolution / 2)
+        << "at " << k / 2.0 << " %";
+  }
+  EXPECT_NEAR(checker.occupancyDistance(away.data(), 0.0, kFar), mc.retreat_clearance, 1e-9);
+  checker.setOccupancy(nullptr);
+  mps::PathCheck pc;
+  scene_->checkPath(lean, away, &pc);
+  EXPECT_EQ(pc.outcome, mps::CheckOutcome::kValid) << pc.message;
+  checker.setOccupancy(map.get());
+
+  // Within the start's own margin every commanded move was refused (START_IN_COLLISION): one that backs away is
+  // accepted now, one that does not is answered with a retreat.
+  sm.start = sm.end;
+  req.goal = back;
+  req.retreat_reach.clear();
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  req.retreat_reach.assign(7, 0.1);
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  EXPECT_TRUE(mc.threatened);
+  EXPECT_TRUE(mc.retreat_state.empty());
+  EXPECT_NEAR(mc.retreat_clearance, back_clear, 1e-9);
+  req.goal = closer;
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;  // the goal is checked first
+  EXPECT_EQ(mc.retreat_state.size(), 7u) << mc.message;
+  // What a retreat costs (printed, not asserted).
+  const auto t0 = Clock::now();
+  for (int k = 0; k < 20; ++k) scene_->validateMotion(req, &mc, &sm);
+  const double search_ms = 1e3 * std::chrono::duration<double>(Clock::now() - t0).count() / 20;
+  const auto t1 = Clock::now();
+  for (int k = 0; k < 20; ++k) checker.occupancyDistance(lean.data(), 0.0, lean_clear + 0.1);
+  std::printf("[ retreat ] refused move + retreat search: %.2f ms; one clearance: %.3f ms\n", search_ms,
+              1e3 * std::chrono::duration<double>(Clock::now() - t1).count() / 20);
+
+  // Boxed in: no reach, no retreat; the robot holds (and says why).
+  req.retreat_reach.assign(7, 0.0);
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_TRUE(mc.threatened);
+  EXPECT_TRUE(mc.retreat_state.empty());
+  EXPECT_NE(mc.message.find("boxed in"), std::string::npos) << mc.message;
+  // A bad reach is an invalid request.
+  req.retreat_reach.assign(6, 0.1);
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_EQ(mc.outcome, mps::MotionOutcome::kInvalidRequest) << mc.message;
+
+  // A hold the margin covers: nothing to back away from.
+  sm.start = 0.0;
+  sm.end = sm.plan = 0.0;
+  req.retreat_reach.assign(7, 0.1);
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_FALSE(mc.threatened) << mc.message;
+  EXPECT_TRUE(mc.retreat_state.empty());
+  EXPECT_DOUBLE_EQ(checker.octreeMargin(), 0.0) << "validateMotion leaves no margin behind";
+  checker.setOccupancy(nullptr);
 }
 
 /// Unknown is occupied: the rule is octomap's update from a prior just above the threshold; one view clears what it

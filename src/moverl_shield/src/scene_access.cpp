@@ -74,6 +74,7 @@ class ServiceScene : public Scene {
     vm.request.start_time = q.start_time;
     vm.request.duration = q.duration;
     vm.request.stamp = q.stamp > 0.0 ? ros::Time(q.stamp) : ros::Time();
+    vm.request.retreat_reach = q.retreat_reach;
     const CallEnd end = validate_.call(vm, timeout);
     if (end != CallEnd::kAnswered) return end;
     const auto& r = vm.response;
@@ -97,6 +98,10 @@ class ServiceScene : public Scene {
     a->map_age = r.map_age;
     a->sensed_margin = r.sensed_margin;
     a->plan_horizon = r.plan_horizon;
+    a->threatened = r.threatened;
+    a->clearance = r.clearance;
+    a->retreat_state = r.retreat_state;
+    a->retreat_clearance = r.retreat_clearance;
     return end;
   }
   CallEnd plan(const std::vector<double>& start, const std::vector<double>& goal, double time_limit,

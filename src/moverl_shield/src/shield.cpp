@@ -1,5 +1,6 @@
 #include "moverl_shield/shield.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
@@ -142,6 +143,15 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
     res->message = std::string("cannot time the move: ") + e.what();
     return Verdict::kExecutionFailed;
   }
+  q.retreat_reach.clear();
+  if (options_.strategy == Strategy::kRetreat) {
+    // A move that backs away lasts as long as the commanded one would, at the velocity limits.
+    const double t = std::max(req.duration, straight);
+    q.retreat_reach.resize(joints_.size());
+    for (std::size_t i = 0; i < joints_.size(); ++i) {
+      q.retreat_reach[i] = options_.limits.velocity[i] * options_.limits.velocity_scale * t;
+    }
+  }
   const double check_begin = real_time ? clock_->now() : 0.0;
   setWindow(s, check_begin, straight, &q);
   const double timeout = sceneTimeout();
@@ -162,6 +172,7 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
   answer.plan.swap(a.path);
   answer.last_free_fraction = a.last_free_fraction;
   answer.last_free_state.swap(a.last_free_state);
+  answer.retreat_state.swap(a.retreat_state);
   Decision decision = decide(options_.strategy, answer, s.q, req.target);
   res->unsafe_cause = decision.unsafe_cause;
   res->truncated_fraction = decision.truncated_fraction;

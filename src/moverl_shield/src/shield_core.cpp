@@ -38,6 +38,8 @@ std::string verdictName(Verdict verdict) {
       return "driver_unavailable";
     case Verdict::kStateUnavailable:
       return "state_unavailable";
+    case Verdict::kRetreated:
+      return "retreated";
   }
   return "unknown";
 }
@@ -45,7 +47,7 @@ std::string verdictName(Verdict verdict) {
 bool isDiscarded(Verdict verdict) {
   return verdict == Verdict::kDiscardedSelf || verdict == Verdict::kDiscardedPose ||
          verdict == Verdict::kDiscardedPath || verdict == Verdict::kDiscardedStart || verdict == Verdict::kTruncated ||
-         verdict == Verdict::kDiscardedUnseen;
+         verdict == Verdict::kDiscardedUnseen || verdict == Verdict::kRetreated;
 }
 
 std::string strategyName(Strategy strategy) {
@@ -56,12 +58,14 @@ std::string strategyName(Strategy strategy) {
       return "discard";
     case Strategy::kLastSafe:
       return "last_safe";
+    case Strategy::kRetreat:
+      return "retreat";
   }
   return "unknown";
 }
 
 bool parseStrategy(const std::string& name, Strategy* strategy) {
-  for (Strategy s : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe}) {
+  for (Strategy s : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe, Strategy::kRetreat}) {
     if (name == strategyName(s)) {
       *strategy = s;
       return true;
@@ -70,9 +74,9 @@ bool parseStrategy(const std::string& name, Strategy* strategy) {
   return false;
 }
 
-std::string strategyNames() { return "plan, discard, last_safe"; }
+std::string strategyNames() { return "plan, discard, last_safe, retreat"; }
 
-bool wantsPlan(Strategy strategy) { return strategy == Strategy::kPlan; }
+bool wantsPlan(Strategy strategy) { return strategy == Strategy::kPlan || strategy == Strategy::kRetreat; }
 bool wantsLastFree(Strategy strategy) { return strategy == Strategy::kLastSafe; }
 
 std::string validateTarget(const std::vector<double>& target, size_t num_joints) {
@@ -107,9 +111,8 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
       held = Verdict::kDiscardedPath;
       break;
     case MotionOutcome::kStartInCollision:
-      d.verdict = Verdict::kDiscardedStart;
-      d.unsafe_cause = static_cast<uint8_t>(outcome);
-      return d;
+      held = Verdict::kDiscardedStart;
+      break;
     case MotionOutcome::kInvalidRequest:
       d.verdict = Verdict::kInvalidRequest;
       return d;
@@ -125,18 +128,22 @@ Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<
   d.verdict = held;
   switch (strategy) {
     case Strategy::kPlan:
+    case Strategy::kRetreat:
       if (outcome == MotionOutcome::kPathCollision && answer.replanned && answer.plan.size() >= 2) {
         d.verdict = Verdict::kReplanned;
         d.waypoints = answer.plan;
         // The plan starts at the state the scene checked; execute from the measured state exactly.
         d.waypoints.front() = start;
+      } else if (strategy == Strategy::kRetreat && answer.retreat_state.size() == start.size()) {
+        d.verdict = Verdict::kRetreated;
+        d.waypoints = {start, answer.retreat_state};
       }
       break;
     case Strategy::kDiscard:
       break;  // never execute anything for an unsafe action (a plan, if any, is ignored)
     case Strategy::kLastSafe:
-      if (answer.last_free_fraction > 0.0 && answer.last_free_fraction <= 1.0 &&
-          answer.last_free_state.size() == start.size()) {
+      if (outcome != MotionOutcome::kStartInCollision && answer.last_free_fraction > 0.0 &&
+          answer.last_free_fraction <= 1.0 && answer.last_free_state.size() == start.size()) {
         d.verdict = Verdict::kTruncated;
         d.waypoints = {start, answer.last_free_state};
         d.truncated_fraction = answer.last_free_fraction;

@@ -48,7 +48,8 @@ static_assert(code(Verdict::kSafe) == StepRes::SAFE && code(Verdict::kReplanned)
                   code(Verdict::kSceneUnavailable) == StepRes::SCENE_UNAVAILABLE &&
                   code(Verdict::kExecutionFailed) == StepRes::EXECUTION_FAILED &&
                   code(Verdict::kDriverUnavailable) == StepRes::DRIVER_UNAVAILABLE &&
-                  code(Verdict::kStateUnavailable) == StepRes::STATE_UNAVAILABLE,
+                  code(Verdict::kStateUnavailable) == StepRes::STATE_UNAVAILABLE &&
+                  code(Verdict::kRetreated) == StepRes::RETREATED,
               "moverl_shield::Verdict differs from moverl_msgs/ShieldStep");
 constexpr std::int32_t code(TrajectoryError e) { return static_cast<std::int32_t>(e); }
 static_assert(code(TrajectoryError::kSuccessful) == FjtResult::SUCCESSFUL &&

@@ -368,6 +368,39 @@ TEST_F(ShieldTest, StrategiesDiscardAndLastSafe) {
   EXPECT_EQ(driver.executed[0].positions.back(), (std::vector<double>{0.025, -0.025, 0.01}));
 }
 
+TEST_F(ShieldTest, RetreatAsksForMovesWithinTheStepsReachAndExecutesThem) {
+  ShieldOptions o = options();
+  o.strategy = Strategy::kRetreat;
+  o.limits.velocity_scale = 0.5;
+  make(o);
+  const std::vector<double> away{-0.01, 0.01, 0.0};
+  scene.answer = [&](const mps::MotionRequest& q, mps::MotionCheck* a) {
+    a->outcome = mps::MotionOutcome::kStartInCollision;
+    a->moving_obstacles = true;
+    a->threatened = true;
+    a->retreat_state = away;
+  };
+  const StepResult r = step();
+  EXPECT_EQ(r.verdict, Verdict::kRetreated) << r.message;
+  EXPECT_EQ(r.unsafe_cause, static_cast<std::uint8_t>(mps::MotionOutcome::kStartInCollision));
+  const mps::MotionRequest& q = scene.requests.back();
+  EXPECT_TRUE(q.plan_on_path_collision);
+  // Each joint's reach: its velocity limit (the URDF's, 1 rad/s) x velocity_scale x the move's duration (the straight
+  // move at half speed: 0.05 rad / 0.5 rad/s = 0.1 s, longer than dt).
+  ASSERT_EQ(q.retreat_reach.size(), 3u);
+  for (double v : q.retreat_reach) EXPECT_NEAR(v, 1.0 * 0.5 * 0.1, 1e-9);
+  ASSERT_EQ(driver.executed.size(), 1u);  // the retreat, not a hold
+  EXPECT_EQ(driver.executed[0].positions.front(), kStart);
+  EXPECT_EQ(driver.executed[0].positions.back(), away);
+  // Without a retreat on offer: held (through the driver: the obstacles move).
+  scene.answer = outcome(mps::MotionOutcome::kStartInCollision);
+  EXPECT_EQ(step().verdict, Verdict::kDiscardedStart);
+  // The other strategies never ask for one.
+  make(options());
+  step();
+  EXPECT_TRUE(scene.requests.back().retreat_reach.empty());
+}
+
 TEST_F(ShieldTest, DisabledShieldPassesThroughUnchecked) {
   ShieldOptions o = options();
   o.enabled = false;

@@ -71,7 +71,7 @@ TEST(Decide, UnknownSceneCodeFailsClosed) {
 
 namespace {
 const std::vector<double> kLastFree{0.04, -0.08, 0.02};  // 40 % of the way to kTarget
-const Strategy kAllStrategies[] = {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe};
+const Strategy kAllStrategies[] = {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe, Strategy::kRetreat};
 
 // What a scene asked with the strategy's flags would answer (plan / last free state only when requested).
 SceneAnswer answer(Strategy s, MotionOutcome outcome, bool plan_found = true, double last_free = 0.4) {
@@ -100,6 +100,8 @@ TEST(Strategy, NamesParseAndRoundTrip) {
   EXPECT_EQ(strategyName(Strategy::kPlan), "plan");
   EXPECT_EQ(strategyName(Strategy::kDiscard), "discard");
   EXPECT_EQ(strategyName(Strategy::kLastSafe), "last_safe");
+  EXPECT_EQ(strategyName(Strategy::kRetreat), "retreat");
+  EXPECT_EQ(strategyNames(), "plan, discard, last_safe, retreat");
   Strategy s = Strategy::kDiscard;
   EXPECT_FALSE(parseStrategy("Plan", &s));
   EXPECT_FALSE(parseStrategy("hold", &s));
@@ -108,6 +110,8 @@ TEST(Strategy, NamesParseAndRoundTrip) {
   EXPECT_TRUE(wantsPlan(Strategy::kPlan));
   EXPECT_FALSE(wantsPlan(Strategy::kDiscard));
   EXPECT_FALSE(wantsPlan(Strategy::kLastSafe));
+  EXPECT_TRUE(wantsPlan(Strategy::kRetreat));
+  EXPECT_FALSE(wantsLastFree(Strategy::kRetreat));
   EXPECT_TRUE(wantsLastFree(Strategy::kLastSafe));
   EXPECT_FALSE(wantsLastFree(Strategy::kPlan));
   EXPECT_FALSE(wantsLastFree(Strategy::kDiscard));
@@ -222,6 +226,42 @@ TEST(Strategy, LastSafeWithoutProgressHoldsStill) {
     a = answer(s, c.first);
     a.last_free_fraction = 1.5;
     EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, c.second);
+  }
+}
+
+TEST(Strategy, RetreatBacksAwayWherePlanWouldHold) {
+  const Strategy s = Strategy::kRetreat;
+  const std::vector<double> away{-0.02, 0.01, 0.0};
+  // As plan without a retreat state: replans a path, holds the rest.
+  EXPECT_EQ(decide(s, answer(s, MotionOutcome::kPathCollision), kStart, kTarget).verdict, Verdict::kReplanned);
+  EXPECT_EQ(decide(s, answer(s, MotionOutcome::kPoseCollision), kStart, kTarget).verdict, Verdict::kDiscardedPose);
+  // A plan beats a retreat (the scene sends none then).
+  SceneAnswer a = answer(s, MotionOutcome::kPathCollision);
+  a.retreat_state = away;
+  EXPECT_EQ(decide(s, a, kStart, kTarget).verdict, Verdict::kReplanned);
+  const MotionOutcome refused[] = {MotionOutcome::kSelfCollision, MotionOutcome::kPoseCollision,
+                                   MotionOutcome::kPathCollision, MotionOutcome::kStartInCollision};
+  for (MotionOutcome o : refused) {
+    a = answer(s, o, /*plan_found=*/false);
+    a.retreat_state = away;
+    Decision d = decide(s, a, kStart, kTarget);
+    EXPECT_EQ(d.verdict, Verdict::kRetreated) << static_cast<int>(o);
+    EXPECT_EQ(d.waypoints, (Waypoints{kStart, away}));
+    EXPECT_EQ(d.unsafe_cause, static_cast<uint8_t>(o));  // what was refused
+    EXPECT_TRUE(isDiscarded(d.verdict));                 // the action was unsafe: punished
+    a.retreat_state = {0.1};                             // malformed: fail closed, hold still
+    EXPECT_TRUE(decide(s, a, kStart, kTarget).waypoints.empty());
+  }
+  // Never for a blind map, an invalid request or a valid move; and never by the other strategies.
+  for (MotionOutcome o : {MotionOutcome::kMapStale, MotionOutcome::kInvalidRequest, MotionOutcome::kValid}) {
+    a = answer(s, o);
+    a.retreat_state = away;
+    EXPECT_NE(decide(s, a, kStart, kTarget).verdict, Verdict::kRetreated);
+  }
+  for (Strategy other : {Strategy::kPlan, Strategy::kDiscard, Strategy::kLastSafe}) {
+    a = answer(other, MotionOutcome::kPoseCollision, true, 0.0);
+    a.retreat_state = away;
+    EXPECT_NE(decide(other, a, kStart, kTarget).verdict, Verdict::kRetreated) << strategyName(other);
   }
 }
 

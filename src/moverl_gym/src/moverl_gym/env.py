@@ -37,7 +37,8 @@ VERDICTS = {
     if name.isupper() and isinstance(getattr(_Step, name), int)
 }
 #: The collision the shield found (and prevented or avoided) for each verdict.
-#: For TRUNCATED (strategy last_safe) it depends on the step: see _collision_type (unsafe_cause).
+#: For TRUNCATED (strategy last_safe) and RETREATED (retreat) it depends on the step: see _collision_type
+#: (unsafe_cause).
 COLLISION_TYPES = {
     _Step.REPLANNED: "path",
     _Step.DISCARDED_SELF: "self",
@@ -55,7 +56,8 @@ UNSAFE_CAUSES = {
     _Motion.START_IN_COLLISION: "start",
 }
 #: Verdicts that count as discarded (the action was unsafe: the agent gets safety_penalty). A truncated step
-#: (strategy last_safe) moved only along the safe part of the unsafe action: it counts too.
+#: (strategy last_safe) moved only along the safe part of the unsafe action, a retreated one (retreat) backed away
+#: from a person instead: they count too.
 DISCARDED = frozenset(
     {
         _Step.DISCARDED_SELF,
@@ -64,6 +66,7 @@ DISCARDED = frozenset(
         _Step.DISCARDED_START,
         _Step.DISCARDED_UNSEEN,
         _Step.TRUNCATED,
+        _Step.RETREATED,
     }
 )
 #: Counters of discarded steps per verdict for training logs and metrics ("discarded_self", ... in code order).
@@ -95,9 +98,9 @@ ENV_LAUNCH_ARGS = {
 
 
 def _collision_type(verdict: int, unsafe_cause: int) -> "str | None":
-    """The collision the shield found for this step (None when none): from the verdict, and for a truncated
-    step from the step's unsafe_cause (self, pose or path), else "path"."""
-    if verdict == _Step.TRUNCATED:
+    """The collision the shield found for this step (None when none): from the verdict, and for a truncated or
+    retreated step from the step's unsafe_cause (self, pose, path or start), else "path"."""
+    if verdict in (_Step.TRUNCATED, _Step.RETREATED):
         return UNSAFE_CAUSES.get(unsafe_cause, "path")
     return COLLISION_TYPES.get(verdict)
 

@@ -104,7 +104,7 @@ class LaunchedGraph:
         grace: float | None = None,
         attempts: int = 5,
     ):
-        launch_args = check_launch_args(launch_args)
+        launch_args = check_launch_args(launch_args, whole=True)
         for tool in ("roslaunch", "rosmaster"):
             if shutil.which(tool) is None:
                 raise GraphError(f"{tool} is not on PATH: source devel/setup.bash (see README) first")

@@ -60,7 +60,12 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "gui": BOOL,
     "markers": BOOL,
     "rviz": BOOL,
-    "strategy": ("plan", "discard", "last_safe"),  # moverl_shield/src/shield_core.cpp: strategyName, parseStrategy
+    "strategy": (
+        "plan",
+        "discard",
+        "last_safe",
+        "retreat",
+    ),  # moverl_shield/src/shield_core.cpp: strategyName, parseStrategy
     "driver": ("sim_service", "follow_joint_trajectory"),  # moverl_shield/src/shield_node.cpp
     "profile": ("linear", "min_jerk"),  # moverl_shield/src/trajectory.cpp: profileName, parseProfile
     "obstacles": ("objects", "octomap", "both", "sensed"),  # moverl_planning_scene/src/scene_server.cpp
@@ -116,11 +121,14 @@ def worlds_available() -> list[str]:
     return sorted(p.stem for p in (repo_root() / "worlds").glob("*.yaml"))
 
 
-def check(args: Mapping[str, object]) -> dict[str, str]:
+def check(args: Mapping[str, object], whole: bool = False) -> dict[str, str]:
     """Check arguments for launch/moverl.launch; return them as roslaunch's text.
 
     Args:
         args: name -> value (a string, a bool, a number, a list for initial_positions, a path).
+        whole: these are all the arguments of a launch (the rest take their defaults): checks that need the world
+            file (sensing, mute_cameras) read the default world when none is given. False: some arguments only (the
+            env's launch_args, whose world comes separately): those checks wait for a world.
 
     Returns:
         name -> the value as ``name:=value`` text (launch_value), for the same names.
@@ -140,7 +148,7 @@ def check(args: Mapping[str, object]) -> dict[str, str]:
             problems.append(_choice(name, text))
             if CHOICES[name] is BOOL:
                 values[name] = text.lower()
-    problems += _open_values(values)
+    problems += _open_values(values, whole)
     problems = [p for p in problems if p]
     if len(problems) == 1:
         raise LaunchArgError(f"launch/moverl.launch: {problems[0]}")
@@ -168,7 +176,7 @@ def _choice(name: str, text: str) -> str:
     return f"{name}={text!r} is not one of: {shown}{_closest(text, [c for c in choices if c])}"
 
 
-def _open_values(values: dict[str, str]) -> list[str]:
+def _open_values(values: dict[str, str], whole: bool) -> list[str]:
     """The problems of the arguments whose values are not a closed set (worlds, robots, names, numbers)."""
     problems = []
     world = None
@@ -219,7 +227,7 @@ def _open_values(values: dict[str, str]) -> list[str]:
                 x = math.nan
             if not (math.isfinite(x) and x > 0):
                 problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
-    problems += _world_problems(values)
+    problems += _world_problems(values, whole)
     if values.get("initial_positions"):
         # The robot the graph loads: robot_config, whose default is config/robots/<robot>.yaml.
         if "robot_config" in values:
@@ -232,16 +240,17 @@ def _open_values(values: dict[str, str]) -> list[str]:
     return problems
 
 
-def _world_problems(values: dict[str, str]) -> list[str]:
+def _world_problems(values: dict[str, str], whole: bool) -> list[str]:
     """The world file the graph would load, where the other arguments need it: its sensing in the sensed modes (a
     speed bound below its fastest motion, no cameras: moverl_sim.world.sensing_problems), and mute_cameras' ids."""
     from moverl_sim.world import WorldFileError, load_world, sensing_problems
 
     sensed = values.get("obstacles", launch_defaults()["obstacles"]) in SENSED_OBSTACLES
     mute = values.get("mute_cameras", "")
-    if not sensed and not mute or not ("world" in values or "world_file" in values):
+    if not sensed and not mute or not (whole or "world" in values or "world_file" in values):
         return []  # (the env checks its launch_args before it knows the world; the launch checks them all again)
-    path = Path(values["world_file"]) if "world_file" in values else world_file(values.get("world", "table"))
+    world_name = values.get("world", launch_defaults()["world"])
+    path = Path(values["world_file"]) if "world_file" in values else world_file(world_name)
     if not path.expanduser().is_file():
         return []  # reported by _open_values
     try:

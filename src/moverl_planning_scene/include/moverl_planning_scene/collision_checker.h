@@ -94,12 +94,12 @@ struct ContactPair {
 
 /// \brief What to check in one state.
 struct CollisionRequest {
-  bool check_self = true;       ///< self collisions (allowed-collision matrix applied)
-  bool check_world = true;      ///< robot vs (inflated) world objects
-  bool check_occupancy = true;  ///< with check_world: robot vs the sensed occupancy map (FclCollisionChecker)
-  std::size_t max_pairs = 1;    ///< stop after this many colliding pairs; 0: verdict only (no names filled)
+  bool check_self = true;     ///< self collisions (allowed-collision matrix applied)
+  bool check_world = true;    ///< robot vs (inflated) world objects
+  std::size_t max_pairs = 1;  ///< stop after this many colliding pairs; 0: verdict only (no names filled)
   /// Fill ContactPair::depth from FCL's contact (libccd MPR). Approximate: unreliable for vertex-only convex hulls.
   bool compute_depth = false;
+  bool check_occupancy = true;  ///< with check_world: robot vs the sensed occupancy map (FclCollisionChecker)
 };
 
 /// \brief Result of one state check. Self collisions are checked first; world pairs only when the state is

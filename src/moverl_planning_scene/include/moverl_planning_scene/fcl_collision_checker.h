@@ -4,11 +4,11 @@
  */
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 #include <limits>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "moverl_planning_scene/collision_checker.h"
@@ -95,17 +95,14 @@ class FclCollisionChecker : public CollisionChecker {
   bool setOctreeMargin(double margin);
   /// \brief The margin (m) the occupancy checks now use (the requested one rounded up).
   double octreeMargin() const { return octo_level_ * kMarginStep; }
-  /// \brief Occupancy checks against links inflated by level * kMarginStep from their raw shapes (no padding), for
-  ///        clearance measures; -1 returns to the padded shapes of setOctreeMargin.
-  void setOccupancyInflationLevel(int level) { inflation_level_ = std::min(level, kMaxInflationLevel); }
-  /// \brief True when no moving link's shape (as the occupancy checks now inflate it) meets an occupied cell in q.
+  /// \brief True when no moving link's shape, padded and inflated by the current margin, meets an occupied cell in q.
   bool occupancyFree(const double* q);
-  /// \brief The largest level in [lo, hi] at which q is occupancyFree with links inflated by level * kMarginStep from
-  ///        their raw shapes; lo - 1 when not free at lo. Leaves the inflation level as it found it.
-  int clearanceLevel(const double* q, int lo, int hi);
-  static constexpr double kMarginStep = 0.01;     ///< m between the sensed margin's levels
-  static constexpr double kMaxMargin = 1.0;       ///< m: the largest margin (100 levels)
-  static constexpr int kMaxInflationLevel = 100;  ///< the largest clearance level (kMaxMargin)
+  /// \brief The distance (m) in q between the moving links' raw collision shapes and the nearest occupied cell
+  ///        (GJK), exact when it lies in [below, above]: as soon as one below `below` is found it is returned (early
+  ///        exit), and `above` when every cell is at least that far. 0 when a link meets a cell. No map: infinity.
+  double occupancyDistance(const double* q, double below, double above);
+  static constexpr double kMarginStep = 0.01;  ///< m between the sensed margin's levels
+  static constexpr double kMaxMargin = 1.0;    ///< m: the largest margin (100 levels)
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
@@ -183,7 +180,6 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<Obstacle> world_;
   const OccupancyMap* occupancy_ = nullptr;  // sensed obstacles (may be null)
   int octo_level_ = 0;                       // sensed margin: octoGeom's level (kMarginStep each)
-  int inflation_level_ = -1;                 // >= 0: clearance checks' raw inflation level (octoGeom)
   /// True when the shape at tf meets an occupied cell of the occupancy map.
   bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf) const;
   /// The shape of g checked against the occupancy map at the current margin.
@@ -193,6 +189,7 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<double> joint_radius_;
   double reach_radius_ = 0.0;
   std::vector<Eigen::Isometry3d> link_poses_;
+  std::vector<std::pair<double, Eigen::AlignedBox3d>> near_boxes_;  // occupancyDistance's scratch
   std::vector<double> q_scratch_;
   CollisionResult state_scratch_;
   AcmStats acm_stats_;

@@ -138,6 +138,11 @@ class OccupancyMap {
   ///        meets it), a partial one is looked into, down to the occupied cells themselves. `meets` is asked about
   ///        boxes that hold occupied cells only; it must be exact for cell boxes (the answer is as exact as it is).
   bool anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const;
+  /// \brief The traversal behind anyOccupied: within `region`, every box that holds occupied cells (a superblock, a
+  ///        block, a cell) is offered to `near`; one it refuses is skipped, one it accepts is looked into, or, when all
+  ///        its cells are occupied (a full superblock or block, a cell), handed to `visit`. True as soon as `visit`
+  ///        returns true (stop), false when the traversal ends.
+  bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit) const;
   /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
   double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
   const OccupancyMapOptions& options() const { return options_; }

@@ -64,6 +64,9 @@ struct MotionRequest {
   double start_time = 0.0;                                    ///< motion time (s) of the start state
   double duration = std::numeric_limits<double>::infinity();  ///< s the straight move's window lasts
   double stamp = 0.0;  ///< absolute time (s, driver clock) of start_time, for the sensed map's age; 0: the newest cloud
+  /// Sensed obstacles (strategy retreat): the largest |goal - start| per joint (rad or m) of a move that backs away
+  /// from the seen cells when the robot would rest within the predictive margin (ValidateMotion.srv). Empty: never.
+  std::vector<double> retreat_reach;
 };
 
 /// \brief Result of validateMotion.
@@ -83,6 +86,11 @@ struct MotionCheck {
   double map_age = -1.0;       ///< s: the map's age at the request's stamp
   double sensed_margin = 0.0;  ///< m: the predictive margin of the goal and the straight path
   double plan_horizon = 0.0;   ///< s: a returned plan is covered for a move lasting at most this long (0: any)
+  // Retreat (a request with retreat_reach; ValidateMotion.srv):
+  bool threatened = false;            ///< the robot would rest within the predictive margin of the seen cells
+  double clearance = -1.0;            ///< threatened: m the start is at least clear of the seen cells (-1: touching)
+  std::vector<double> retreat_state;  ///< threatened and refused: the goal of a move that backs away (empty: none)
+  double retreat_clearance = -1.0;    ///< m that goal (or a commanded move accepted as backing away) is at least clear
 };
 
 /// \brief The planning scene: robot model + FCL checker + OMPL planner. Not thread-safe (callers serialize).
@@ -135,6 +143,11 @@ class PlanningScene {
   static constexpr double kTimeSlack = 1e-3;
   /// Longest accepted planning time limit (s).
   static constexpr double kMaxPlanningTime = 60.0;
+  /// Retreat: m of robot-point motion between the states whose clearance is checked (points between them come at
+  /// most half of it closer); m a retreat's goal must gain at least; random directions tried besides each joint's.
+  static constexpr double kRetreatResolution = 0.005;
+  static constexpr double kRetreatGain = 0.002;
+  static constexpr int kRetreatDirections = 16;
 
  private:
   PlanningScene() = default;
@@ -142,6 +155,15 @@ class PlanningScene {
   std::string prepare(const std::vector<double>& q, const char* what, std::vector<double>* clamped) const;
   /// find_last_free: from a find_first check of start_ -> goal_ (path_result_), fill out->last_free_*.
   void findLastFree(bool goal_checked, MotionCheck* out);
+  /// Retreat: after the outcome of a request with retreat_reach is known (start_, goal_ set), decide whether the
+  /// robot is threatened where it rests (at the end margin, m) and find a move that backs away.
+  void retreat(const MotionRequest& request, double end_margin, MotionCheck* out);
+  /// The clearance (m) of q from the seen cells when it is at least `clearance` + kRetreatGain, else less than that.
+  double clearanceAbove(const std::vector<double>& q, double clearance);
+  /// True when the path start_ -> q backs away from the seen cells: q and the path free of self collisions and the
+  /// world objects (padded, at path_resolution), and its states every kRetreatResolution of robot-point motion at
+  /// least `clearance` clear of the seen cells (q's own clearance is clearanceAbove's).
+  bool pathBacksAway(const std::vector<double>& q, double clearance);
 
   std::unique_ptr<RobotModel> model_;
   std::unique_ptr<FclCollisionChecker> checker_;
@@ -151,6 +173,8 @@ class PlanningScene {
   CollisionRequest verdict_only_{true, true, 0, false};  ///< self + world, no pairs (fast)
   CollisionResult state_result_;
   PathCheckResult path_result_;
+  CollisionResult retreat_result_;
+  PathCheckResult retreat_path_;
   PlanResult plan_result_;
   std::vector<Eigen::Isometry3d> link_poses_;
 };

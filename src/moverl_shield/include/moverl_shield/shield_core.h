@@ -35,6 +35,7 @@ enum class Verdict : uint8_t {
   kExecutionFailed = 12,    ///< the driver refused the trajectory
   kDriverUnavailable = 13,  ///< the driver is unreachable or gave no result by the deadline: fail closed
   kStateUnavailable = 14,   ///< no fresh, complete, in-limits joint state: fail closed
+  kRetreated = 15,          ///< unsafe target (retreat) while resting within the sensed margin: backed away instead
 };
 
 /// What the shield does with an unsafe action (param ~strategy).
@@ -42,13 +43,18 @@ enum class Strategy : uint8_t {
   kPlan = 0,      ///< "plan" (the paper's): self/pose collisions held still; a path collision replaced by a plan
   kDiscard = 1,   ///< "discard": every unsafe action held still, no planning
   kLastSafe = 2,  ///< "last_safe": move straight to the last safe state before the first collision
+  /// "retreat": as plan; and with sensed obstacles, a robot that would rest within the predictive margin of the seen
+  /// cells backs away instead of holding still (ValidateMotion.retreat_reach), and a commanded move that backs away
+  /// is accepted.
+  kRetreat = 3,
 };
 
-/// \brief Name of a strategy as used in ~strategy and the ShieldStep response ("plan", "discard", "last_safe").
+/// \brief Name of a strategy as used in ~strategy and the ShieldStep response ("plan", "discard", "last_safe",
+///        "retreat").
 std::string strategyName(Strategy strategy);
 /// \brief Parse a strategy name (exact, lower case). False for an unknown name (*strategy unchanged).
 bool parseStrategy(const std::string& name, Strategy* strategy);
-/// \brief The names accepted by parseStrategy, for messages ("plan, discard, last_safe").
+/// \brief The names accepted by parseStrategy, for messages ("plan, discard, last_safe, retreat").
 std::string strategyNames();
 
 using Waypoints = std::vector<std::vector<double>>;
@@ -60,6 +66,7 @@ struct SceneAnswer {
   Waypoints plan;                       ///< the replacement plan (start..goal) when replanned
   double last_free_fraction = -1;       ///< t of the last free checked state before the first collision; -1: none
   std::vector<double> last_free_state;  ///< the configuration at last_free_fraction
+  std::vector<double> retreat_state;    ///< a move that backs away from the seen cells (retreat); empty: none
 };
 
 /// \brief What the scene must compute for a strategy (ValidateMotion request flags).
@@ -96,6 +103,8 @@ std::string validateTarget(const std::vector<double>& target, size_t num_joints)
 /// |                 | DISCARDED_PATH                | (plan ignored)  |                                        |
 /// | START_IN_COLL.  | DISCARDED_START               | DISCARDED_START | DISCARDED_START                        |
 /// t = last_free_fraction (with a last_free_state of the start's size); TRUNCATED executes start -> that state.
+/// retreat: as plan, but where plan holds still and the scene found a retreat_state (of the start's size), RETREATED
+/// executes start -> that state (the unsafe cause is kept).
 /// \param start,target the current and the commanded configuration
 Decision decide(Strategy strategy, const SceneAnswer& answer, const std::vector<double>& start,
                 const std::vector<double>& target);

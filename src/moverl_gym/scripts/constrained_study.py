@@ -109,6 +109,25 @@ def command_line(argv) -> str:
 
 
 # -- workers (one process each) -----------------------------------------------------------------------------------
+def provenance() -> dict:
+    """What code a run used: the commit, the files changed in the checkout (other work in progress), and when the C++
+    binaries the graph runs were built (the shield and the planning scene are the checkout's devel space)."""
+
+    def git(*cmd) -> str:
+        try:
+            return subprocess.run(["git", *cmd], cwd=ROOT, capture_output=True, text=True, timeout=30).stdout.rstrip()
+        except (OSError, subprocess.SubprocessError):
+            return ""
+
+    built = {}
+    for rel in ("devel/lib/moverl_shield/shield_node", "devel/lib/moverl_planning_scene/planning_scene_node"):
+        path = ROOT / rel
+        if path.exists():
+            built[Path(rel).name] = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(path.stat().st_mtime))
+    changed = [line[3:] for line in git("status", "--porcelain", "--untracked-files=no").splitlines()]
+    return {"commit": git("rev-parse", "HEAD"), "changed_files": changed, "binaries_built_utc": built}
+
+
 def _make_env(world: str, shield: bool, task: dict):
     """The training env: the ROS graph with the shield, or the in-process PyBullet backend without it."""
 
@@ -167,6 +186,7 @@ def train_worker(args) -> int:
             "hyperparams": hp,
             "algo_kwargs": algo_kwargs,
             "task": vars(env.get_attr("config", [0])[0]),
+            "code": provenance(),
         }
         (folder / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         cls = PPOLagrangian if spec.algo == "ppolag" else PPO
@@ -235,6 +255,8 @@ def eval_worker(args) -> int:
                 row["success"] = int(bool(info["is_success"]))
                 row["return"] = round(row["return"], 4)
                 rows.append(row)
+            meta = dict(episodes=args.eval_episodes, first_seed=EVAL_SEED, deterministic=True, code=provenance())
+            folder.joinpath(f"eval_{args.mode}.json").write_text(json.dumps(meta, indent=2))
             tmp = out.with_suffix(".tmp")
             with open(tmp, "w", newline="") as f:
                 w = csv.DictWriter(f, fieldnames=cs.EVAL_FIELDS)

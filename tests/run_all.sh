@@ -67,9 +67,9 @@ if [ "$live" = 1 ]; then
     src/moverl_gym/test/test_constrained_study_live.py
   suite "pytest every shipped robot x scenario live (check_env, determinism, random policy without contact)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_robot_matrix_live.py
-  suite "pytest a person seen only by cameras (pushing policy lockstep and real time, a person faster than the bound; a hand by a fixture or a link, a withheld camera)" \
+  suite "pytest a person seen only by cameras (pushing policy lockstep and real time, a person faster than the bound; a hand by a fixture or a link, a withheld camera; a parked robot backs away)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_sensed_person_live.py \
-    src/moverl_gym/test/test_sensing_assumptions_live.py
+    src/moverl_gym/test/test_sensing_assumptions_live.py src/moverl_gym/test/test_retreat_live.py
   suite "pytest goal-conditioned ids live (SAC + HER, shield on; relabelled rewards with discarded steps; rendering)" \
     python -m pytest -q -p no:cacheprovider src/moverl_gym/test/test_goal_live.py
   suite "pytest RLlib on a 2-node local Ray cluster (runners on different nodes; resumed with a simulator and a runner killed)" \

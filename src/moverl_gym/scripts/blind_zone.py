@@ -10,7 +10,7 @@ configurations of the robot, and measures the distance of every point on the rob
 body's collision shapes in PyBullet (the planning scene's shapes contain PyBullet's: test_geometry_parity.py, so the
 distance to the scene's shapes is at most this). Points inside a shape count 0.
 
-    python src/moverl_gym/scripts/blind_zone.py [--robot panda] [--worlds table human case] [-n 20] [--seed 0]
+    python src/moverl_gym/scripts/blind_zone.py [--robot panda | my_arm.yaml] [--worlds table human case] [-n 20] [--seed 0]
 
 Prints, per world, the points on the robot and on static objects, and their largest and 99.9th-percentile distance
 outside the shapes (mm). ROS-free (moverl_sim's core in this process).
@@ -48,7 +48,7 @@ def _distances(p, probe, body, points):
 
 
 def measure(robot: str, world_name: str, n: int, seed: int) -> dict:
-    rc = load_robot_config(robot_config_file(robot))
+    rc = load_robot_config(robot if robot.endswith(".yaml") else robot_config_file(robot))
     world = load_world(world_file(world_name))
     sim = Simulator(
         resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings()
@@ -104,7 +104,7 @@ def measure(robot: str, world_name: str, n: int, seed: int) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--robot", default="panda", help="robot config name (config/robots/<robot>.yaml)")
+    ap.add_argument("--robot", default="panda", help="robot config name (config/robots/<robot>.yaml) or file")
     ap.add_argument("--worlds", nargs="+", default=["table", "human", "case"])
     ap.add_argument("-n", type=int, default=20, help="random collision-free configurations per world")
     ap.add_argument("--seed", type=int, default=0)

@@ -116,10 +116,12 @@ def worker(
     obstacles: str | None = None,
     mode: str | None = None,
     motion_time_scale: float | None = None,
+    strategy: str | None = None,
 ) -> dict:
     from gymnasium.wrappers import TimeLimit
 
     from moverl_gym.env import MoveRLReachEnv
+    from moverl_gym.launch_args import launch_defaults
     from moverl_gym.paths import config_file, world_file
     from moverl_gym.task import TaskConfig
     from moverl_sim.core import Simulator
@@ -158,6 +160,7 @@ def worker(
                 **({"obstacles": obstacles} if obstacles else {}),
                 **({"mode": mode} if mode else {}),
                 **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
+                **({"strategy": strategy} if strategy else {}),
             },
         ),
         max_episode_steps=max_steps,
@@ -199,6 +202,7 @@ def worker(
         "obstacles": obstacles or "objects",
         "mode": mode or "lockstep",
         **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
+        "strategy": (strategy or launch_defaults()["strategy"]) if shield else "",
         "shield": shield,
         "steps": steps,
         "episodes": episodes,
@@ -252,8 +256,17 @@ def main(argv=None) -> int:
         help="experiments: the simulator plays the obstacles' motions this many times faster than the world says",
     )
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock")
+    p.add_argument(
+        "--strategy",
+        nargs="+",
+        choices=CHOICES["strategy"],
+        default=None,
+        help="the shield's strategies to compare, each in runs of their own with the same seed (default: the launch "
+        "file's)",
+    )
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
     p.add_argument("--worker", nargs=3, metavar=("CONFIG", "WORLD", "on|off"), help=argparse.SUPPRESS)
+    p.add_argument("--worker-strategy", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
         config, world, shield = args.worker
@@ -272,6 +285,7 @@ def main(argv=None) -> int:
                     args.obstacles,
                     args.mode,
                     args.motion_time_scale,
+                    args.worker_strategy,
                 )
             )
         )
@@ -283,11 +297,14 @@ def main(argv=None) -> int:
         else sorted(config_file("robots").glob("*.yaml"))
     )
     shields = ["on", "off"] if args.shield == "both" else [args.shield]
+    # (shield, strategy) runs: the unshielded baseline once, each strategy with the shield on.
+    runs = [(s, strategy) for s in shields for strategy in (args.strategy or [None] if s == "on" else [None])]
     rows = []
     for config in configs:
         for world in args.worlds:
-            for shield in shields:
-                print(f"{config.name} in {world}, shield {shield}: {args.steps} pushing steps ...", flush=True)
+            for shield, strategy in runs:
+                what = f"shield {shield}" + (f" ({strategy})" if strategy else "")
+                print(f"{config.name} in {world}, {what}: {args.steps} pushing steps ...", flush=True)
                 r = run_json_worker(
                     __file__,
                     [
@@ -309,8 +326,9 @@ def main(argv=None) -> int:
                         *(["--obstacles", args.obstacles] if args.obstacles else []),
                         *(["--mode", args.mode] if args.mode else []),
                         *(["--motion-time-scale", args.motion_time_scale] if args.motion_time_scale else []),
+                        *(["--worker-strategy", strategy] if strategy else []),
                     ],
-                    f"worker {config.name} {world} shield {shield}",
+                    f"worker {config.name} {world} {what}",
                 )
                 rows.append(r)
                 print(
@@ -333,6 +351,8 @@ def main(argv=None) -> int:
     for name in ("shield", "seed", "spread", "switch", "noise", "control", "obstacles", "mode", "motion_time_scale"):
         if getattr(args, name) != p.get_default(name):
             cmd += f" --{name.replace('_', '-')} {getattr(args, name)}"
+    if args.strategy:
+        cmd += " --strategy " + " ".join(args.strategy)
     if args.out:
         cmd += f" --out {args.out}"
     lines = [
@@ -347,22 +367,24 @@ def main(argv=None) -> int:
         f"{args.noise}), and keeps pushing when the shield holds the arm, creeping (the push halves after a "
         "held step, down to 1/16, and doubles after an executed one); new target every episode and every "
         f"{args.switch} steps. contacts = distinct robot contact pairs the physics engine saw during each step's "
-        "motion, summed over the steps (must be 0 with the shield on). Steps before the first executed motion "
+        "motion, summed over the steps (must be 0 with the shield on), split by who moved: made while the robot "
+        "moved, or while it rested (a person walking into a parked arm). Steps before the first executed motion "
         "of a run report no contact information (the driver has not reported yet); they did not move "
         "(unsensed moves must be 0). at limit = steps whose command put a joint onto its URDF limit (with dynamic "
         "control the motors overshoot there; the env must not raise).",
         "",
-        "| robot | world | control | obstacles | clock | shield | steps | episodes | contacts | steps with contact | "
-        "unsensed moves | at limit | verdicts | targets per object | steps/s |",
-        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|",
+        "| robot | world | control | obstacles | clock | shield | steps | episodes | contacts | robot moving | "
+        "robot at rest | steps with contact | unsensed moves | at limit | verdicts | targets per object | steps/s |",
+        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|",
     ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
         t = ", ".join(f"{k} {n}" for k, n in sorted(r["targets"].items()))
         lines.append(
             f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | {r['mode']} | "
-            f"{'on' if r['shield'] else 'off'} | "
-            f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['steps_with_contact']} | "
+            f"{('on (' + r['strategy'] + ')') if r['shield'] else 'off'} | "
+            f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['contacts_moving']} | "
+            f"{r['contacts_resting']} | {r['steps_with_contact']} | "
             f"{r['unsensed_moves']} | {r['steps_at_limit']} | {v} | {t} | {r['steps_per_s']} |"
         )
     (out / "audit.md").write_text("\n".join(lines) + "\n")

@@ -2,6 +2,8 @@
 
 import threading
 
+import numpy as np
+
 
 class GroundTruthContacts:
     """Every contact the simulator saw, from its ~contacts reports (one per finished motion, and while idle): the
@@ -94,8 +96,6 @@ class LiveAssertions:
 def seeded_traces(env, seed: int = 7, steps: int = 25) -> list:
     """Two rollouts of the same fixed actions from reset(seed=seed); asserts they are identical (seed determinism,
     moving obstacles included) and returns the first one's observations."""
-    import numpy as np
-
     n = env.action_space.shape[0]
     actions = np.random.default_rng(1).uniform(-1, 1, (steps, n)).astype(np.float32)
     traces = []
@@ -108,3 +108,66 @@ def seeded_traces(env, seed: int = 7, steps: int = 25) -> list:
     for a, b in zip(*traces):
         np.testing.assert_array_equal(a, b)
     return traces[0]
+
+
+class Tool:
+    """A robot (config name) in a PyBullet of this process, without obstacles: inverse kinematics of the end effector
+    (pointing down), and the lowest point of the tool (the links below the end-effector link)."""
+
+    DOWN = (1.0, 0.0, 0.0, 0.0)  # the end-effector frame's z axis pointing down (x, y, z, w)
+
+    def __init__(self, robot: str):
+        from moverl_gym.paths import robot_config_file
+        from moverl_sim.core import Simulator
+        from moverl_sim.robot_config import load_robot_config
+        from moverl_sim.settings import sim_settings
+        from moverl_sim.urdf import resolve_uri
+        from moverl_sim.world import World
+
+        rc = load_robot_config(robot_config_file(robot))
+        self.sim = Simulator(
+            resolve_uri(rc["urdf"]),
+            rc["joints"],
+            rc["base_link"],
+            rc.get("fixed_joint_positions"),
+            World(name="empty"),
+            **sim_settings(),
+        )
+        p, robot = self.sim._p, self.sim.robot
+        index = {p.getJointInfo(robot, j)[12].decode(): j for j in range(p.getNumJoints(robot))}
+        self.ee = index[rc["ee_link"]]
+        parents = {j: p.getJointInfo(robot, j)[16] for j in range(p.getNumJoints(robot))}
+
+        def below_ee(j):
+            while j >= 0:
+                if j == self.ee:
+                    return True
+                j = parents[j]
+            return False
+
+        self.tool = [j for j in parents if below_ee(j)]
+        self.movable = [j for j in range(p.getNumJoints(robot)) if p.getJointInfo(robot, j)[2] != 4]  # not fixed
+        self.home = np.array(rc["home"], dtype=float)
+
+    def lowest(self, q):
+        """The tool's lowest point (m, z) in configuration q."""
+        self.sim.reset_robot(list(q))
+        return min(self.sim._p.getAABB(self.sim.robot, j)[0][2] for j in self.tool)
+
+    def ee_xyz(self, q):
+        self.sim.reset_robot(list(q))
+        return np.array(self.sim._p.getLinkState(self.sim.robot, self.ee, computeForwardKinematics=True)[4])
+
+    def ik(self, xyz, seed):
+        """Joint angles that put the end effector at xyz, pointing down (from seed)."""
+        p, robot = self.sim._p, self.sim.robot
+        q = np.asarray(seed, dtype=float)
+        for _ in range(5):  # refine from the last answer
+            self.sim.reset_robot(list(q))
+            sol = p.calculateInverseKinematics(robot, self.ee, list(xyz), self.DOWN, maxNumIterations=200)
+            by_joint = dict(zip(self.movable, sol))
+            q = np.clip([by_joint[j] for j in self.sim.joint_indices], self.sim.lower, self.sim.upper)
+        return q
+
+    def close(self):
+        self.sim.close()

@@ -150,3 +150,37 @@ def test_recovery_counts_a_failure_found_at_a_step_or_at_a_reset(where):
         assert info["verdict"] == "unchecked" and info["graph_failures"] == 1
     finally:
         env.close()
+
+
+class _HomeBlocked(moverl_gym.bullet_backend.BulletBackend):
+    """The PyBullet backend with every state within 0.5 rad of home refused (a person standing at a long arm's
+    home), or every state refused."""
+
+    def __init__(self, everywhere=False):
+        super().__init__("table")
+        self.everywhere = everywhere
+
+    def check_state(self, q):
+        near_home = np.max(np.abs(np.asarray(q) - np.asarray(self.home))) < 0.5
+        return not (self.everywhere or near_home) and super().check_state(q)
+
+
+def test_starts_are_sampled_over_the_whole_range_when_home_is_blocked():
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=_HomeBlocked(), shield=False)
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        assert np.max(np.abs(u.q - np.asarray(u._backend.home))) >= 0.5  # not within start_noise of home
+    finally:
+        env.close()
+    env = gym.make(
+        "MoveRL/PandaReachTable-v0",
+        backend=_HomeBlocked(everywhere=True),
+        shield=False,
+        task={"start_sampling_attempts": 20},
+    )
+    try:
+        with pytest.raises(MoveRLError, match="20 random samples near home nor as many over the joint range"):
+            env.reset(seed=0)
+    finally:
+        env.close()

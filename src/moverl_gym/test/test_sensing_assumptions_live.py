@@ -17,19 +17,14 @@ import time
 import numpy as np
 import pytest
 import yaml
+from live_helpers import Tool
 
 from moverl_gym.env import MoveRLReachEnv
-from moverl_gym.paths import robot_config_file, world_file
-from moverl_sim.core import Simulator
-from moverl_sim.robot_config import load_robot_config
-from moverl_sim.settings import sim_settings
-from moverl_sim.urdf import resolve_uri
-from moverl_sim.world import World
+from moverl_gym.paths import world_file
 
 ROBOT = "panda"
 HAND = {"size": [0.18, 0.09, 0.025], "xyz": [0.35, 0.15, 0.0125]}  # lying flat on the table top (z = 0)
 SHAKE = {"type": "oscillate", "axis": [1, 0, 0], "amplitude": 0.001, "period": 2.0}  # 3 mm/s: sensed, not known
-DOWN = (1.0, 0.0, 0.0, 0.0)  # the end-effector frame's z axis pointing down (x, y, z, w)
 
 
 def _world(tmp_path, name, hand=None, unknown_occupied=True):
@@ -44,63 +39,9 @@ def _world(tmp_path, name, hand=None, unknown_occupied=True):
     return path
 
 
-class Tool:
-    """The robot in a PyBullet of this process, without obstacles: inverse kinematics of the end effector, and the
-    lowest point of the tool (the links below the end-effector link)."""
-
-    def __init__(self):
-        rc = load_robot_config(robot_config_file(ROBOT))
-        self.sim = Simulator(
-            resolve_uri(rc["urdf"]),
-            rc["joints"],
-            rc["base_link"],
-            rc.get("fixed_joint_positions"),
-            World(name="empty"),
-            **sim_settings(),
-        )
-        p, robot = self.sim._p, self.sim.robot
-        index = {p.getJointInfo(robot, j)[12].decode(): j for j in range(p.getNumJoints(robot))}
-        self.ee = index[rc["ee_link"]]
-        parents = {j: p.getJointInfo(robot, j)[16] for j in range(p.getNumJoints(robot))}
-
-        def below_ee(j):
-            while j >= 0:
-                if j == self.ee:
-                    return True
-                j = parents[j]
-            return False
-
-        self.tool = [j for j in parents if below_ee(j)]
-        self.movable = [j for j in range(p.getNumJoints(robot)) if p.getJointInfo(robot, j)[2] != 4]  # not fixed
-        self.home = np.array(rc["home"], dtype=float)
-
-    def lowest(self, q):
-        """The tool's lowest point (m, z) in configuration q."""
-        self.sim.reset_robot(list(q))
-        return min(self.sim._p.getAABB(self.sim.robot, j)[0][2] for j in self.tool)
-
-    def ee_xyz(self, q):
-        self.sim.reset_robot(list(q))
-        return np.array(self.sim._p.getLinkState(self.sim.robot, self.ee, computeForwardKinematics=True)[4])
-
-    def ik(self, xyz, seed):
-        """Joint angles that put the end effector at xyz, pointing down (from seed)."""
-        p, robot = self.sim._p, self.sim.robot
-        q = np.asarray(seed, dtype=float)
-        for _ in range(5):  # refine from the last answer
-            self.sim.reset_robot(list(q))
-            sol = p.calculateInverseKinematics(robot, self.ee, list(xyz), DOWN, maxNumIterations=200)
-            by_joint = dict(zip(self.movable, sol))
-            q = np.clip([by_joint[j] for j in self.sim.joint_indices], self.sim.lower, self.sim.upper)
-        return q
-
-    def close(self):
-        self.sim.close()
-
-
 @pytest.fixture(scope="module")
 def tool():
-    t = Tool()
+    t = Tool(ROBOT)
     yield t
     t.close()
 

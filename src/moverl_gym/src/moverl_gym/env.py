@@ -393,21 +393,23 @@ class MoveRLReachEnv(gym.Env):
         )
 
     def _sample_start(self) -> np.ndarray:
-        """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform)."""
+        """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform; when no
+        sample near home is free, uniform)."""
         lo, hi = self.limits.lower, self.limits.upper
+        ranges = [(lo, hi)]
         noise = self.config.start_noise
         if noise > 0:
-            lo = np.maximum(lo, self._home - noise)
-            hi = np.minimum(hi, self._home + noise)
-        for _ in range(self.config.start_sampling_attempts):
-            q = self.np_random.uniform(lo, hi)
-            if self._backend.check_state(q) and not self.task.is_success(
-                self.task.distance(self._backend.ee_pose(q)[:3])
-            ):
-                return q
+            ranges.insert(0, (np.maximum(lo, self._home - noise), np.minimum(hi, self._home + noise)))
+        for a, b in ranges:
+            for _ in range(self.config.start_sampling_attempts):
+                q = self.np_random.uniform(a, b)
+                if self._backend.check_state(q) and not self.task.is_success(
+                    self.task.distance(self._backend.ee_pose(q)[:3])
+                ):
+                    return q
         raise MoveRLError(
-            f"no collision-free start configuration found in {self.config.start_sampling_attempts} "
-            f"random samples of world '{self.world_name}'"
+            f"no collision-free start configuration found in {self.config.start_sampling_attempts} random samples "
+            f"{'near home nor as many ' if len(ranges) > 1 else ''}over the joint range of world '{self.world_name}'"
         )
 
     def step(self, action):

@@ -1,0 +1,98 @@
+"""Out of a person's way (issue 28), on the live graph, obstacles:=sensed, lockstep: a robot parked where a sensed
+person walks up to it.
+
+The world is worlds/human.yaml's table, cameras and sensing, with the person replaced by a "visitor" (a 10 x 30 x
+30 cm box) that walks straight at the Panda's parked hand and back (x(t) = 0.75 - 0.3 sin(2 pi t / 6 s), at most
+0.31 m/s; its near face comes 5 cm past the hand) and a speed bound that covers it. The agent commands nothing (zero
+actions: stay where you are) for one period of the walk.
+
+* strategy plan (today's shield): every step holds still, and the visitor walks into the parked hand: contacts,
+  all with the robot at rest;
+* strategy retreat: the shield backs the hand away while the visitor comes (verdict RETREATED) and no contact
+  happens at all.
+"""
+
+import numpy as np
+import pytest
+import yaml
+from live_helpers import Tool
+
+from moverl_gym.env import MoveRLReachEnv
+from moverl_gym.paths import world_file
+
+ROBOT = "panda"
+PARKED = [0.42, 0.0, 0.25]  # the hand's position (m, pointing down) where the robot is parked
+VISITOR = {
+    "id": "visitor",
+    "shape": "box",
+    "size": [0.1, 0.3, 0.3],
+    "xyz": [0.75, 0.0, 0.25],
+    "motion": {"type": "oscillate", "axis": [-1, 0, 0], "amplitude": 0.3, "period": 6.0},
+    "observed": True,
+}
+STEPS = 120  # one period of the walk at the env's dt (0.05 s)
+GOAL = [0.3, 0.45, 0.5]  # away from the parked hand and the visitor: no episode ends on success
+
+
+def _world(tmp_path):
+    data = yaml.safe_load(world_file("human").read_text())
+    data["name"] = "visitor"
+    data["objects"] = [o for o in data["objects"] if not o["id"].startswith("human_")] + [VISITOR]
+    data["sensing"]["speed_bound"] = 0.32  # the visitor's top speed: 2 pi x 0.3 m / 6 s = 0.314 m/s
+    path = tmp_path / "visitor.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+@pytest.fixture(scope="module")
+def parked():
+    tool = Tool(ROBOT)
+    try:
+        q = tool.ik(PARKED, tool.home)
+        assert np.linalg.norm(tool.ee_xyz(q) - PARKED) < 0.01, "no configuration with the hand at PARKED"
+        yield q
+    finally:
+        tool.close()
+
+
+def _park(tmp_path, parked, strategy):
+    """One period of the walk with the robot told to stay: (verdict counts, contacts moving, contacts at rest,
+    largest joint motion from the parked state)."""
+    env = MoveRLReachEnv(
+        world=str(_world(tmp_path)),
+        graph="launch",
+        goal=GOAL,
+        task={"max_episode_steps": STEPS + 1},
+        launch_args={"obstacles": "sensed", "strategy": strategy},
+    )
+    try:
+        env.reset(options={"start": parked})
+        inner = env.unwrapped
+        verdicts, moving, resting, moved = {}, 0, 0, 0.0
+        zero = np.zeros(env.action_space.shape, dtype=np.float32)
+        for _ in range(STEPS):
+            _, _, term, trunc, info = env.step(zero)
+            verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+            moving += max(info["contacts_moving"], 0)
+            resting += max(info["contacts_resting"], 0)
+            moved = max(moved, float(np.max(np.abs(inner.q - parked))))
+            assert not (term or trunc), f"the episode ended: {info}"
+        return verdicts, moving, resting, moved
+    finally:
+        env.close()
+
+
+def test_a_parked_robot_held_still_is_walked_into(tmp_path, parked):
+    verdicts, moving, resting, moved = _park(tmp_path, parked, "plan")
+    print(f"plan: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f} rad")
+    assert moved < 1e-3, "told to stay and never allowed to back away, the robot stays"
+    assert moving == 0
+    assert resting > 0, "the visitor walks into the parked hand"
+
+
+def test_a_parked_robot_backs_away_from_a_sensed_person(tmp_path, parked):
+    verdicts, moving, resting, moved = _park(tmp_path, parked, "retreat")
+    print(f"retreat: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f} rad")
+    assert verdicts.get("retreated", 0) > 0, verdicts
+    assert moved > 0.05, "the hand backed away"
+    assert moving == 0 and resting == 0, f"{moving} contacts while backing away, {resting} at rest"

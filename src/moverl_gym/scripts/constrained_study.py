@@ -120,7 +120,12 @@ def provenance() -> dict:
             return ""
 
     built = {}
-    for rel in ("devel/lib/moverl_shield/shield_node", "devel/lib/moverl_planning_scene/planning_scene_node"):
+    for rel in (
+        "devel/lib/moverl_shield/shield_node",
+        "devel/lib/libmoverl_shield_core.so",
+        "devel/lib/moverl_planning_scene/planning_scene_node",
+        "devel/lib/libmoverl_planning_scene_core.so",
+    ):
         path = ROOT / rel
         if path.exists():
             built[Path(rel).name] = time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(path.stat().st_mtime))

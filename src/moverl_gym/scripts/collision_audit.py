@@ -51,6 +51,7 @@ import sys
 import time
 from pathlib import Path
 
+from moverl_gym.launch_args import CHOICES
 from moverl_gym.workers import run_json_worker
 from moverl_sim.robot_config import load_robot_config
 
@@ -102,7 +103,8 @@ MODE_NOTES = {
     "octomap": (
         "obstacles: octomap (the scene knows no object: only the occupied cells of the OctoMap built from "
         "the world's depth cameras at start-up, robot at home, self-filtered; robot links padded against "
-        "the cells). Unknown (never seen) cells count as free."
+        "the cells). Unknown (never seen) cells count as the world's sensing: says (unknown_occupied, occupied by "
+        "default)."
     ),
     "both": "obstacles: both (the world file's shapes plus the OctoMap from the depth cameras).",
     "sensed": (
@@ -110,6 +112,8 @@ MODE_NOTES = {
         "from the depth cameras, with the world's predictive margin, given per world in the notes)."
     ),
 }
+
+assert set(MODE_NOTES) == set(CHOICES["obstacles"]), "a note per obstacle mode (moverl_gym.launch_args.CHOICES)"
 
 
 # ----------------------------------------------------------------------------- pure functions (tested)
@@ -681,7 +685,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: <repo>/docs/audit)")
     p.add_argument(
         "--obstacles",
-        choices=sorted(MODE_NOTES),
+        choices=CHOICES["obstacles"],
         default="objects",
         help="where the scene's obstacles come from (launch arg obstacles): the world file's objects, "
         "the OctoMap built from the world's depth cameras, or both",

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from moverl_gym.launch_args import SENSED_OBSTACLES
 from moverl_gym.workers import run_json_worker
 
 
@@ -109,7 +110,7 @@ def main(argv=None) -> int:
     p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
     p.add_argument("--goal-q", type=float, nargs="+", required=True, help="a configuration whose hand is at the goal")
     p.add_argument("--camera-rates", type=float, nargs="+", default=[2.0], help="renders per simulated second")
-    p.add_argument("--obstacles", choices=["octomap", "sensed"], default="sensed")
+    p.add_argument("--obstacles", choices=SENSED_OBSTACLES, default="sensed")
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--max-steps", type=int, default=100, help="steps per episode")
     p.add_argument("--seed", type=int, default=0)

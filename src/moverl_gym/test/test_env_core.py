@@ -184,3 +184,27 @@ def test_starts_are_sampled_over_the_whole_range_when_home_is_blocked():
             env.reset(seed=0)
     finally:
         env.close()
+
+
+def test_the_env_step_deadline_exceeds_the_shields_own_bound():
+    """config/env.yaml's step_timeout against the shield's bound from the shipped config files (the env checks the
+    live graph's parameters the same way at start-up)."""
+    import yaml
+
+    from moverl_gym.paths import config_file
+    from moverl_gym.ros_backend import shield_step_bound
+    from moverl_gym.task import TaskConfig
+
+    shield = yaml.safe_load(config_file("shield.yaml").read_text())
+    scene = yaml.safe_load(config_file("planning_scene.yaml").read_text())
+    task = TaskConfig.from_yaml(config_file("env.yaml"))
+    bound = shield_step_bound({**shield, "planning_time": scene["planning_time"]}, task.dt)
+    assert bound == pytest.approx(
+        shield["max_state_age"]
+        + scene["planning_time"]
+        + shield["scene_margin"]
+        + task.dt
+        + shield["goal_time"]
+        + shield["result_margin"]
+    )
+    assert task.step_timeout > bound

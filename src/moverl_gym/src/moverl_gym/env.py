@@ -194,6 +194,7 @@ class MoveRLReachEnv(gym.Env):
                     dict(world=world, robot=robot, shield=shield, **launch_args),
                     call_timeout=self.config.step_timeout,
                     reset_timeout=self.config.reset_timeout,
+                    step_duration=self.config.dt,
                 )
             else:
                 raise ValueError(f"backend must be 'ros', 'bullet' or a Backend, got {backend!r}")

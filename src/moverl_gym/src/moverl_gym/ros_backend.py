@@ -194,24 +194,59 @@ def init_node(master_uri: str) -> None:
     _NODE_MASTER = master_uri
 
 
+def shield_step_bound(shield: dict, step_duration: float) -> float:
+    """The longest a legit direct step may take in the shield (s): the hops it bounds one by one (config/shield.yaml
+    and the scene's planning_time, config/planning_scene.yaml): waiting for a fresh state, the scene's answer, the
+    move, the controller's settling and the result's margin.
+
+    Args:
+        shield: the shield node's private parameters (/shield), with the scene's under its scene_namespace when the
+            scene runs in the shield's process, or given as shield["planning_time"].
+        step_duration: s the move lasts.
+    """
+    planning_time = shield.get("planning_time")
+    if planning_time is None:
+        import rospy
+
+        planning_time = rospy.get_param(shield["scene_namespace"].rstrip("/") + "/planning_time")
+    return (
+        shield["max_state_age"]
+        + planning_time
+        + shield["scene_margin"]
+        + step_duration
+        + shield["goal_time"]
+        + shield["result_margin"]
+    )
+
+
 class RosBackend(Backend):
     """The shield and the planning scene of a live graph, through persistent proxies whose calls have deadlines.
 
     Args:
         graph: "auto" (attach to $ROS_MASTER_URI if it serves MoveRL, else launch), "attach" or "launch".
         launch_args: roslaunch arguments for a launched graph: world (a name or a path), robot, shield, driver, ...
-        call_timeout: deadline of every call but resets (config/env.yaml step_timeout).
+        call_timeout: deadline of every call but resets (config/env.yaml step_timeout). Checked at start-up against
+            the shield's own bound for a step of `step_duration` (shield_step_bound): it must be longer, so that a
+            stalled component is reported by the shield (naming it) before this deadline reports the shield.
         reset_timeout: deadline of the shield's ~reset (config/env.yaml reset_timeout).
+        step_duration: s a direct move lasts (the env's dt).
         wait_timeout: seconds to wait for the services at start-up.
     """
 
     def __init__(
-        self, graph: str, launch_args: dict, call_timeout: float, reset_timeout: float, wait_timeout: float = 30.0
+        self,
+        graph: str,
+        launch_args: dict,
+        call_timeout: float,
+        reset_timeout: float,
+        step_duration: float,
+        wait_timeout: float = 30.0,
     ):
         if graph not in ("auto", "attach", "launch"):
             raise ValueError(f"graph must be 'auto', 'attach' or 'launch', got {graph!r}")
         self._launch_args = dict(launch_args)
         self._timeouts = (call_timeout, reset_timeout, wait_timeout)
+        self._step_duration = step_duration
         self._graph = None
         self._proxies = ()
         self._watchdog = None
@@ -285,6 +320,13 @@ class RosBackend(Backend):
         self.home = list(self.robot_config["home"])
         self.ee_link = self.robot_config["ee_link"]
         self.shield_enabled = bool(rospy.get_param("/shield/enabled", True))
+        bound = shield_step_bound(rospy.get_param("/shield"), self._step_duration)
+        if not call_timeout > bound:
+            raise GraphError(
+                f"step_timeout ({call_timeout} s, config/env.yaml or task=) must exceed the shield's bound for a step "
+                f"({bound:.2f} s: its max_state_age + the scene's planning_time + scene_margin + the move + "
+                "goal_time + result_margin), so that a stalled component is reported by the shield, naming it"
+            )
         self.world = _world_info(self._world(GetWorld._request_class()).world)
         simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
         self.restartable = simulated  # never a real robot's graph, nor one this env did not launch

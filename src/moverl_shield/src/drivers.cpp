@@ -162,7 +162,8 @@ MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, double) 
   return out;
 }
 
-bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after, std::string* error) {
+bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after, std::string* error,
+                                bool* unreachable) {
   moverl_msgs::ResetRobot srv;
   srv.request.positions = q;
   srv.request.not_after = wallSeconds() + options_.result_margin;
@@ -174,6 +175,7 @@ bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after,
   }
   if (!srv.response.success) {
     *error = srv.response.message;
+    *unreachable = srv.response.unreachable;
     return false;
   }
   std::lock_guard<std::mutex> lock(mutex_);

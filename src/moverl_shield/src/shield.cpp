@@ -308,7 +308,7 @@ void Shield::reset(const ResetRequest& req, ResetResult* res) {
   }
   if (driver_->canTeleport()) {
     RobotState after;
-    if (!driver_->teleport(req.positions, &after, &error)) {
+    if (!driver_->teleport(req.positions, &after, &error, &res->unreachable)) {
       res->message = error;
       return;
     }

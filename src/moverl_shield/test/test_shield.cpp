@@ -90,10 +90,11 @@ class FakeDriver : public Driver {
     if (r.contacts.available) r.contacts.stamp = state.stamp;
     return r;
   }
-  bool teleport(const std::vector<double>& q, RobotState* after, std::string* error) override {
+  bool teleport(const std::vector<double>& q, RobotState* after, std::string* error, bool* unreachable) override {
     teleports.push_back(q);
     if (!teleport_error.empty()) {
       *error = teleport_error;
+      *unreachable = teleport_unreachable;
       return false;
     }
     state.q = q;
@@ -111,6 +112,7 @@ class FakeDriver : public Driver {
   std::deque<DriverEnd> ends;
   ContactReport contacts;
   std::string teleport_error;
+  bool teleport_unreachable = false;  // the driver refused the target itself
   double read_delay = 0.0;
   std::vector<TimedTrajectory> executed;
   std::vector<double> starts;
@@ -636,7 +638,14 @@ TEST_F(ShieldTest, ResetTeleportsWhenTheDriverCan) {
   driver.teleport_error = "a trajectory is executing";
   r = reset({0.1, 0.2, 0.3});
   EXPECT_FALSE(r.success);
+  EXPECT_FALSE(r.unreachable);  // a failure: not a reason to try another target
   EXPECT_EQ(r.message, "a trajectory is executing");
+  // A target the simulator refuses itself (it touches an obstacle where the motions restart): try another.
+  driver.teleport_error = "the target touches the world where the obstacles' motions restart (l3 / person)";
+  driver.teleport_unreachable = true;
+  r = reset({0.1, 0.2, 0.3});
+  EXPECT_FALSE(r.success);
+  EXPECT_TRUE(r.unreachable);
 }
 
 TEST_F(ShieldTest, ResetWhereTheRobotStandsAndBadResets) {

@@ -93,8 +93,9 @@ class Driver {
   ///        ignored by lockstep drivers). Blocks until it ended, failed or passed its deadline (then it is cancelled).
   virtual MoveResult execute(const TimedTrajectory& trajectory, double start) = 0;
   /// \brief Teleport (canTeleport() only): *after is the state there, whose stamp is when the obstacles' motions
-  ///        restarted. False with *error when the driver is unreachable or refused.
-  virtual bool teleport(const std::vector<double>& q, RobotState* after, std::string* error) = 0;
+  ///        restarted. False with *error when the driver is unreachable or refused; *unreachable = true when it
+  ///        refused the target itself (it touches an obstacle where the motions restart: try another).
+  virtual bool teleport(const std::vector<double>& q, RobotState* after, std::string* error, bool* unreachable) = 0;
   /// \brief Path (and goal position) tolerance per controlled joint sent with every move from now on.
   virtual void setPathTolerance(const std::vector<double>& tolerance) = 0;
 };

@@ -191,7 +191,9 @@ def record(name: str, steps: int, seed: int) -> dict:
         )
     commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True).stdout
     dirty = subprocess.run(
-        ["git", "-C", str(REPO), "status", "--porcelain", "src/moverl_sim"], capture_output=True, text=True
+        ["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no", "src/moverl_sim"],
+        capture_output=True,
+        text=True,
     ).stdout
     return {
         "name": name,

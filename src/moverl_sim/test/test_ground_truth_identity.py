@@ -36,9 +36,7 @@ def make_sim(record):
         f.write(robot_description(rc["urdf"]))
     try:
         world = load_world(os.path.join(REPO_DIR, "worlds", record["world"] + ".yaml"))
-        sim = Simulator(
-            f.name, rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings()
-        )
+        sim = Simulator(f.name, rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings())
     finally:
         os.unlink(f.name)
     sim.reset_robot(rc["home"])
@@ -54,10 +52,11 @@ def record(request):
     return load(os.path.join(FIXTURES, request.param + ".json.gz"))
 
 
-def test_recording_has_contacts_of_each_kind(record):
-    """A recording without contacts would compare nothing: each has self contacts and contacts with the world."""
+def test_recording_has_contacts_with_the_world(record):
+    """A recording without contacts would compare nothing: each has contacts with the world (the random runs also
+    self contacts; the pushing runs touch the case's walls and the walking person)."""
     kinds = {row[1] for row in record["trace"]}
-    assert kinds == {"world", "self"}, (record["name"], kinds)
+    assert "world" in kinds and (record["policy"] != "random" or "self" in kinds), (record["name"], kinds)
 
 
 def test_substep_replay_matches_the_recording(record):

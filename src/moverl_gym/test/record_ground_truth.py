@@ -195,6 +195,23 @@ def record(name: str, steps: int, seed: int) -> dict:
         capture_output=True,
         text=True,
     ).stdout
+    # The last commit that changed the simulator's code (this tool and the replay module aside): what was recorded.
+    simulator = subprocess.run(
+        [
+            "git",
+            "-C",
+            str(REPO),
+            "log",
+            "-1",
+            "--format=%H",
+            "--",
+            "src/moverl_sim/src/moverl_sim",
+            "src/moverl_sim/scripts",
+            ":!src/moverl_sim/src/moverl_sim/ground_truth.py",
+        ],
+        capture_output=True,
+        text=True,
+    ).stdout
     return {
         "name": name,
         "world": world,
@@ -203,6 +220,7 @@ def record(name: str, steps: int, seed: int) -> dict:
         "seed": seed,
         "steps": steps,
         "commit": commit.strip() + (" (src/moverl_sim modified)" if dirty.strip() else ""),
+        "simulator_commit": simulator.strip(),
         "actions": actions,
         "events": inputs,
         "live_counts": live,

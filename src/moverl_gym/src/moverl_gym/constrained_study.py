@@ -334,6 +334,11 @@ def _pm(m: float, h: float, fmt: str = "{:.0f}", scale: float = 1.0) -> str:
     return s if not np.isfinite(h) else f"{s} ± {fmt.format(scale * h)}"
 
 
+def _pct(m: float, h: float) -> str:
+    """A rate as a percentage with its CI half-width, or n/a."""
+    return "n/a" if not np.isfinite(m) else f"{_pm(m, h, '{:.1f}', 100)} %"
+
+
 def markdown_table(rows: list[dict], last: int = 200) -> str:
     """The comparison table (GitHub markdown): mean ± 95 % CI half-width over seeds."""
     head = (
@@ -345,11 +350,11 @@ def markdown_table(rows: list[dict], last: int = 200) -> str:
     for r in rows:
         lines.append(
             f"| {r['world']} | {r['label']} | {r['n_runs']} "
-            f"| {_pm(r['success_mean'], r['success_ci95'], '{:.1f}', 100)} % "
+            f"| {_pct(r['success_mean'], r['success_ci95'])} "
             f"| {_pm(r['train_contacts_mean'], r['train_contacts_ci95'], '{:,.0f}')} "
             f"| {_pm(r['train_contact_steps_mean'], r['train_contact_steps_ci95'], '{:,.0f}')} "
             f"| {_pm(r['train_interventions_mean'], r['train_interventions_ci95'], '{:,.0f}')} "
-            f"| {_pm(r['eval_success_mean'], r['eval_success_ci95'], '{:.1f}', 100)} % (shield {r['eval_mode']}) "
+            f"| {_pct(r['eval_success_mean'], r['eval_success_ci95'])} (shield {r['eval_mode']}) "
             f"| {_pm(r['eval_contacts_mean'], r['eval_contacts_ci95'], '{:,.1f}')} "
             f"| {_pm(r['wall_time_mean'], r['wall_time_ci95'])} | {_pm(r['steps_per_second_mean'], math.nan)} "
             f"| {_pm(r['multiplier_mean'], r['multiplier_ci95'], '{:.2f}')} |"
@@ -367,7 +372,7 @@ def markdown_2x2(rows: list[dict]) -> str:
     for r in rows:
         lines.append(
             f"| {r['world']} | {r['label']} | {'on' if r['deployed_with_shield'] else 'off'} "
-            f"| {r['n_runs']} x {r['episodes_per_run']} | {_pm(r['success_mean'], r['success_ci95'], '{:.1f}', 100)} % "
+            f"| {r['n_runs']} x {r['episodes_per_run']} | {_pct(r['success_mean'], r['success_ci95'])} "
             f"| {_pm(r['contacts_per_episode_mean'], r['contacts_per_episode_ci95'], '{:.2f}')} "
             f"| {_pm(r['contact_steps_per_episode_mean'], r['contact_steps_per_episode_ci95'], '{:.2f}')} "
             f"| {_pm(r['interventions_per_episode_mean'], r['interventions_per_episode_ci95'], '{:.2f}')} "

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from moverl_gym.launch_args import SENSED_OBSTACLES
+from moverl_gym.launch_args import CHOICES, SENSED_OBSTACLES
 from moverl_gym.workers import run_json_worker
 
 
@@ -41,7 +41,7 @@ def worker(args) -> dict:
         env_id(args.robot, "Human"),
         world=args.world_file,
         graph="launch",
-        launch_args={"obstacles": args.obstacles},
+        launch_args={"obstacles": args.obstacles, **({"strategy": args.strategy} if args.strategy else {})},
         task={"max_episode_steps": args.max_steps},
     )
     u = env.unwrapped
@@ -111,6 +111,7 @@ def main(argv=None) -> int:
     p.add_argument("--goal-q", type=float, nargs="+", required=True, help="a configuration whose hand is at the goal")
     p.add_argument("--camera-rates", type=float, nargs="+", default=[2.0], help="renders per simulated second")
     p.add_argument("--obstacles", choices=SENSED_OBSTACLES, default="sensed")
+    p.add_argument("--strategy", choices=CHOICES["strategy"], default=None, help="default: the launch file's")
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--max-steps", type=int, default=100, help="steps per episode")
     p.add_argument("--seed", type=int, default=0)

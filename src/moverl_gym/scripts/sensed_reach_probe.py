@@ -100,7 +100,12 @@ def with_camera_rate(world: Path, rate: float, folder: Path) -> Path:
     if not cameras:
         raise SystemExit(f"{world} has no cameras")
     out = folder / f"{world.stem}_cameras_{rate:g}hz.yaml"
-    out.write_text(yaml.safe_dump({"base": str(world.resolve()), "cameras": cameras}, sort_keys=False))
+    variant = {"base": str(world.resolve()), "cameras": cameras}
+    # The same cell: its sensing stated again (a world file never takes sensing: from its base).
+    sensing = yaml.safe_load(world.read_text()).get("sensing")
+    if sensing is not None:
+        variant["sensing"] = sensing
+    out.write_text(yaml.safe_dump(variant, sort_keys=False))
     return out
 
 

@@ -9,7 +9,10 @@ actions: stay where you are) for one period of the walk.
 * strategy plan (today's shield): every step holds still, and the visitor walks into the parked hand: contacts,
   all with the robot at rest;
 * strategy retreat: the shield backs the hand away while the visitor comes (verdict RETREATED) and no contact
-  happens at all.
+  happens at all;
+* strategy retreat with the walk played three times faster than the world's bound says (motion_time_scale 3): the
+  margin no longer covers where the visitor may be between two views, and the robot is hit. The bound is the cell's
+  promise; a person faster than it is not covered.
 """
 
 import numpy as np
@@ -55,15 +58,17 @@ def parked():
         tool.close()
 
 
-def _park(tmp_path, parked, strategy):
-    """One period of the walk with the robot told to stay: (verdict counts, contacts moving, contacts at rest,
-    largest joint motion from the parked state)."""
+def _park(tmp_path, parked, strategy, motion_time_scale=1.0):
+    """One walk of the visitor (STEPS env steps) with the robot told to stay: (verdict counts, contacts moving,
+    contacts at rest, largest joint motion from the parked state). motion_time_scale > 1 plays the walk that many
+    times faster than the world declares."""
+    extra = {"motion_time_scale": motion_time_scale} if motion_time_scale != 1.0 else {}
     env = MoveRLReachEnv(
         world=str(_world(tmp_path)),
         graph="launch",
         goal=GOAL,
         task={"max_episode_steps": STEPS + 1},
-        launch_args={"obstacles": "sensed", "strategy": strategy},
+        launch_args={"obstacles": "sensed", "strategy": strategy, **extra},
     )
     try:
         env.reset(options={"start": parked})
@@ -96,3 +101,13 @@ def test_a_parked_robot_backs_away_from_a_sensed_person(tmp_path, parked):
     assert verdicts.get("retreated", 0) > 0, verdicts
     assert moved > 0.05, "the hand backed away"
     assert moving == 0 and resting == 0, f"{moving} contacts while backing away, {resting} at rest"
+
+
+def test_a_visitor_faster_than_the_declared_bound_is_not_covered(tmp_path, parked):
+    # The same walk played 3 times faster (up to 0.94 m/s) than the world's bound of 0.32 m/s says, as a real person
+    # the world file does not describe: the margin no longer covers where the visitor may be between two views, and
+    # backing away starts too late. The speed bound is the cell's promise, not something the shield can check
+    # (declared as played, such a world is refused before anything starts: test_launch_args.py).
+    verdicts, moving, resting, moved = _park(tmp_path, parked, "retreat", motion_time_scale=3.0)
+    print(f"retreat, 3x faster: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f}")
+    assert moving + resting > 0, f"the visitor faster than the bound never reached the robot: {verdicts}"

@@ -60,4 +60,3 @@ def test_pushing_at_the_sensed_person_realtime(tmp_path):
     assert proc.returncode == 0, text[-5000:]
     assert int(row["contacts"]) == 0 and int(row["unsensed_moves"]) == 0, text[-5000:]
     assert _discarded(row) > 20, "the policy did not push near anything: " + row["verdicts"]
-

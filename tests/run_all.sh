@@ -41,7 +41,7 @@ suite "pytest (cores)" python -m pytest -q -p no:cacheprovider src/control_msgs/
   src/moverl_gym/test/test_gym_core.py src/moverl_gym/test/test_tools.py src/moverl_gym/test/test_reaper.py \
   src/moverl_gym/test/test_codes.py src/moverl_gym/test/test_env_core.py src/moverl_gym/test/test_watchdog.py \
   src/moverl_gym/test/test_goal_render_core.py src/moverl_gym/test/test_run_help.py \
-  src/moverl_gym/test/test_launch_args.py src/moverl_gym/test/test_constrained.py
+  src/moverl_gym/test/test_launch_args.py src/moverl_gym/test/test_constrained.py src/moverl_gym/test/test_docs_links.py
 suite "pytest geometry parity (scene shapes vs PyBullet's)" python -m pytest -q -p no:cacheprovider \
   src/moverl_planning_scene/test/test_geometry_parity.py
 # Tier 3: the live graph.

@@ -9,7 +9,8 @@ once every process of the graph is gone, stopped and hung ones included, and the
 process that launched it dies in any way (SIGKILL included). It listens on loopback only: ROS_HOSTNAME=127.0.0.1
 and the moverl_loopback shim preloaded into every process of the graph, because roscpp binds its XML-RPC
 server to 0.0.0.0 whatever ROS_IP or ROS_HOSTNAME say. The one sanctioned exception is a graph that a robot
-driver on another host must reach: expose=<this host's name or address> (or MOVERL_GRAPH_EXPOSE), see README.
+driver on another host must reach: expose=<this host's name or address> (or MOVERL_GRAPH_EXPOSE), see
+docs/architecture.md.
 """
 
 from __future__ import annotations

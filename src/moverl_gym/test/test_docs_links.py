@@ -42,8 +42,9 @@ def markdown_files() -> list[Path]:
     return [f for f in files if ".venv" not in f.parts]
 
 
-def prose_lines(text: str) -> list[tuple[int, str]]:
-    """(line number, line) outside fenced code blocks, with inline code spans removed."""
+def prose_lines(text: str, keep_code_spans: bool = False) -> list[tuple[int, str]]:
+    """(line number, line) outside fenced code blocks, with inline code spans removed unless keep_code_spans (a
+    heading's code spans are part of its anchor)."""
     lines, fence = [], None
     for number, line in enumerate(text.splitlines(), 1):
         m = FENCE.match(line)
@@ -54,7 +55,7 @@ def prose_lines(text: str) -> list[tuple[int, str]]:
         if m:
             fence = m.group(1)
             continue
-        lines.append((number, INLINE_CODE.sub("", line)))
+        lines.append((number, line if keep_code_spans else INLINE_CODE.sub("", line)))
     return lines
 
 
@@ -69,7 +70,7 @@ def anchors(path: Path) -> set[str]:
     """Every heading anchor of a Markdown file; a repeated heading gets -1, -2, ... as on GitHub."""
     seen: dict[str, int] = {}
     result = set()
-    for _, line in prose_lines(path.read_text(encoding="utf-8")):
+    for _, line in prose_lines(path.read_text(encoding="utf-8"), keep_code_spans=True):
         m = HEADING.match(line)
         if not m:
             continue
@@ -161,11 +162,11 @@ def test_a_broken_link_is_found(tmp_path, monkeypatch):
     """The check itself: a missing file, a wrong anchor and a link in code (ignored) in a page of a repository."""
     monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     (tmp_path / "docs").mkdir()
-    (tmp_path / "docs" / "a.md").write_text("# A page\n\n## Its part\n")
+    (tmp_path / "docs" / "a.md").write_text("# A page\n\n## Its part (`code`)\n")
     page = tmp_path / "README.md"
     page.write_text(
-        "[ok](docs/a.md#its-part) [self](#top) [gone](docs/b.md) [bad anchor](docs/a.md#its-parts)\n"
+        "[ok](docs/a.md#its-part-code) [self](#top) [gone](docs/b.md) [bad anchor](docs/a.md#its-part-)\n"
         "`[code](docs/c.md)`\n```\n[block](docs/d.md)\n```\n# Top\n![img](docs/e.png) [web](https://example.org)\n"
     )
     problems = broken_links(page)
-    assert [p.split(": ")[1] for p in problems] == ["docs/b.md", "docs/a.md#its-parts", "docs/e.png"], problems
+    assert [p.split(": ")[1] for p in problems] == ["docs/b.md", "docs/a.md#its-part-", "docs/e.png"], problems

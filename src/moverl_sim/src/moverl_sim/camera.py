@@ -37,15 +37,7 @@ __all__ = [
     "rotation_to_quaternion",
     "quaternion_to_rotation",
     "depth_from_zbuffer",
-    "DUE_TOLERANCE",
-    "due_cameras",
-    "substeps_until_due",
 ]
-
-# Seconds of simulated time by which a camera may fall short of its due time and still count as due: sim time is
-# substeps / physics_hz, so "last render + 1 / rate" and the substep that reaches it can differ in the last bits.
-# Far below any substep (1 / physics_hz), so it never makes a camera render a substep early.
-DUE_TOLERANCE = 1e-6
 
 
 def look_at_rotation(xyz, target, up=(0.0, 0.0, 1.0)):
@@ -203,40 +195,3 @@ class Camera:
     def render(self, client_id):
         """Render and back-project: (height * width) x 3 float32 points in the optical frame (no return: z = far)."""
         return self.points_from_depth(self.render_depth(client_id))
-
-
-# ---------------------------------------------------------------------- render schedule (simulated time)
-def due_cameras(last_renders, periods, now):
-    """The cameras due at simulated time ``now``, in camera order.
-
-    Args:
-        last_renders (Sequence[Optional[float]]): per camera, the sim time of its last render; None when it never
-            rendered (or must render again at once, e.g. after a reset): such a camera is always due.
-        periods (Sequence[float]): per camera, simulated seconds between renders (1 / rate).
-        now (float): the simulated time.
-
-    Returns:
-        List[int]: indices of the cameras with ``now >= last + period`` (within DUE_TOLERANCE) or never rendered.
-    """
-    return [
-        i
-        for i, (last, period) in enumerate(zip(last_renders, periods))
-        if last is None or now >= last + period - DUE_TOLERANCE
-    ]
-
-
-def substeps_until_due(last_renders, periods, now, physics_hz):
-    """How many physics substeps to run from simulated time ``now`` until the first camera is due.
-
-    Arguments as in due_cameras; physics_hz: substeps per simulated second. After k substeps sim time is
-    now + k / physics_hz: the result is the smallest k at which due_cameras is not empty.
-
-    Returns:
-        Optional[int]: 0 when a camera is due now, else >= 1; None without cameras (never due).
-    """
-    if not periods:
-        return None
-    if due_cameras(last_renders, periods, now):
-        return 0
-    next_due = min(last + period for last, period in zip(last_renders, periods))
-    return max(1, math.ceil((next_due - DUE_TOLERANCE - now) * physics_hz))

@@ -66,6 +66,18 @@ class Tolerances:
             np.full(n, float(path)), np.full(n, float(goal)), np.full(n, float(stopped_velocity)), float(goal_time)
         )
 
+    @classmethod
+    def from_constraints(cls, joints, constraints: dict) -> "Tolerances":
+        """A joint_trajectory_controller's `constraints` parameters (config/sim.yaml): per joint {trajectory, goal}
+        (absent: 0, not checked), stopped_velocity_tolerance (absent: 0.01) and goal_time (absent: 0)."""
+        joints = list(joints)
+        return cls(
+            np.array([float(constraints.get(j, {}).get("trajectory", 0.0)) for j in joints]),
+            np.array([float(constraints.get(j, {}).get("goal", 0.0)) for j in joints]),
+            np.full(len(joints), float(constraints.get("stopped_velocity_tolerance", 0.01))),
+            float(constraints.get("goal_time", 0.0)),
+        )
+
     def merged(self, joints, path_tolerance, goal_tolerance, goal_time: float) -> "Tolerances":
         """The goal's tolerances over these defaults (control_msgs/JointTolerance: > 0 set, -1 off, 0 keep).
 

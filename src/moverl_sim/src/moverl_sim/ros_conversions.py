@@ -80,6 +80,16 @@ def contacts_to_msg(stats, stamp_sec):
     return msg
 
 
+class FollowPoint:
+    """A trajectory_msgs/JointTrajectoryPoint as moverl_sim.follow reads it (time_from_start in seconds)."""
+
+    __slots__ = ("positions", "velocities", "accelerations", "time_from_start")
+
+    def __init__(self, p):
+        self.positions, self.velocities, self.accelerations = p.positions, p.velocities, p.accelerations
+        self.time_from_start = p.time_from_start.to_sec()
+
+
 def joint_state_msg(names, positions, velocities, stamp_sec):
     msg = JointState()
     msg.header.stamp = sim_stamp(stamp_sec)

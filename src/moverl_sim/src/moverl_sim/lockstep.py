@@ -1,0 +1,132 @@
+"""The simulator's lockstep driver without ROS: ~execute and ~reset_robot (moverl_msgs ExecuteTrajectory, ResetRobot).
+
+ROS-free; the sim node converts messages and calls these with its simulator lock held:
+
+* ``trajectory_arrays``: an ExecuteTrajectory request's joint names and points, checked and put in the simulator's
+  joint order (both modes: in real time the node hands the prepared motion to moverl_sim.realtime);
+* ``run_motion``: lockstep, a prepared motion run to its end in one call, or, when the cameras are watched, in pieces
+  that stop at every substep where a camera falls due (moverl_sim.camera_schedule), so the clouds are rendered with
+  the robot and the moving obstacles where they are at that sim time. The pieces change nothing else: the substeps,
+  contacts and final state are those of the one call (test_lockstep.py compares them);
+* ``reset_robot``: teleport the robot and restart the obstacles' motions, refused where the target touches the world.
+"""
+
+import math
+
+from .core import VELOCITY_TOLERANCE, InvalidTrajectory, LimitViolation
+
+__all__ = ["trajectory_arrays", "run_motion", "reset_robot", "Unreachable"]
+
+
+class Unreachable(Exception):
+    """A reset target the robot cannot be placed at (it touches the world): the caller samples another."""
+
+
+def trajectory_arrays(joints, velocity_limits, names, points, times):
+    """Check an ExecuteTrajectory request and reorder it into the simulator's joint order.
+
+    Args:
+        joints (Sequence[str]): the simulator's controlled joints, in its order.
+        velocity_limits (Sequence[float]): per joint of ``joints``.
+        names (Sequence[str]): the request's joint_names (any order, each controlled joint exactly once).
+        points (Sequence): trajectory_msgs/JointTrajectoryPoint-like objects (positions, velocities, accelerations).
+        times (Sequence[float]): each point's time_from_start in seconds.
+
+    Returns:
+        Tuple[list, list, list, list]: times, positions, velocities and accelerations per point (velocities /
+        accelerations of a point: [] when it gave none), as Simulator.prepare takes them.
+
+    Raises:
+        InvalidTrajectory: joints not exactly the controlled ones, no points, a point with the wrong number of values
+            or non-finite velocities / accelerations.
+        LimitViolation: a point's velocity above its joint's limit.
+    """
+    names = list(names)
+    n = len(joints)
+    if len(names) != n or set(names) != set(joints):
+        missing = [j for j in joints if j not in names]
+        unknown = [j for j in names if j not in joints]
+        dup = sorted({j for j in names if names.count(j) > 1})
+        raise InvalidTrajectory(
+            "joint_names must list the controlled joints %s exactly once (missing %s, unknown %s, duplicated %s)"
+            % (list(joints), missing, unknown, dup)
+        )
+    if not points:
+        raise InvalidTrajectory("empty trajectory")
+    order = [names.index(j) for j in joints]
+    positions, velocities, accelerations = [], [], []
+    for i, pt in enumerate(points):
+        if len(pt.positions) != n:
+            raise InvalidTrajectory("point %d has %d positions, expected %d" % (i, len(pt.positions), n))
+        for kind in ("velocities", "accelerations"):
+            values = getattr(pt, kind)
+            if len(values) not in (0, n) or not all(math.isfinite(v) for v in values):
+                raise InvalidTrajectory("point %d: %s must be empty or %d finite values" % (i, kind, n))
+        if any(
+            abs(pt.velocities[k]) > v * (1.0 + VELOCITY_TOLERANCE)
+            for k, v in zip(order, velocity_limits)
+            if len(pt.velocities) == n
+        ):
+            raise LimitViolation("point %d: a velocity is above its joint's limit" % i)
+        positions.append([pt.positions[k] for k in order])
+        velocities.append([pt.velocities[k] for k in order] if len(pt.velocities) == n else [])
+        accelerations.append([pt.accelerations[k] for k in order] if len(pt.accelerations) == n else [])
+    return times, positions, velocities, accelerations
+
+
+def run_motion(sim, motion, schedule=None, on_due=None):
+    """Run a prepared motion to its end (lockstep), rendering the cameras that fall due on the way.
+
+    Without a schedule (no cameras, or nobody watches them) the motion runs in one call. With one, the cameras due at
+    the start render first (pending ones: a new subscriber, never rendered); then the motion runs in pieces of
+    ``schedule.piece`` substeps, and after each piece that does not end the motion the cameras due at that substep
+    render. Cameras due at the end are the caller's (after it published the final state).
+
+    Args:
+        sim (moverl_sim.core.Simulator): the simulator (not thread safe: the caller holds its lock).
+        motion (moverl_sim.core.Motion): from sim.prepare, not started.
+        schedule (Optional[moverl_sim.camera_schedule.CameraSchedule]): the cameras' render times.
+        on_due (Callable[[List[int], bool], list]): called with the due cameras (camera order) and whether the motion
+            is under way (False: at its start), the simulator at that substep; renders them (and tells the schedule,
+            CameraSchedule.rendered, or stops it on a failure) and returns what to publish.
+
+    Returns:
+        Tuple[moverl_sim.core.ExecutionResult, list]: sim.finish's result and what the on_due calls returned, in order.
+    """
+    if schedule is None:
+        sim.advance(motion, motion.n)
+        return sim.finish(motion), []
+    out = []
+    due = schedule.due_now(sim.sim_time)
+    if due:
+        out += on_due(due, False)
+    while not motion.done:
+        want = schedule.piece(sim.sim_time, motion.remaining, sim.physics_hz)
+        if sim.advance(motion, want) < want or motion.done:
+            break  # (an aborted motion ran fewer: it is over)
+        due = schedule.due_now(sim.sim_time)
+        if due:
+            out += on_due(due, True)
+    return sim.finish(motion), out
+
+
+def reset_robot(sim, positions):
+    """~reset_robot: teleport the robot to positions (no contacts counted) and restart the obstacles' motions (motion
+    time 0 = now).
+
+    A robot cannot be placed inside an obstacle (where the motions restart, a person may stand on the sampled start):
+    a target touching the world is refused like a planned reset's unreachable target, the robot put back where it was
+    (the motions stay restarted).
+
+    Raises:
+        ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
+        Unreachable: the target touches the world (the message names the pairs).
+    """
+    before = list(sim.joint_positions())
+    sim.reset_robot(list(positions))
+    sim.restart_motions()
+    touching = sim.contacts_now().world_pairs
+    if touching:
+        sim.reset_robot(before)
+        pairs = ", ".join(f"{a} / {b}" for a, b in sorted(touching))
+        raise Unreachable(f"the target touches the world where the obstacles' motions restart ({pairs})")

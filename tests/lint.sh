@@ -16,18 +16,29 @@ for tool in clang-format ruff catkin_lint; do
   [ -x "$bin/$tool" ] || { echo "lint: $bin/$tool is missing: run ./catkin_ws_setup.sh" >&2; exit 2; }
 done
 mapfile -t cpp < <(git ls-files '*.cpp' '*.cc' '*.h' '*.hpp')
+# Python: ruff finds the *.py files under . itself (pyproject.toml's excludes apply); scripts without the suffix (ROS
+# nodes in scripts/ folders: rosrun names them by file name) are every other file of the checkout, tracked or new and
+# not ignored, whose first line is a python shebang. ruff checks a file named on its command line whatever its suffix.
+scripts=()
+while IFS= read -r -d '' f; do
+  case "$f" in *.py | *.pyi) continue ;; esac
+  [ -f "$f" ] && [ ! -L "$f" ] || continue
+  IFS= read -r first < "$f" 2>/dev/null || true
+  [[ ${first:-} =~ ^#!.*python ]] && scripts+=("$f")
+  first=
+done < <(git ls-files -z --cached --others --exclude-standard)
 if [ "${1:-}" = "--fix" ]; then
   "$bin/clang-format" -i "${cpp[@]}"
-  "$bin/ruff" format -q .
-  "$bin/ruff" check -q --fix .
+  "$bin/ruff" format -q . "${scripts[@]}"
+  "$bin/ruff" check -q --fix . "${scripts[@]}"
 fi
 status=0
 echo "clang-format: ${#cpp[@]} C++ files"
 "$bin/clang-format" --dry-run --Werror "${cpp[@]}" || status=1
-echo "ruff check"
-"$bin/ruff" check -q . || status=1
+echo "ruff check: the *.py files and ${#scripts[@]} Python scripts without the suffix (${scripts[*]##*/})"
+"$bin/ruff" check -q . "${scripts[@]}" || status=1
 echo "ruff format --check"
-"$bin/ruff" format --check -q . || status=1
+"$bin/ruff" format --check -q . "${scripts[@]}" || status=1
 # catkin_lint needs the ROS environment (package paths); rosdep's database is not used (no network here), so the
 # names in package.xml are checked against the packages found, not against rosdep's keys.
 echo "catkin_lint"

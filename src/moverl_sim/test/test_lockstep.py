@@ -231,3 +231,16 @@ def test_an_invalid_reset_target_changes_nothing(panda_urdf, table_world):
         assert s.joint_positions() == pytest.approx(HOME, abs=1e-12) and s.motion_epoch == 0.0
     finally:
         s.close()
+
+
+def test_a_robot_that_cannot_be_put_back_is_an_error_not_a_refusal(panda_urdf, table_world):
+    """A dynamic robot pushed beyond a joint limit (an encoder past the stop) is not a valid configuration to put back
+    after an unreachable target: an error (the service fails), never answered as a refusal the caller acts on."""
+    s = make_sim(panda_urdf, table_world, control="dynamic", physics_hz=HZ)
+    try:
+        s.reset_robot(HOME)
+        s._p.resetJointState(s.robot, s.joint_indices[3], s.upper[3] + 0.004)
+        with pytest.raises(RuntimeError, match="cannot put the robot back where it was: reset: joint panda_joint4"):
+            lockstep.reset_robot(s, INTO_TABLE)
+    finally:
+        s.close()

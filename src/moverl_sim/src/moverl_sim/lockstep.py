@@ -121,12 +121,17 @@ def reset_robot(sim, positions):
     Raises:
         ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
         Unreachable: the target touches the world (the message names the pairs).
+        RuntimeError: the robot cannot be put back (a dynamic robot pushed beyond a joint limit is not a valid
+            configuration): it stays at the target. Not a refusal: the node's service answers with an error.
     """
     before = list(sim.joint_positions())
     sim.reset_robot(list(positions))
     sim.restart_motions()
     touching = sim.contacts_now().world_pairs
     if touching:
-        sim.reset_robot(before)
+        try:
+            sim.reset_robot(before)
+        except ValueError as exc:
+            raise RuntimeError("cannot put the robot back where it was: %s" % exc) from exc
         pairs = ", ".join(f"{a} / {b}" for a, b in sorted(touching))
         raise Unreachable(f"the target touches the world where the obstacles' motions restart ({pairs})")

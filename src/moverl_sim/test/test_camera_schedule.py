@@ -169,20 +169,22 @@ def test_a_stopped_schedule_renders_nothing_and_runs_moves_in_one_piece():
 
 
 def test_the_camera_thread_renders_the_most_overdue_first():
-    """next_render: pending cameras first (in both modes), then (real time only) never rendered, then the oldest
-    render; with nothing due, next_due is the earliest due time (real time) or never (lockstep)."""
+    """next_render: pending cameras first (in both modes), then (real time only) those that never rendered, then the
+    oldest render; with nothing due, next_due is the earliest due time (real time) or never (lockstep)."""
     periods = [0.5, 0.5, 0.5]
-    schedule = schedule_of([1.0, 0.2, 0.7], periods)
+    schedule = schedule_of([0.4, 0.1, 0.7], periods)
     assert schedule.next_render(1.0, realtime=False) is None and schedule.next_due == math.inf
-    assert schedule.next_render(1.0, realtime=True) == 1  # due since 0.7 s (camera 2 since 1.2 s: not yet)
+    assert schedule.next_render(1.0, realtime=True) == 1  # due since 0.6 s; camera 0 since 0.9 s; camera 2 at 1.2 s
     schedule.rendered(1, 1.0)
+    assert schedule.next_render(1.0, realtime=True) == 0
+    schedule.rendered(0, 1.0)
     assert schedule.next_render(1.0, realtime=True) is None
-    assert schedule.next_due == pytest.approx(1.2 - DUE_TOLERANCE, abs=1e-15)  # camera 2
-    assert schedule.next_render(1.2, realtime=True) == 2
-    schedule.last[0] = None  # never rendered: before any overdue one
-    assert schedule.next_render(1.3, realtime=True) == 0
-    schedule.pending[2] = True  # pending: before a never-rendered one, and in lockstep too
-    assert schedule.next_render(1.3, realtime=True) == 2 and schedule.next_render(1.3, realtime=False) == 2
-    schedule.rendered(2, 1.3)
+    assert schedule.next_due == pytest.approx(1.2 - DUE_TOLERANCE, abs=1e-15)  # camera 2's
+    assert schedule.next_render(1.3, realtime=True) == 2
+    schedule.last[1] = None  # never rendered: before the overdue camera 2
+    assert schedule.next_render(1.3, realtime=True) == 1
+    schedule.pending[0] = True  # pending: before a never-rendered one although it rendered last, and in lockstep too
+    assert schedule.next_render(1.3, realtime=True) == 0 and schedule.next_render(1.3, realtime=False) == 0
+    schedule.rendered(0, 1.3)
     assert schedule.next_render(1.3, realtime=False) is None  # lockstep: only pending ones
-    assert schedule.pending == [False, False, False] and schedule.last[2] == 1.3
+    assert schedule.pending == [False, False, False] and schedule.last == [1.3, None, 0.7]

@@ -1,5 +1,7 @@
 """Simulated depth cameras: world-file parsing, pose, rendering geometry (moverl_sim.camera). No roscore."""
 
+import os
+
 import numpy as np
 import pybullet
 import pytest
@@ -314,7 +316,17 @@ def test_point_cloud_message():
 
 
 # ---------------------------------------------------------------------- coverage of the repo worlds
-def test_coverage_reachable_surfaces():
+@pytest.fixture(scope="module")
+def panda_workspace():
+    from conftest import REPO_DIR
+
+    from moverl_sim.robot_config import load_robot_config
+    from moverl_sim.workspace import Workspace
+
+    return Workspace.of_robot(load_robot_config(os.path.join(REPO_DIR, "config", "robots", "panda.yaml")))
+
+
+def test_coverage_reachable_surfaces(panda_workspace):
     from moverl_sim import coverage
 
     w = parse_world(
@@ -328,7 +340,7 @@ def test_coverage_reachable_surfaces():
         }
     )
     s = coverage.surface_samples(w, 0.02)
-    reach = coverage.reachable_mask(s, w)
+    reach = coverage.reachable_mask(s, w, panda_workspace)
     near = s.objects == 1
     top = near & (s.normals[:, 2] > 0.5)
     bottom = near & (s.normals[:, 2] < -0.5)
@@ -340,12 +352,29 @@ def test_coverage_reachable_surfaces():
     assert not reach[(s.objects == 0) & (s.normals[:, 2] < -0.5)].any()  # the table's underside
 
 
+def test_coverage_reach_is_the_robots(panda_workspace):
+    """The same box is within the Panda's reach and beyond the xArm6's: what counts as reachable is the robot's."""
+    from conftest import REPO_DIR
+
+    from moverl_sim import coverage
+    from moverl_sim.robot_config import load_robot_config
+    from moverl_sim.workspace import Workspace
+
+    xarm6 = Workspace.of_robot(load_robot_config(os.path.join(REPO_DIR, "config", "robots", "xarm6.yaml")))
+    w = parse_world(
+        {"name": "w", "objects": [{"id": "far", "shape": "box", "size": [0.1, 0.1, 0.1], "xyz": [0.95, 0, 0.3]}]}
+    )
+    s = coverage.surface_samples(w, 0.02)
+    near_face = s.normals[:, 0] < -0.5  # faces the robot, 0.9 m from the base axis: the probe's centre at 0.85 m
+    assert coverage.reachable_mask(s, w, panda_workspace)[near_face].all()
+    assert not coverage.reachable_mask(s, w, xarm6)[near_face].any()
+    assert xarm6.reach < 0.85 < panda_workspace.reach
+
+
 @pytest.mark.parametrize("name,minimum", [("table", 0.99), ("human", 0.98), ("case", 0.99)])
-def test_repo_world_cameras_see_the_reachable_obstacle_surface(panda_urdf, name, minimum):
+def test_repo_world_cameras_see_the_reachable_obstacle_surface(panda_urdf, panda_workspace, name, minimum):
     """The worlds' cameras see (almost) all the obstacle surface the robot can reach, the robot at home (the
     human at the centre and both ends of the walk). render_world --cameras prints the same figures."""
-    import os
-
     from conftest import HOME, REPO_DIR, make_sim
 
     from moverl_sim import coverage
@@ -363,7 +392,7 @@ def test_repo_world_cameras_see_the_reachable_obstacle_surface(panda_urdf, name,
             sim._place_movers(t)
             samples = coverage.surface_samples(w, 0.02, t)
             depths = [c.render_depth(sim.client_id) for c in cams]
-            table, _, _, _ = coverage.coverage_report(w, cams, depths, samples, t)
+            table, _, _, _ = coverage.coverage_report(w, cams, depths, samples, panda_workspace, t)
             total = sum(a for a, _ in table.values())
             seen = sum(b for _, b in table.values())
             assert total > 1000

@@ -168,25 +168,10 @@ class _Bullet:
 
     def shape_points(self, link) -> np.ndarray:
         """PyBullet's hull vertices, box corners and sphere points of a link (world frame)."""
-        import pybullet
+        from moverl_sim.core import collision_shape
 
-        com = self.com_frame(link)
-        shapes = self.p.getCollisionShapeData(self.robot, link)
-        pts = []
-        if any(s[2] == pybullet.GEOM_MESH for s in shapes):  # convex hulls (meshes, cylinders)
-            _, verts = self.p.getMeshData(self.robot, link)
-            if len(verts):
-                pts.append(_apply(com, verts))
-        for shape in shapes:
-            kind, dims, pos, orn = shape[2], shape[3], shape[5], shape[6]
-            local = com @ _matrix(pos, orn)
-            if kind == pybullet.GEOM_BOX:
-                half = np.array(dims) / 2
-                corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
-                pts.append(_apply(local, corners))
-            elif kind == pybullet.GEOM_SPHERE:
-                pts.append(_apply(local, _sphere_points(np.zeros(3), dims[0])))
-        return np.vstack(pts) if pts else np.zeros((0, 3))
+        pts, spheres = collision_shape(self.p, self.robot, link)
+        return np.vstack([pts] + [_sphere_points(c, r) for c, r in spheres])
 
     def distance(self, link, x) -> float:
         """Signed distance from the probe at x to the link's shape as PyBullet sees it (margin included; inf: none)."""

@@ -20,7 +20,15 @@ from .follow import spline_at
 from .urdf import JointLimits
 from .world import World
 
-__all__ = ["Simulator", "ContactStats", "ExecutionResult", "Motion", "InvalidTrajectory", "LimitViolation"]
+__all__ = [
+    "Simulator",
+    "ContactStats",
+    "ExecutionResult",
+    "Motion",
+    "InvalidTrajectory",
+    "LimitViolation",
+    "collision_shape",
+]
 
 POSITION_TOLERANCE = 1e-6  # rad (or m): tolerance on the joint position limits
 VELOCITY_TOLERANCE = 1e-6  # relative tolerance on the velocity limits
@@ -128,6 +136,51 @@ class Motion:
 
 def _quat_from_pybullet(q):
     return (q[0], q[1], q[2], q[3])
+
+
+def _frame(pos, orn) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = np.array(pybullet.getMatrixFromQuaternion(orn)).reshape(3, 3)
+    m[:3, 3] = pos
+    return m
+
+
+def collision_shape(client, body, link):
+    """PyBullet's collision shape of one link of a body, in the world frame, as its contacts see it: the hull vertices
+    of its convex pieces (getMeshData: meshes and the hulls PyBullet makes of cylinders) and the corners of its boxes
+    (N x 3), and its spheres as (centre, radius) pairs. The one reading of a link's shape from PyBullet
+    (moverl_gym.geometry_parity compares it with the planning scene's, moverl_sim.workspace measures the reach).
+
+    Args:
+        client: a pybullet_utils BulletClient.
+        body: the body's unique id.
+        link: the link's index (-1: the base).
+
+    Returns:
+        (points, spheres).
+    """
+    if link == -1:
+        com = _frame(*client.getBasePositionAndOrientation(body))
+    else:
+        s = client.getLinkState(body, link, computeForwardKinematics=True)
+        com = _frame(s[0], s[1])
+    shapes = client.getCollisionShapeData(body, link)
+    pts, spheres = [], []
+    if any(s[2] == pybullet.GEOM_MESH for s in shapes):  # convex hulls (meshes, cylinders)
+        _, verts = client.getMeshData(body, link)
+        if len(verts):
+            v = np.asarray(verts, dtype=float).reshape(-1, 3)
+            pts.append(v @ com[:3, :3].T + com[:3, 3])
+    for shape in shapes:
+        kind, dims, pos, orn = shape[2], shape[3], shape[5], shape[6]
+        local = com @ _frame(pos, orn)
+        if kind == pybullet.GEOM_BOX:
+            half = np.array(dims) / 2
+            corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half
+            pts.append(corners @ local[:3, :3].T + local[:3, 3])
+        elif kind == pybullet.GEOM_SPHERE:
+            spheres.append((local[:3, 3].copy(), float(dims[0])))
+    return (np.vstack(pts) if pts else np.zeros((0, 3))), spheres
 
 
 def _relative_pose(base_xyz, base_quat, xyz, quat):

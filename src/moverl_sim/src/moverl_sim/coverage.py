@@ -5,11 +5,13 @@ high). The obstacle surfaces are sampled on a grid (about one sample per 2 x 2 c
 
 A sample is *reachable* when a probe ball (radius 3 cm, a finger) can get there from the robot: the point 5 cm
 out along the sample's outward normal lies in the free space (probe centres clear of every object) that is
-within ``reach`` of the shoulder (0.95 m around (0, 0, 0.333): the Panda's 0.855 m reach plus its hand) and
-above the table top (z >= 0: the robot works on its table, so surfaces below the table top such as its edges
-do not count; the OctoMap cells of the table top hold the edges' top 2 cm), and is connected to the space
-around the robot (flood fill on a 2 cm grid). Surfaces covered by another object (the table top under the
-case floor) and the table top under the robot's base (within 0.15 m of the base axis) do not count either.
+within the robot's reach of its shoulder (moverl_sim.workspace.Workspace, from the robot's model: for the Panda
+0.98 m around (0, 0, 0.333), its 0.858 m flange reach plus its open hand) and above the table top (z >= 0: the
+robot works on its table, so surfaces below the table top such as its edges do not count; the OctoMap cells of
+the table top hold the edges' top 2 cm), and is connected to the space around the robot (flood fill on a 2 cm
+grid from within 0.3 m of the shoulder). Surfaces covered by another object (the table top under the case
+floor) and the table top under the robot's base (within the base's radius of its axis: Workspace.base_radius,
+0.155 m for the Panda) do not count either.
 
 A sample is *seen* by a camera when it lies in the camera's image and clip range and within ``max_range`` of
 the camera (default 3.0 m, the planning scene's OctoMap max_range: longer beams only clear free space), faces
@@ -31,15 +33,11 @@ __all__ = [
     "reachable_mask",
     "visible_mask",
     "coverage_report",
-    "SHOULDER",
-    "REACH",
 ]
 
-SHOULDER = (0.0, 0.0, 0.333)  # Panda joint 2 axis above the base
-REACH = 0.95  # 0.855 m Panda reach + the hand
 PROBE = 0.03  # radius of the ball that must get to a surface (m)
 VOXEL = 0.02  # free-space grid (m)
-BASE_RADIUS = 0.15  # table top under the robot base
+SEED_RADIUS = 0.3  # the flood fill of the accessible space starts from the free space this close to the shoulder (m)
 MIN_FACING_COS = 0.15  # surfaces seen more obliquely than ~81 deg do not count
 DEPTH_TOL = 0.01  # m
 MAX_RANGE = 3.0  # the planning scene's OctoMap max_range (config/planning_scene.yaml)
@@ -138,10 +136,11 @@ def _distance(obj, points, t):
     return np.hypot(radial, axial)
 
 
-def accessible_space(world, t=0.0, shoulder=SHOULDER, reach=REACH, probe=PROBE, voxel=VOXEL):
+def accessible_space(world, workspace, t=0.0, probe=PROBE, voxel=VOXEL):
     """Boolean grid of the probe-ball centres the robot can bring there (module docstring), and a lookup
-    function points -> bool."""
-    c = np.asarray(shoulder, dtype=float)
+    function points -> bool. ``workspace``: the robot's moverl_sim.workspace.Workspace."""
+    c = np.asarray(workspace.shoulder, dtype=float)
+    reach = workspace.reach
     lo = c - reach
     lo[2] = max(lo[2], 0.0)
     n = np.ceil((c + reach - lo) / voxel).astype(int) + 1
@@ -154,7 +153,7 @@ def accessible_space(world, t=0.0, shoulder=SHOULDER, reach=REACH, probe=PROBE, 
         free[sel] &= _distance(obj, centres[sel], t) > probe
     free = free.reshape(n)
     # Flood fill from the free space near the shoulder.
-    reached = free & (np.linalg.norm(centres - c, axis=1) <= 0.3).reshape(n)
+    reached = free & (np.linalg.norm(centres - c, axis=1) <= SEED_RADIUS).reshape(n)
     while True:
         grown = reached.copy()
         grown[1:] |= reached[:-1]
@@ -178,15 +177,15 @@ def accessible_space(world, t=0.0, shoulder=SHOULDER, reach=REACH, probe=PROBE, 
     return reached, lookup
 
 
-def reachable_mask(samples, world, t=0.0, shoulder=SHOULDER, reach=REACH, probe=PROBE):
-    """Samples on a surface the robot can touch (module docstring)."""
+def reachable_mask(samples, world, workspace, t=0.0, probe=PROBE):
+    """Samples on a surface the robot (its moverl_sim.workspace.Workspace) can touch (module docstring)."""
     p, n = samples.points, samples.normals
     if len(p) == 0:
         return np.zeros(0, dtype=bool)
-    _, lookup = accessible_space(world, t, shoulder, reach, probe)
+    _, lookup = accessible_space(world, workspace, t, probe)
     q = p + (probe + VOXEL) * n
     ok = lookup(q) & (q[:, 2] >= 0.0)
-    ok &= ~((np.hypot(p[:, 0], p[:, 1]) < BASE_RADIUS) & (np.abs(p[:, 2]) < 1e-3) & (n[:, 2] > 0.5))
+    ok &= ~((np.hypot(p[:, 0], p[:, 1]) < workspace.base_radius) & (np.abs(p[:, 2]) < 1e-3) & (n[:, 2] > 0.5))
     just_out = p + 0.002 * n  # covered by another object (the table top under the case floor)
     for k, obj in enumerate(world.objects):
         other = np.flatnonzero(ok & (samples.objects != k))
@@ -224,10 +223,11 @@ def visible_mask(camera, depth, samples, max_range=MAX_RANGE, max_spacing=None):
     return seen
 
 
-def coverage_report(world, cameras, depths, samples, t=0.0, max_range=MAX_RANGE):
+def coverage_report(world, cameras, depths, samples, workspace, t=0.0, max_range=MAX_RANGE):
     """{object id: (reachable samples, seen by at least one camera)}, per-camera seen masks and the
-    reachable mask. ``depths``: each camera's rendered z-depth image, same order as ``cameras``."""
-    reach = reachable_mask(samples, world, t)
+    reachable mask. ``depths``: each camera's rendered z-depth image, same order as ``cameras``; ``workspace``: the
+    robot's moverl_sim.workspace.Workspace."""
+    reach = reachable_mask(samples, world, workspace, t)
     per_camera = [visible_mask(c, d, samples, max_range) for c, d in zip(cameras, depths)]
     seen = np.zeros(len(samples.points), dtype=bool)
     for m in per_camera:

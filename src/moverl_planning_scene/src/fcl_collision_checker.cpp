@@ -168,16 +168,16 @@ bool FclCollisionChecker::setOctreeMargin(double margin) {
   return true;
 }
 
-bool FclCollisionChecker::occupancyFree(const double* q) {
+bool FclCollisionChecker::occupancyFree(const double* q, CellClass which) {
   if (occupancy_ == nullptr) return true;
   updateTransforms(q);
   for (int gi : world_geoms_) {
-    if (meetsOccupied(octoGeom(geoms_[gi]), geoms_[gi].world_tf)) return false;
+    if (meetsOccupied(octoGeom(geoms_[gi]), geoms_[gi].world_tf, which)) return false;
   }
   return true;
 }
 
-double FclCollisionChecker::occupancyDistance(const double* q, double below, double above) {
+double FclCollisionChecker::occupancyDistance(const double* q, double below, double above, CellClass which) {
   if (occupancy_ == nullptr) return std::numeric_limits<double>::infinity();
   updateTransforms(q);
   double best = above;
@@ -207,7 +207,8 @@ double FclCollisionChecker::occupancyDistance(const double* q, double below, dou
         [&](const Eigen::AlignedBox3d& box) {
           near_boxes_.emplace_back(lower(box), box);
           return false;
-        });
+        },
+        which);
     std::sort(near_boxes_.begin(), near_boxes_.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     for (const auto& [bound, box] : near_boxes_) {
       if (bound >= best) break;
@@ -235,7 +236,7 @@ const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octo
 }
 
 bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
-                                        const Eigen::Isometry3d& tf) const {
+                                        const Eigen::Isometry3d& tf, CellClass which) const {
   // The shape's world box (its local box's corners, transformed) bounds the cells to look at; its bounding sphere
   // rejects boxes cheaply before GJK.
   const fcl::AABBd& local = shape->aabb_local;
@@ -246,16 +247,19 @@ bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeom
   }
   const Eigen::Vector3d centre = tf * shape->aabb_center;
   const double radius = shape->aabb_radius;
-  return occupancy_->anyOccupied(region, [&](const Eigen::AlignedBox3d& box) {
-    if (box.exteriorDistance(centre) > radius) return false;
-    const fcl::Boxd cell(box.sizes());
-    fcl::Transform3d at = fcl::Transform3d::Identity();
-    at.translation() = box.center();
-    fcl::CollisionRequestd req(1, false);
-    fcl::CollisionResultd res;
-    fcl::collide(&cell, at, shape.get(), tf, req, res);
-    return res.isCollision();
-  });
+  return occupancy_->anyOccupied(
+      region,
+      [&](const Eigen::AlignedBox3d& box) {
+        if (box.exteriorDistance(centre) > radius) return false;
+        const fcl::Boxd cell(box.sizes());
+        fcl::Transform3d at = fcl::Transform3d::Identity();
+        at.translation() = box.center();
+        fcl::CollisionRequestd req(1, false);
+        fcl::CollisionResultd res;
+        fcl::collide(&cell, at, shape.get(), tf, req, res);
+        return res.isCollision();
+      },
+      which);
 }
 
 void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,

@@ -105,6 +105,8 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->block_dirty_.assign(static_cast<std::size_t>(blocks), 0);
   m->super_count_.assign(static_cast<std::size_t>(supers), 0);
+  m->seen_block_count_.assign(static_cast<std::size_t>(blocks), 0);
+  m->seen_super_count_.assign(static_cast<std::size_t>(supers), 0);
   m->log_hit_ = logodds(o.prob_hit);
   m->log_miss_ = logodds(o.prob_miss);
   m->clamp_min_ = logodds(o.clamp_min);
@@ -349,15 +351,24 @@ void OccupancyMap::apply(const MapUpdate& update) {
       const bool was = testBit(observed_, c) && value_[c] >= threshold_;
       setValue(c, updated(value_[c], u));
       setBit(&observed_, c);
-      seen_occupied_ += static_cast<std::int64_t>(value_[c] >= threshold_) - static_cast<std::int64_t>(was);
+      const bool now = value_[c] >= threshold_;
+      if (now != was) countSeen(c, now ? 1 : -1);
     }
   }
 }
 
 void OccupancyMap::clear() {
   std::fill(observed_.begin(), observed_.end(), 0);
-  seen_occupied_ = 0;
   fillUnobserved(options_.unknown_occupied);
+}
+
+void OccupancyMap::countSeen(std::int64_t c, int delta) {
+  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
+  const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+  const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  seen_block_count_[b] = static_cast<std::uint8_t>(seen_block_count_[b] + delta);
+  seen_super_count_[s] = static_cast<std::uint16_t>(seen_super_count_[s] + delta);
+  seen_occupied_ += delta;
 }
 
 void OccupancyMap::setUnknownOccupied(bool on) {
@@ -371,6 +382,9 @@ void OccupancyMap::fillUnobserved(bool on) {
   std::fill(occupied_.begin(), occupied_.end(), 0);
   std::fill(block_count_.begin(), block_count_.end(), 0);
   std::fill(super_count_.begin(), super_count_.end(), 0);
+  std::fill(seen_block_count_.begin(), seen_block_count_.end(), 0);
+  std::fill(seen_super_count_.begin(), seen_super_count_.end(), 0);
+  seen_occupied_ = 0;
   // Every cell counts as dirty (unknown) until setValue says otherwise.
   std::int64_t at[3];
   for (at[0] = 0; at[0] < blocks_[0]; ++at[0]) {
@@ -388,6 +402,7 @@ void OccupancyMap::fillUnobserved(bool on) {
     const float v = value_[c];
     value_[c] = unknown;  // setValue counts from an unoccupied, dirty cell
     setValue(c, v);
+    if (testBit(observed_, c) && v >= threshold_) countSeen(c, 1);
   }
 }
 
@@ -455,12 +470,13 @@ void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::ve
 
 std::size_t OccupancyMap::occupiedLeafCount() const { return static_cast<std::size_t>(seen_occupied_); }
 
-bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const {
+bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets, CellClass which) const {
   // A box of occupied cells that the shape meets: one of them meets it.
-  return visitOccupied(region, meets, [](const Eigen::AlignedBox3d&) { return true; });
+  return visitOccupied(region, meets, [](const Eigen::AlignedBox3d&) { return true; }, which);
 }
 
-bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit) const {
+bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
+                                 CellClass which) const {
   std::int64_t lo[3], hi[3];
   for (int i = 0; i < 3; ++i) {
     lo[i] = std::max<std::int64_t>(0, indexOf(region.min()[i], i));
@@ -484,11 +500,43 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
     }
     return n;
   };
+  // Occupied cells of the class asked for: in a (super)block, and one by one.
+  auto super_count = [&](std::int64_t x) -> std::int64_t {
+    switch (which) {
+      case CellClass::kSeen:
+        return seen_super_count_[x];
+      case CellClass::kUnseen:
+        return super_count_[x] - seen_super_count_[x];
+      default:
+        return super_count_[x];
+    }
+  };
+  auto block_count = [&](std::int64_t x) -> std::int64_t {
+    switch (which) {
+      case CellClass::kSeen:
+        return seen_block_count_[x];
+      case CellClass::kUnseen:
+        return block_count_[x] - seen_block_count_[x];
+      default:
+        return block_count_[x];
+    }
+  };
+  auto cell_counts = [&](std::int64_t c) {
+    if (!testBit(occupied_, c)) return false;
+    switch (which) {
+      case CellClass::kSeen:
+        return testBit(observed_, c);
+      case CellClass::kUnseen:
+        return !testBit(observed_, c);
+      default:
+        return true;
+    }
+  };
   std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3];
   for (s[0] = lo[0] >> kSuperShift; s[0] <= hi[0] >> kSuperShift; ++s[0]) {
     for (s[1] = lo[1] >> kSuperShift; s[1] <= hi[1] >> kSuperShift; ++s[1]) {
       for (s[2] = lo[2] >> kSuperShift; s[2] <= hi[2] >> kSuperShift; ++s[2]) {
-        const std::uint16_t sc = super_count_[(s[0] * supers_[1] + s[1]) * supers_[2] + s[2]];
+        const std::int64_t sc = super_count((s[0] * supers_[1] + s[1]) * supers_[2] + s[2]);
         if (sc == 0) continue;
         const std::int64_t cells = span(s, kSuperShift, sa, sb);
         const Eigen::AlignedBox3d super_box = box(sa, sb);
@@ -501,7 +549,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
           for (bl[1] = std::max(lo[1], sa[1]) >> kBlockShift; bl[1] <= std::min(hi[1], sb[1]) >> kBlockShift; ++bl[1]) {
             for (bl[2] = std::max(lo[2], sa[2]) >> kBlockShift; bl[2] <= std::min(hi[2], sb[2]) >> kBlockShift;
                  ++bl[2]) {
-              const std::uint8_t bc = block_count_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]];
+              const std::int64_t bc = block_count((bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]);
               if (bc == 0) continue;
               const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
               const Eigen::AlignedBox3d block_box = box(ba, bb);
@@ -513,7 +561,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
               for (std::int64_t i = std::max(lo[0], ba[0]); i <= std::min(hi[0], bb[0]); ++i) {
                 for (std::int64_t j = std::max(lo[1], ba[1]); j <= std::min(hi[1], bb[1]); ++j) {
                   for (std::int64_t k = std::max(lo[2], ba[2]); k <= std::min(hi[2], bb[2]); ++k) {
-                    if (!testBit(occupied_, (i * size_[1] + j) * size_[2] + k)) continue;
+                    if (!cell_counts((i * size_[1] + j) * size_[2] + k)) continue;
                     const std::int64_t c[3] = {i, j, k};
                     const Eigen::AlignedBox3d cell_box = box(c, c);
                     if (near(cell_box) && visit(cell_box)) return true;

@@ -390,7 +390,7 @@ void OctomapMonitor::addKnownFree() {
 }
 
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
-                             const ros::Time& epoch) {
+                             const ros::Time& epoch, double max_wait) {
   // Every camera the world lists counts, heard from or not (one never heard from leaves the map blind), and so does
   // any other camera whose clouds came in.
   std::string deciding;
@@ -409,8 +409,9 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   };
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
-  if (map_age > max_age_ && stale_wait_ > 0.0) {
-    stamps_cv_.wait_for(lock, std::chrono::duration<double>(stale_wait_), [&] { return age() <= max_age_; });
+  const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
+  if (map_age > max_age_ && wait > 0.0) {
+    stamps_cv_.wait_for(lock, std::chrono::duration<double>(wait), [&] { return age() <= max_age_; });
     map_age = age();
   }
   const bool none = cameras_.empty() && frame_stamps_.empty();

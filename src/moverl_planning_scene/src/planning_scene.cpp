@@ -247,6 +247,10 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
   const bool plan_on_path_collision = req.plan_on_path_collision, find_last_free = req.find_last_free;
   const double start_time = req.start_time, duration = req.duration;
   auto t0 = Clock::now();
+  const Clock::time_point deadline = req.time_budget > 0.0
+                                         ? t0 + std::chrono::duration_cast<Clock::duration>(
+                                                    std::chrono::duration<double>(std::min(req.time_budget, 1e6)))
+                                         : Clock::time_point::max();
   // Sensed obstacles: each check with the margin of the time it covers; back to none when done.
   const SensedMargins none;
   const SensedMargins& margin = sensed != nullptr ? *sensed : none;
@@ -351,7 +355,7 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
       findLastFree(/*goal_checked=*/false, out);
       out->path_check_time = since(t0);
     }
-    if (!measured) retreat(req, margin.end, out);
+    if (!measured) retreat(req, margin.end, deadline, out);
     return;
   }
   // Straight path (interior states only: both ends are free).
@@ -395,54 +399,59 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
     }
   }
   out->message = m.str();
-  if (!out->replanned && !measured) retreat(req, margin.end, out);
+  if (!out->replanned && !measured) retreat(req, margin.end, deadline, out);
 }
 
-void PlanningScene::retreat(const MotionRequest& req, double end_margin, MotionCheck* out) {
+void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::time_point deadline, MotionCheck* out) {
   FclCollisionChecker& c = *checker_;
   if (req.retreat_reach.empty() || !c.hasOccupancy()) return;
   const auto t0 = Clock::now();
   checker_->setOctreeMargin(end_margin);
   if (out->outcome == MotionOutcome::kStartInCollision) {
-    // Within the start's own margin. Only the seen cells may stand in the way: backing away does not help a start in
+    // Within the start's own margin. Only the sensed cells may stand in the way: backing away does not help a start in
     // self collision or in a world object.
     if (state_result_.status != CollisionStatus::kWorld) return;
     for (const ContactPair& p : state_result_.pairs) {
       if (p.b != FclCollisionChecker::kOctomapId) return;
     }
-  } else if (c.occupancyFree(start_.data())) {
-    return;  // resting here for the move's duration is covered by the margin
   }
+  // Threatened: a cell a camera saw occupied (a person) lies within padding + the end margin of where the robot rests.
+  // Space occupied only because no camera has seen it (unknown_occupied) is no threat to back away from: it is where
+  // the robot's own links and the person hide from the cameras, and the robot cannot leave it behind; the retreat
+  // never brings the robot closer to it than it stands (below).
+  if (c.occupancyFree(start_.data(), CellClass::kSeen)) return;  // resting here is covered by the margin
   out->threatened = true;
   // Not free at padding + end margin: the clearance is below that (plus the inflation's rounding).
-  const double clearance =
-      c.occupancyDistance(start_.data(), 0.0, c.options().padding + end_margin + FclCollisionChecker::kMarginStep);
+  const double reach = c.options().padding + end_margin + FclCollisionChecker::kMarginStep;
+  const double seen = c.occupancyDistance(start_.data(), 0.0, reach, CellClass::kSeen);
   std::ostringstream m;
-  m << out->message << (out->message.empty() ? "" : "; ") << "the robot rests within the sensed margin";
-  if (!(clearance > 0.0)) {
-    m << " touching the seen cells: no move is known to back away, held";
+  m << out->message << (out->message.empty() ? "" : "; ") << "the robot rests within the sensed margin of seen cells";
+  auto done = [&](const char* why) {
+    m << why;
     out->message = m.str();
     out->path_check_time += since(t0);
-    return;
-  }
-  out->clearance = clearance;
-  m << " (" << clearance << " m clear)";
+  };
+  if (!(seen > 0.0)) return done(" touching them: no move is known to back away, held");
+  out->clearance = seen;
+  m << " (" << seen << " m clear)";
+  // Unseen cells: up to `reach` (where a move's own margin keeps the robot from them anyway), no closer than now.
+  const double unseen = c.occupancyDistance(start_.data(), 0.0, reach, CellClass::kUnseen);
+  if (!(unseen > 0.0)) return done("; it touches space no camera has seen: no move is known to back away, held");
+  const auto late = [&] { return Clock::now() >= deadline; };
   // The commanded move itself, when it backs away: accepted as it is.
-  double g = clearanceAbove(goal_, clearance);
-  if (g >= clearance + kRetreatGain && pathBacksAway(goal_, clearance)) {
+  double g = clearanceAbove(goal_, seen);
+  if (g >= seen + kRetreatGain && pathBacksAway(goal_, seen, unseen)) {
     out->outcome = MotionOutcome::kValid;
     out->pairs.clear();
     out->last_free_fraction = -1.0;
     out->last_free_state.clear();
     out->retreat_clearance = g;
     m << "; the commanded move backs away (to " << g << " m clear)";
-    out->message = m.str();
-    out->path_check_time += since(t0);
-    return;
+    return done("");
   }
   // Candidates within reach: each joint alone (both ways) and seeded random directions, then the joints that gained
   // alone combined; ranked by the clearance they end at, the first whose path backs away. Then the same at half the
-  // reach (a wall or a limit may be nearer than the full reach).
+  // reach (a wall or a limit may be nearer than the full reach). The search stops, holding, at the deadline.
   const std::size_t dof = start_.size();
   std::vector<std::vector<double>> candidates;
   std::vector<double> ends;
@@ -454,24 +463,26 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, MotionC
         q[i] = std::min(std::max(q[i], model_->lowerLimits()[i]), model_->upperLimits()[i]);
       }
       if (q == start_) return;
-      ends.push_back(clearanceAbove(q, clearance));
+      ends.push_back(clearanceAbove(q, seen));
       candidates.push_back(std::move(q));
     };
     std::vector<double> gain(dof, 0.0);  // per joint: the gain of its move alone, signed by its direction
     for (std::size_t i = 0; i < dof; ++i) {
       for (double f : {scale, -scale}) {
+        if (late()) return done("; no move backing away found in the time the caller waits, held");
         std::vector<double> q = start_;
         q[i] += f * req.retreat_reach[i];
         const std::size_t before = candidates.size();
         add(std::move(q));
-        if (candidates.size() > before && ends.back() - clearance > std::fabs(gain[i])) {
-          gain[i] = std::copysign(ends.back() - clearance, f);
+        if (candidates.size() > before && ends.back() - seen > std::fabs(gain[i])) {
+          gain[i] = std::copysign(ends.back() - seen, f);
         }
       }
     }
     std::mt19937 rng(1234567u);  // the same directions every time: a decision is repeatable
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
     for (int k = 0; k < kRetreatDirections; ++k) {
+      if (late()) return done("; no move backing away found in the time the caller waits, held");
       std::vector<double> q = start_;
       for (std::size_t i = 0; i < dof; ++i) q[i] += scale * unit(rng) * req.retreat_reach[i];
       add(std::move(q));
@@ -485,35 +496,33 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, MotionC
     }
     std::vector<std::size_t> order;
     for (std::size_t k = 0; k < candidates.size(); ++k) {
-      if (ends[k] >= clearance + kRetreatGain) order.push_back(k);
+      if (ends[k] >= seen + kRetreatGain) order.push_back(k);
     }
     std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return ends[a] > ends[b]; });
     for (std::size_t k : order) {
-      if (!pathBacksAway(candidates[k], clearance)) continue;
+      if (late()) return done("; no move backing away found in the time the caller waits, held");
+      if (!pathBacksAway(candidates[k], seen, unseen)) continue;
       out->retreat_state = candidates[k];
       out->retreat_clearance = ends[k];
       m << "; a move backs away (to " << ends[k] << " m clear)";
-      out->message = m.str();
-      out->path_check_time += since(t0);
-      return;
+      return done("");
     }
   }
-  m << "; no move within reach backs away (boxed in), held";
-  out->message = m.str();
-  out->path_check_time += since(t0);
+  done("; no move within reach backs away (boxed in), held");
 }
 
 double PlanningScene::clearanceAbove(const std::vector<double>& q, double clearance) {
   double motion = 0.0;
   for (std::size_t i = 0; i < q.size(); ++i) motion += checker_->jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
   // No robot point moved more than `motion`: the clearance grew by at most that.
-  return checker_->occupancyDistance(q.data(), clearance + kRetreatGain, clearance + motion + kRetreatGain);
+  return checker_->occupancyDistance(q.data(), clearance + kRetreatGain, clearance + motion + kRetreatGain,
+                                     CellClass::kSeen);
 }
 
-bool PlanningScene::pathBacksAway(const std::vector<double>& q, double clearance) {
+bool PlanningScene::pathBacksAway(const std::vector<double>& q, double seen, double unseen) {
   FclCollisionChecker& c = *checker_;
   CollisionRequest fixed = verdict_only_;
-  fixed.check_occupancy = false;  // the seen cells: by clearance below
+  fixed.check_occupancy = false;  // the sensed cells: by clearance below
   c.checkState(q.data(), fixed, &retreat_result_);
   if (retreat_result_.collision()) return false;
   PathCheckRequest request;
@@ -525,12 +534,13 @@ bool PlanningScene::pathBacksAway(const std::vector<double>& q, double clearance
   if (retreat_path_.status != CollisionStatus::kFree) return false;
   double motion = 0.0;
   for (std::size_t i = 0; i < q.size(); ++i) motion += c.jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
-  const int n = static_cast<int>(std::ceil(motion / kRetreatResolution));
+  const int n = std::max(1, static_cast<int>(std::ceil(motion / kRetreatResolution)));
   std::vector<double> s(q.size());
-  for (int k = 1; k < n; ++k) {
+  for (int k = 1; k <= n; ++k) {  // k = n: q itself, whose clearance from the seen cells the caller knows
     const double t = static_cast<double>(k) / n;
     for (std::size_t i = 0; i < q.size(); ++i) s[i] = start_[i] + t * (q[i] - start_[i]);
-    if (c.occupancyDistance(s.data(), clearance, clearance) < clearance) return false;
+    if (k < n && c.occupancyDistance(s.data(), seen, seen, CellClass::kSeen) < seen) return false;
+    if (c.occupancyDistance(s.data(), unseen, unseen, CellClass::kUnseen) < unseen) return false;
   }
   return true;
 }

@@ -5,6 +5,7 @@
 #include "moverl_planning_scene/scene_server.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdlib>
 #include <exception>
 
@@ -403,6 +404,11 @@ bool SceneServer::fk(moverl_msgs::GetFK::Request& req, moverl_msgs::GetFK::Respo
 }
 
 void SceneServer::validate(const MotionRequest& req, MotionCheck* out) {
+  // The caller's budget (MotionRequest::time_budget): the wait for clouds takes at most half of it, and the scene's
+  // own work (the checks, a plan within planning_time, a retreat search) must end by 90 % of it; the rest carries the
+  // answer back.
+  const auto t0 = std::chrono::steady_clock::now();
+  const double budget = req.time_budget > 0.0 ? req.time_budget : -1.0;
   try {
     // Sensed obstacles: the margins from the map's age at the state's stamp (may wait for clouds: before the lock,
     // which integration needs).
@@ -413,7 +419,8 @@ void SceneServer::validate(const MotionRequest& req, MotionCheck* out) {
     const double epoch = req.stamp - req.start_time;
     const bool stamped = req.stamp > 0.0;
     if (monitor_ && !monitor_->margins(stamped ? ros::Time(req.stamp) : monitor_->newestStamp(), req.duration, &sensed,
-                                       &blind, !stamped || !(epoch > 0.0) ? ros::Time() : ros::Time(epoch))) {
+                                       &blind, !stamped || !(epoch > 0.0) ? ros::Time() : ros::Time(epoch),
+                                       budget > 0.0 ? 0.5 * budget : -1.0)) {
       *out = MotionCheck();
       out->outcome = MotionOutcome::kMapStale;
       out->moving_obstacles = true;  // sensed obstacles may move: time passes while the robot holds
@@ -424,7 +431,14 @@ void SceneServer::validate(const MotionRequest& req, MotionCheck* out) {
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
-    scene_->validateMotion(req, out, monitor_ ? &sensed : nullptr);
+    if (budget > 0.0) {
+      MotionRequest within = req;  // what is left of the budget after the wait and the lock
+      const double spent = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      within.time_budget = std::max(1e-3, 0.9 * budget - spent);
+      scene_->validateMotion(within, out, monitor_ ? &sensed : nullptr);
+    } else {
+      scene_->validateMotion(req, out, monitor_ ? &sensed : nullptr);
+    }
     out->moving_obstacles = out->moving_obstacles || monitor_ != nullptr;  // sensed obstacles may move
     out->map_age = sensed.map_age;
     out->sensed_margin = sensed.end;
@@ -449,6 +463,7 @@ bool SceneServer::serveValidateMotion(moverl_msgs::ValidateMotion::Request& req,
   request.duration = req.duration;
   request.stamp = req.stamp.toSec();
   request.retreat_reach = req.retreat_reach;
+  request.time_budget = req.time_budget;
   MotionCheck m;
   validate(request, &m);
   res.outcome = static_cast<uint8_t>(m.outcome);

@@ -546,6 +546,102 @@ TEST_F(PandaOctomap, ARobotRestingWithinTheMarginBacksAway) {
 /// Unknown is occupied: the rule is octomap's update from a prior just above the threshold; one view clears what it
 /// sees, space no camera sees stays occupied, known-free cells (inside the robot) are turned free, and switching the
 /// rule off forgets only the prior.
+/// Retreat with unseen space around the robot (unknown_occupied): only cells a camera saw occupied make the robot
+/// back away (space no camera has seen, e.g. its own shadow, does not come closer); a retreat never brings any link
+/// closer to the unseen cells than it stands; and the search ends, holding, when the caller's time budget runs out.
+TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  const double reach = scene_->checker().reachRadius() + 0.3;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  o.unknown_occupied = true;
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  auto& checker = scene_->checker();
+  std::vector<double> lean = kHome;
+  lean[1] = 0.3;
+  lean[3] = -1.8;  // reaches towards x = 0.75
+  // A camera behind the robot sees a wall at x = 0.75 (its rays clear the space before it); space the rays do not
+  // reach stays unseen. The robot's own cells (3 cm around its links at `lean`) are known free.
+  std::vector<Eigen::Vector3d> wall;
+  for (double y = -0.4; y <= 0.4; y += 0.01) {
+    for (double z = 0.0; z <= 0.8; z += 0.01) wall.emplace_back(0.75, y, z);
+  }
+  mps::MapUpdate u;
+  map->computeUpdate(wall, {}, Eigen::Vector3d(-0.5, 0.0, 0.6), &u);
+  std::vector<Eigen::AlignedBox3d> boxes;
+  checker.robotBoundingBoxes(lean.data(), 0.03, &boxes);
+  std::vector<Eigen::Vector3d> centers;
+  std::vector<std::uint64_t> keys, free_keys;
+  std::vector<std::uint8_t> mask;
+  for (const auto& box : boxes) {
+    map->unobservedCells(box, &centers, &keys);
+    checker.robotPointMask(lean.data(), centers, 0.03, &mask);
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      if (mask[k] != 0) free_keys.push_back(keys[k]);
+    }
+  }
+  map->addKnownFree(free_keys, &u);
+  map->apply(u);
+  checker.setOccupancy(map.get());
+  constexpr double kFar = 1.0;
+  const double seen0 = checker.occupancyDistance(lean.data(), 0.0, kFar, mps::CellClass::kSeen);
+  const double unseen0 = checker.occupancyDistance(lean.data(), 0.0, kFar, mps::CellClass::kUnseen);
+  ASSERT_GT(seen0, 0.02);
+  ASSERT_LT(seen0, 0.12) << "the wall is a few cm from the arm";
+  ASSERT_GT(unseen0, 0.0);
+  ASSERT_LT(unseen0, 0.1) << "unseen space lies close to the robot (beyond its known-free shell)";
+  EXPECT_DOUBLE_EQ(checker.occupancyDistance(lean.data(), 0.0, kFar), std::min(seen0, unseen0));
+
+  std::vector<double> closer = lean;
+  closer[1] += 0.15;  // towards the wall: refused
+  mps::SensedMargins sm;
+  sm.end = sm.plan = seen0 + 0.02;  // the wall within the end margin
+  mps::MotionRequest req;
+  req.start = lean;
+  req.goal = closer;
+  req.duration = 0.05;
+  req.retreat_reach.assign(7, 0.1);
+  mps::MotionCheck mc;
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+  EXPECT_TRUE(mc.threatened) << mc.message;
+  EXPECT_NEAR(mc.clearance, seen0, 1e-9) << "the clearance that matters is from the seen cells";
+  ASSERT_EQ(mc.retreat_state.size(), 7u) << mc.message;
+  EXPECT_GE(mc.retreat_clearance, seen0 + mps::PlanningScene::kRetreatGain);
+  // Checked independently, finely: from the seen cells no closer than the start (within half the retreat resolution),
+  // from the unseen ones no closer than the start either (up to padding + the end margin).
+  const double unseen_floor = std::min(unseen0, checker.options().padding + sm.end);
+  std::vector<double> q(7);
+  for (int k = 0; k <= 200; ++k) {
+    for (std::size_t i = 0; i < 7; ++i) q[i] = lean[i] + k / 200.0 * (mc.retreat_state[i] - lean[i]);
+    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar, mps::CellClass::kSeen),
+              seen0 - mps::PlanningScene::kRetreatResolution / 2)
+        << "at " << k / 2.0 << " %";
+    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar, mps::CellClass::kUnseen),
+              unseen_floor - mps::PlanningScene::kRetreatResolution / 2)
+        << "at " << k / 2.0 << " %";
+  }
+
+  // Unseen space alone within the margin (no seen cell near): not a threat, nothing searched.
+  sm.end = sm.plan = std::max(0.0, seen0 - checker.options().padding - 0.03);
+  ASSERT_LT(checker.options().padding + sm.end, seen0);
+  if (checker.options().padding + sm.end > unseen0) {
+    scene_->validateMotion(req, &mc, &sm);
+    EXPECT_FALSE(mc.threatened) << mc.message;
+    EXPECT_TRUE(mc.retreat_state.empty());
+  }
+
+  // Out of time: the search stops and the robot holds, saying why.
+  sm.end = sm.plan = seen0 + 0.02;
+  req.time_budget = 1e-9;
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_TRUE(mc.threatened) << mc.message;
+  EXPECT_TRUE(mc.retreat_state.empty());
+  EXPECT_NE(mc.message.find("time the caller waits"), std::string::npos) << mc.message;
+  checker.setOccupancy(nullptr);
+}
+
 TEST(OccupancyMap, UnknownOccupiedRule) {
   mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1.0, -1.0, -0.2), Eigen::Vector3d(1.0, 1.0, 1.0));
@@ -588,9 +684,38 @@ TEST(OccupancyMap, UnknownOccupiedRule) {
   map->unobservedCells(Eigen::AlignedBox3d(Eigen::Vector3d(0.36, -0.04, 0.1), Eigen::Vector3d(0.46, 0.06, 0.3)),
                        &centers, &keys);
   EXPECT_TRUE(keys.empty()) << "known-free cells count as observed";
+  // The classes of occupied cells (CellClass): seen (the box top, the floor) and unseen (the prior), apart.
+  auto any = [&](const Eigen::Vector3d& p, mps::CellClass which) {
+    const Eigen::AlignedBox3d around(p.array() - 0.005, p.array() + 0.005);
+    return map->anyOccupied(around, [](const Eigen::AlignedBox3d&) { return true; }, which);
+  };
+  // (cell centres: the query boxes stay inside one cell)
+  const Eigen::Vector3d top(0.41, 0.01, 0.41), under(0.41, 0.03, 0.05), above(0.41, 0.01, 0.61);
+  EXPECT_TRUE(any(top, mps::CellClass::kSeen) && any(top, mps::CellClass::kAll));
+  EXPECT_FALSE(any(top, mps::CellClass::kUnseen));
+  EXPECT_TRUE(any(under, mps::CellClass::kUnseen) && any(under, mps::CellClass::kAll));
+  EXPECT_FALSE(any(under, mps::CellClass::kSeen));
+  for (auto which : {mps::CellClass::kAll, mps::CellClass::kSeen, mps::CellClass::kUnseen}) {
+    EXPECT_FALSE(any(above, which));  // seen free
+  }
+  // A whole region: the seen class visits exactly the cells seen occupied, the unseen one the unobserved cells.
+  std::size_t seen_visited = 0, unseen_visited = 0;
+  const double cell = o.resolution;
+  auto count = [&](std::size_t* n) {
+    return [n, cell](const Eigen::AlignedBox3d& b) {
+      *n += static_cast<std::size_t>(std::llround(b.volume() / (cell * cell * cell)));
+      return false;
+    };
+  };
+  auto all = [](const Eigen::AlignedBox3d&) { return true; };
+  map->visitOccupied(o.bounds, all, count(&seen_visited), mps::CellClass::kSeen);
+  map->visitOccupied(o.bounds, all, count(&unseen_visited), mps::CellClass::kUnseen);
+  EXPECT_EQ(seen_visited, map->occupiedLeafCount());
+  EXPECT_EQ(unseen_visited, map->unobservedCount());
   // One hit turns a cell seen free occupied again, as without the rule.
   integrate(map.get(), {{0.1, 0.3, 0.2}}, origin);
   EXPECT_TRUE(map->occupied({0.1, 0.3, 0.2}));
+  EXPECT_TRUE(any({0.1, 0.3, 0.2}, mps::CellClass::kSeen));
   // Off: the unobserved cells are unknown (free) again, what was observed stays.
   map->setUnknownOccupied(false);
   EXPECT_EQ(map->unobservedCount(), 0u);
@@ -604,9 +729,14 @@ TEST(OccupancyMap, UnknownOccupiedRule) {
   map->setUnknownOccupied(true);
   EXPECT_TRUE(map->occupied({0.41, 0.03, 0.05}));
   EXPECT_FALSE(map->occupied({0.4, 0.0, 0.6}));
+  EXPECT_TRUE(any(top, mps::CellClass::kSeen));
+  EXPECT_TRUE(any(under, mps::CellClass::kUnseen));
   map->clear();
   EXPECT_EQ(map->unobservedCount(), cells);
   EXPECT_TRUE(map->occupied({0.4, 0.0, 0.6}));
+  EXPECT_FALSE(any(top, mps::CellClass::kSeen)) << "nothing seen after a clear";
+  EXPECT_TRUE(any(top, mps::CellClass::kUnseen));
+  EXPECT_EQ(map->occupiedLeafCount(), 0u);
 }
 
 /// The robot in a map where nothing has been seen: the cells inside its links (self-filter padding) are known free,

@@ -75,6 +75,7 @@ class ServiceScene : public Scene {
     vm.request.duration = q.duration;
     vm.request.stamp = q.stamp > 0.0 ? ros::Time(q.stamp) : ros::Time();
     vm.request.retreat_reach = q.retreat_reach;
+    vm.request.time_budget = q.time_budget;
     const CallEnd end = validate_.call(vm, timeout);
     if (end != CallEnd::kAnswered) return end;
     const auto& r = vm.response;

@@ -155,6 +155,7 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
   const double check_begin = real_time ? clock_->now() : 0.0;
   setWindow(s, check_begin, straight, &q);
   const double timeout = sceneTimeout();
+  q.time_budget = timeout;  // the scene answers within it (a wait for clouds, a retreat search end early)
   mps::MotionCheck& a = answer_;
   const CallEnd end = scene_->validate(q, &a, timeout);
   if (end != CallEnd::kAnswered) {
@@ -384,6 +385,7 @@ void Shield::plannedReset(const std::vector<double>& target, ResetResult* res) {
   setWindow(s, check_begin, duration, &q);
   mps::MotionCheck a;
   const double timeout = sceneTimeout();
+  q.time_budget = timeout;
   CallEnd end = scene_->validate(q, &a, timeout);
   if (end != CallEnd::kAnswered) {
     res->message = "planning scene: " + describe(end, timeout);

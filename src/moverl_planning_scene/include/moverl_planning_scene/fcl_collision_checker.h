@@ -95,12 +95,14 @@ class FclCollisionChecker : public CollisionChecker {
   bool setOctreeMargin(double margin);
   /// \brief The margin (m) the occupancy checks now use (the requested one rounded up).
   double octreeMargin() const { return octo_level_ * kMarginStep; }
-  /// \brief True when no moving link's shape, padded and inflated by the current margin, meets an occupied cell in q.
-  bool occupancyFree(const double* q);
-  /// \brief The distance (m) in q between the moving links' raw collision shapes and the nearest occupied cell
-  ///        (GJK), exact when it lies in [below, above]: as soon as one below `below` is found it is returned (early
-  ///        exit), and `above` when every cell is at least that far. 0 when a link meets a cell. No map: infinity.
-  double occupancyDistance(const double* q, double below, double above);
+  /// \brief True when no moving link's shape, padded and inflated by the current margin, meets an occupied cell of
+  ///        class `which` in q.
+  bool occupancyFree(const double* q, CellClass which = CellClass::kAll);
+  /// \brief The distance (m) in q between the moving links' raw collision shapes and the nearest occupied cell of
+  ///        class `which` (GJK), exact when it lies in [below, above]: as soon as one below `below` is found it is
+  ///        returned (early exit), and `above` when every such cell is at least that far. 0 when a link meets a cell.
+  ///        No map: infinity.
+  double occupancyDistance(const double* q, double below, double above, CellClass which = CellClass::kAll);
   static constexpr double kMarginStep = 0.01;  ///< m between the sensed margin's levels
   static constexpr double kMaxMargin = 1.0;    ///< m: the largest margin (100 levels)
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
@@ -180,8 +182,9 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<Obstacle> world_;
   const OccupancyMap* occupancy_ = nullptr;  // sensed obstacles (may be null)
   int octo_level_ = 0;                       // sensed margin: octoGeom's level (kMarginStep each)
-  /// True when the shape at tf meets an occupied cell of the occupancy map.
-  bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf) const;
+  /// True when the shape at tf meets an occupied cell (of class `which`) of the occupancy map.
+  bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf,
+                     CellClass which = CellClass::kAll) const;
   /// The shape of g checked against the occupancy map at the current margin.
   const std::shared_ptr<fcl::CollisionGeometry<double>>& octoGeom(Geom& g);
   std::vector<std::size_t> moving_;  // indices into world_ of moving obstacles

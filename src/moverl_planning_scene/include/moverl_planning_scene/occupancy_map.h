@@ -66,6 +66,13 @@ constexpr std::uint8_t kPointOnRobot = 1;    ///< on the robot (self filter): cl
 constexpr std::uint8_t kPointOnFixture = 2;  ///< on a static world object the scene knows exactly (obstacles: sensed):
                                              ///< clears the cells before it and its end cell
 
+/// \brief Which occupied cells a query looks at.
+enum class CellClass {
+  kAll,     ///< every occupied cell: seen occupied, or never observed under unknown_occupied (the collision checks)
+  kSeen,    ///< cells a camera saw occupied (a person, an object)
+  kUnseen,  ///< cells occupied only because no camera has seen them (unknown_occupied's prior)
+};
+
 /// \brief What one integration did (logs, tests, the status topic).
 struct MapUpdateStats {
   std::size_t points = 0;         ///< points in the cloud
@@ -137,12 +144,14 @@ class OccupancyMap {
   ///        without occupied cells are skipped, a full one that meets the shape answers at once (one of its cells
   ///        meets it), a partial one is looked into, down to the occupied cells themselves. `meets` is asked about
   ///        boxes that hold occupied cells only; it must be exact for cell boxes (the answer is as exact as it is).
-  bool anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets) const;
-  /// \brief The traversal behind anyOccupied: within `region`, every box that holds occupied cells (a superblock, a
-  ///        block, a cell) is offered to `near`; one it refuses is skipped, one it accepts is looked into, or, when all
-  ///        its cells are occupied (a full superblock or block, a cell), handed to `visit`. True as soon as `visit`
-  ///        returns true (stop), false when the traversal ends.
-  bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit) const;
+  ///        `which`: the occupied cells of that class only.
+  bool anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest& meets, CellClass which = CellClass::kAll) const;
+  /// \brief The traversal behind anyOccupied: within `region`, every box that holds occupied cells of class `which`
+  ///        (a superblock, a block, a cell) is offered to `near`; one it refuses is skipped, one it accepts is looked
+  ///        into, or, when all its cells are occupied cells of that class (a full superblock or block, a cell), handed
+  ///        to `visit`. True as soon as `visit` returns true (stop), false when the traversal ends.
+  bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
+                     CellClass which = CellClass::kAll) const;
   /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
   double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
   const OccupancyMapOptions& options() const { return options_; }
@@ -166,6 +175,8 @@ class OccupancyMap {
   void setValue(std::int64_t c, float v);
   /// Every unobserved cell at the prior (on) or unknown (off).
   void fillUnobserved(bool on);
+  /// Count cell c in (delta 1) or out of (-1) the seen-occupied block counts.
+  void countSeen(std::int64_t c, int delta);
 
   OccupancyMapOptions options_;
   double inv_resolution_ = 0.0;
@@ -182,6 +193,9 @@ class OccupancyMap {
   std::vector<std::uint8_t> block_count_;
   std::vector<std::uint8_t> block_dirty_;  ///< per block: cells not at clamp_min (unknown ones included)
   std::vector<std::uint16_t> super_count_;
+  // The same counts for the cells seen occupied only (observed and at or above the threshold: CellClass::kSeen).
+  std::vector<std::uint8_t> seen_block_count_;
+  std::vector<std::uint16_t> seen_super_count_;
   std::int64_t blocks_[3] = {0, 0, 0}, supers_[3] = {0, 0, 0};
   float log_hit_ = 0.0f, log_miss_ = 0.0f, clamp_min_ = 0.0f, clamp_max_ = 0.0f;
   float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied

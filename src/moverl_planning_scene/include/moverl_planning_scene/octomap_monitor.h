@@ -58,8 +58,10 @@ class OctomapMonitor {
   /// \param epoch when the world's motions last restarted (a simulator reset moves every moving object back to its
   ///        start): a camera's clouds from before it tell nothing about where moving things are now, and the camera
   ///        counts as unseen until its next cloud. Zero: none.
+  /// \param max_wait wall s the caller can spare for waiting (the shield's budget for the answer): the wait for clouds
+  ///        lasts at most this, if it is shorter than octomap/stale_wait. Negative: stale_wait.
   bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
-               const ros::Time& epoch = ros::Time());
+               const ros::Time& epoch = ros::Time(), double max_wait = -1.0);
   /// \brief The newest integrated cloud's stamp (zero before the first).
   ros::Time newestStamp();
   /// \brief The world's sensing section (World.msg): its speed bound (m/s) replaces octomap/speed_bound (negative:

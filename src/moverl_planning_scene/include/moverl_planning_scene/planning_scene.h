@@ -5,6 +5,7 @@
  */
 #pragma once
 
+#include <chrono>
 #include <limits>
 #include <memory>
 #include <string>
@@ -67,6 +68,9 @@ struct MotionRequest {
   /// Sensed obstacles (strategy retreat): the largest |goal - start| per joint (rad or m) of a move that backs away
   /// from the seen cells when the robot would rest within the predictive margin (ValidateMotion.srv). Empty: never.
   std::vector<double> retreat_reach;
+  /// s the caller waits for the answer (the shield's deadline for the scene); 0: no limit. Work that may take long
+  /// (the scene server's wait for clouds, the retreat search) ends early enough to answer within it, failing closed.
+  double time_budget = 0.0;
 };
 
 /// \brief Result of validateMotion.
@@ -156,14 +160,17 @@ class PlanningScene {
   /// find_last_free: from a find_first check of start_ -> goal_ (path_result_), fill out->last_free_*.
   void findLastFree(bool goal_checked, MotionCheck* out);
   /// Retreat: after the outcome of a request with retreat_reach is known (start_, goal_ set), decide whether the
-  /// robot is threatened where it rests (at the end margin, m) and find a move that backs away.
-  void retreat(const MotionRequest& request, double end_margin, MotionCheck* out);
+  /// robot is threatened (a cell seen occupied within its padding + end_margin) and, if so, accept the commanded move
+  /// when it backs away or propose one that does (out->retreat_state). Stops (holding) at `deadline`.
+  void retreat(const MotionRequest& request, double end_margin, std::chrono::steady_clock::time_point deadline,
+               MotionCheck* out);
   /// The clearance (m) of q from the seen cells when it is at least `clearance` + kRetreatGain, else less than that.
   double clearanceAbove(const std::vector<double>& q, double clearance);
-  /// True when the path start_ -> q backs away from the seen cells: q and the path free of self collisions and the
-  /// world objects (padded, at path_resolution), and its states every kRetreatResolution of robot-point motion at
-  /// least `clearance` clear of the seen cells (q's own clearance is clearanceAbove's).
-  bool pathBacksAway(const std::vector<double>& q, double clearance);
+  /// True when the straight move start_ -> q backs away: q free of self collisions and the world objects, its path
+  /// free of them (padded, at path_resolution), and its states every kRetreatResolution of robot-point motion (q
+  /// included) at least `seen` clear of the seen cells and at least `unseen` clear of the unseen ones (q's own
+  /// clearance from the seen cells is clearanceAbove's).
+  bool pathBacksAway(const std::vector<double>& q, double seen, double unseen);
 
   std::unique_ptr<RobotModel> model_;
   std::unique_ptr<FclCollisionChecker> checker_;

@@ -21,6 +21,8 @@ namespace moverl_tcpros {
 /// part of one at most). A persistent connection that the server closed while it was idle is noticed before the
 /// request is written (one poll(2)), and the request goes over a new connection. A connection that closes while the
 /// answer is awaited ends the call with kClosed: the server may have acted on the request, which is never sent again.
+///
+/// One call at a time (the calling thread does all the work; callers that share a client serialize their calls).
 class ServiceClient {
  public:
   /// \brief A client of `service` (resolved name) whose requests and answers have this md5sum ("*": any). Persistent:

@@ -1,4 +1,4 @@
-"""The shield's ~step speaks TCPROS itself (src/moverl_shield/src/tcpros.h): what any ROS client does with a service
+"""The shield's ~step speaks TCPROS itself (moverl_tcpros, src/moverl_tcpros): what any ROS client does with a service
 works on it (launches its own graph on a free port).
 
 Each case talks to /shield/step the way a client library does, on raw sockets where the library would hide what is

@@ -90,9 +90,29 @@ Verdict verdictForDriverEnd(Verdict decided, DriverEnd end, std::int32_t code) {
       return Verdict::kExecutionFailed;
     case DriverEnd::kTimedOut:
     case DriverEnd::kUnreachable:
+    case DriverEnd::kLost:
       return Verdict::kDriverUnavailable;
   }
   return Verdict::kDriverUnavailable;
+}
+
+DriverEnd driverEndForCall(CallEnd end) {
+  switch (end) {
+    case CallEnd::kAnswered:
+      return DriverEnd::kSucceeded;
+    case CallEnd::kTimedOut:
+      return DriverEnd::kTimedOut;
+    case CallEnd::kUnreachable:
+      return DriverEnd::kUnreachable;
+    case CallEnd::kClosed:
+    case CallEnd::kFailed:
+      return DriverEnd::kLost;
+  }
+  return DriverEnd::kLost;
+}
+
+bool resultKnown(DriverEnd end) {
+  return end != DriverEnd::kTimedOut && end != DriverEnd::kUnreachable && end != DriverEnd::kLost;
 }
 
 std::string trajectoryErrorName(std::int32_t code) {

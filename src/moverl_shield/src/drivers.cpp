@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <sstream>
+#include <thread>
 
 #include <ros/master.h>
 
@@ -126,11 +127,10 @@ MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, double) 
   const CallEnd end = execute_.call(ex, timeout);
   out.seconds = seconds(SteadyClock::now() - t0);
   if (end != CallEnd::kAnswered) {
-    out.end = end == CallEnd::kTimedOut ? DriverEnd::kTimedOut : DriverEnd::kUnreachable;
+    out.end = driverEndForCall(end);  // closed or failed after the move was sent: lost, never sent again
     std::ostringstream m;
-    m << "simulator service " << execute_.name()
-      << (end == CallEnd::kTimedOut ? " did not answer within " : " is unreachable (waited ") << out.seconds
-      << (end == CallEnd::kTimedOut ? " s" : " s)");
+    m << "simulator service " << execute_.name() << ": " << callEndName(end) << " after " << out.seconds << " s ("
+      << execute_.error() << ")";
     out.message = m.str();
     return out;
   }
@@ -169,8 +169,8 @@ bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after,
   srv.request.not_after = wallSeconds() + options_.result_margin;
   const CallEnd end = reset_.call(srv, options_.result_margin);
   if (end != CallEnd::kAnswered) {
-    *error = "simulator reset service " + reset_.name() +
-             (end == CallEnd::kTimedOut ? " did not answer in time" : " is unreachable (hardware drivers have none)");
+    *error = "simulator reset service " + reset_.name() + ": " + callEndName(end) +
+             (end == CallEnd::kUnreachable ? " (hardware drivers have none): " : ": ") + reset_.error();
     return false;
   }
   if (!srv.response.success) {

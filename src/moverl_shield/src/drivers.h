@@ -29,7 +29,7 @@
 #include "moverl_shield/driver_core.h"
 #include "moverl_shield/shield.h"
 #include "moverl_shield/trajectory.h"
-#include "tcpros.h"
+#include "moverl_tcpros/client.h"
 
 namespace moverl_shield {
 
@@ -69,9 +69,10 @@ class SimServiceDriver : public RosDriver {
   JointStateMapper mapper_;
   std::vector<double> lower_, upper_;
   DriverOptions options_;
-  // Called by the thread that serves the step, over TCPROS directly (tcpros.h: no hand-offs between threads).
-  DirectServiceClient<moverl_msgs::ExecuteTrajectory> execute_;
-  DirectServiceClient<moverl_msgs::ResetRobot> reset_;
+  // Called by the thread that serves the step, over TCPROS directly (moverl_tcpros: no hand-offs between threads;
+  // a move is sent at most once).
+  moverl_tcpros::DirectServiceClient<moverl_msgs::ExecuteTrajectory> execute_;
+  moverl_tcpros::DirectServiceClient<moverl_msgs::ResetRobot> reset_;
   ros::Subscriber state_sub_;  ///< the first state only (the others come with the responses)
   std::mutex mutex_;           ///< guards the state against the subscriber
   RobotState state_;

@@ -8,7 +8,7 @@
 
 #include "moverl_planning_scene/ros_param.h"
 #include "moverl_planning_scene/scene_server.h"
-#include "tcpros.h"
+#include "moverl_tcpros/client.h"
 
 namespace moverl_shield {
 namespace mps = moverl_planning_scene;
@@ -144,9 +144,9 @@ class ServiceScene : public Scene {
 
  private:
   ros::NodeHandle scene_nh_;
-  DirectServiceClient<moverl_msgs::ValidateMotion> validate_;
-  DirectServiceClient<moverl_msgs::PlanPath> plan_;
-  DirectServiceClient<moverl_msgs::GetWorld> world_;
+  moverl_tcpros::DirectServiceClient<moverl_msgs::ValidateMotion> validate_;
+  moverl_tcpros::DirectServiceClient<moverl_msgs::PlanPath> plan_;
+  moverl_tcpros::DirectServiceClient<moverl_msgs::GetWorld> world_;
   moverl_msgs::ValidateMotion vm_;
   std::unique_ptr<mps::RobotModel> model_;
 };

@@ -22,9 +22,16 @@ Shield::Shield(const ShieldOptions& options, Driver* driver, Scene* scene, const
 }
 
 std::string Shield::describe(CallEnd end, double timeout) const {
-  return end == CallEnd::kTimedOut
-             ? "service " + scene_->name() + " did not answer within its deadline of " + std::to_string(timeout) + " s"
-             : "service " + scene_->name() + " is unreachable";
+  switch (end) {
+    case CallEnd::kTimedOut:
+      return "service " + scene_->name() + " did not answer within its deadline of " + std::to_string(timeout) + " s";
+    case CallEnd::kClosed:
+      return "service " + scene_->name() + " closed the connection while its answer was awaited";
+    case CallEnd::kFailed:
+      return "service " + scene_->name() + " failed to answer";
+    default:
+      return "service " + scene_->name() + " is unreachable";
+  }
 }
 
 bool Shield::lastState(RobotState* state) const {
@@ -267,7 +274,7 @@ Verdict Shield::move(const Waypoints& waypoints, Verdict decided, double min_dur
     res->message =
         "driver " + driver_->name() + ": " + r.message + (res->message.empty() ? "" : " (" + res->message + ")");
   }
-  if (r.end != DriverEnd::kTimedOut && r.end != DriverEnd::kUnreachable) {
+  if (resultKnown(r.end)) {
     RobotState after;
     std::string error;
     if (!driver_->currentState(&after, &error)) {

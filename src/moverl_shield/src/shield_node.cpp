@@ -6,10 +6,11 @@
 // services: scene_access.h; the clock), serves ~step and ~reset, and converts between the messages and the core's
 // plain types (adding the end-effector pose of the state and the ~events for visualisers).
 //
-// Threads: ~step is served over TCPROS by a thread per client connection (tcpros.h), which also makes the step's
+// Threads: ~step is served over TCPROS by a thread per client connection (moverl_tcpros), which also makes the step's
 // calls to the simulator: no hand-offs between threads on the hot path. ~reset runs on the global callback queue; a
 // mutex lets one step or reset run at a time. The driver's joint states and action callbacks run on their own queue
 // and thread, so they arrive while a step waits.
+#include <csignal>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -26,8 +27,8 @@
 #include "deadline.h"
 #include "drivers.h"
 #include "moverl_shield/shield.h"
+#include "moverl_tcpros/server.h"
 #include "scene_access.h"
-#include "tcpros.h"
 
 namespace moverl_shield {
 namespace {
@@ -154,14 +155,22 @@ class ShieldNode {
 
     reset_srv_ = pnh.advertiseService("reset", &ShieldNode::serveReset, this);
     events_pub_ = pnh.advertise<moverl_msgs::ShieldEvent>("events", 10);
-    // ~step is served over TCPROS by threads of its own (tcpros.h: the hot path without roscpp's thread hand-offs),
-    // from the moment it is advertised: last, once everything a step uses is built. ~reset runs on the global queue;
-    // serve_mutex_ lets one of them run at a time.
-    step_srv_ = advertiseDirect<moverl_msgs::ShieldStep>(
-        pnh.resolveName("step"), [this](moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
+    // ~step is served over TCPROS by threads of its own (moverl_tcpros: the hot path without roscpp's thread
+    // hand-offs), from the moment it is advertised: last, once everything a step uses is built. ~reset runs on the
+    // global queue; serve_mutex_ lets one of them run at a time.
+    moverl_tcpros::ServerOptions step_options;
+    const int step_clients = required<int>(pnh, "step_clients");
+    if (step_clients < 1) {
+      throw std::runtime_error("~step_clients must be at least 1, not " + std::to_string(step_clients));
+    }
+    step_options.max_clients = static_cast<std::size_t>(step_clients);
+    step_srv_ = moverl_tcpros::advertiseDirect<moverl_msgs::ShieldStep>(
+        pnh.resolveName("step"),
+        [this](moverl_msgs::ShieldStep::Request& req, moverl_msgs::ShieldStep::Response& res) {
           std::lock_guard<std::mutex> lock(serve_mutex_);
           return step(req, res);
-        });
+        },
+        step_options);
     ROS_INFO("shield ready (%s, strategy %s, %s profile), %zu joints, scene %s, driver %s",
              o.enabled ? "enabled" : "DISABLED", strategyName(o.strategy).c_str(), profileName(o.profile).c_str(),
              shield_->joints().size(), scene_->name().c_str(), driver_->name().c_str());
@@ -262,7 +271,7 @@ class ShieldNode {
   std::unique_ptr<Shield> shield_;
   ros::Publisher events_pub_;
   std::mutex serve_mutex_;  ///< one step or reset at a time
-  std::unique_ptr<TcprosServiceServer> step_srv_;
+  std::unique_ptr<moverl_tcpros::ServiceServer> step_srv_;
   ros::ServiceServer reset_srv_;
   StepRequest request_;  ///< the step's request and result, reused (no allocation per step once grown)
   StepResult result_;
@@ -273,15 +282,33 @@ class ShieldNode {
 
 }  // namespace moverl_shield
 
+namespace {
+volatile std::sig_atomic_t g_stop = 0;     ///< SIGINT came
+volatile std::sig_atomic_t g_serving = 0;  ///< the node is built and spinning
+void onSigint(int) {
+  g_stop = 1;
+  if (!g_serving) ros::requestShutdown();  // while the node is built: what roscpp's own handler does
+}
+}  // namespace
+
 int main(int argc, char** argv) {
-  ros::init(argc, argv, "shield");
-  ros::NodeHandle nh, pnh("~");
-  try {
-    moverl_shield::ShieldNode node(nh, pnh);
-    ros::spin();
-  } catch (const std::exception& e) {
-    ROS_FATAL("shield: %s", e.what());
-    return 1;
+  // SIGINT (roslaunch's stop) ends the spin below instead of shutting roscpp down at once, so that ~step is
+  // unregistered from the master while the node is still up (the node's destructor), before ros::shutdown().
+  ros::init(argc, argv, "shield", ros::init_options::NoSigintHandler);
+  std::signal(SIGINT, onSigint);
+  int rc = 0;
+  {
+    ros::NodeHandle nh, pnh("~");
+    try {
+      moverl_shield::ShieldNode node(nh, pnh);
+      g_serving = 1;
+      ros::CallbackQueue* queue = ros::getGlobalCallbackQueue();
+      while (!g_stop && ros::ok()) queue->callAvailable(ros::WallDuration(0.1));  // ros::spin(), ending on SIGINT too
+    } catch (const std::exception& e) {
+      ROS_FATAL("shield: %s", e.what());
+      rc = 1;
+    }
   }
-  return 0;
+  ros::shutdown();
+  return rc;
 }

@@ -12,7 +12,7 @@ CORE_LIB="$ROOT/devel/lib/libmoverl_planning_scene_core.so"
 WORK=$(mktemp -d /tmp/moverl_shield_coverage.XXXXXX)
 trap 'rm -rf "$WORK"' EXIT
 SOURCES=(src/shield.cpp src/shield_core.cpp src/driver_core.cpp src/trajectory.cpp)
-FLAGS=(-std=c++17 -O0 --coverage -I include -I ../moverl_planning_scene/include -I /usr/include/eigen3)
+FLAGS=(-std=c++17 -O0 --coverage -I include -I ../moverl_planning_scene/include -I ../moverl_tcpros/include -I /usr/include/eigen3)
 for t in test_shield test_shield_core test_driver_core; do
   g++ "${FLAGS[@]}" -o "$WORK/$t" "test/$t.cpp" "${SOURCES[@]}" "$CORE_LIB" -lgtest -lpthread \
     -Wl,-rpath,"$(dirname "$CORE_LIB")"

@@ -66,8 +66,27 @@ TEST(VerdictForDriverEnd, DecidesWhatEndsTheEpisodeAndWhatRaises) {
   EXPECT_EQ(verdictForDriverEnd(Verdict::kSafe, DriverEnd::kPreempted, 0), Verdict::kExecutionFailed);
   EXPECT_EQ(verdictForDriverEnd(Verdict::kSafe, DriverEnd::kTimedOut, 0), Verdict::kDriverUnavailable);
   EXPECT_EQ(verdictForDriverEnd(Verdict::kSafe, DriverEnd::kUnreachable, 0), Verdict::kDriverUnavailable);
+  EXPECT_EQ(verdictForDriverEnd(Verdict::kSafe, DriverEnd::kLost, 0), Verdict::kDriverUnavailable);
   EXPECT_EQ(trajectoryErrorName(path), "PATH_TOLERANCE_VIOLATED");
   EXPECT_EQ(trajectoryErrorName(-42), "CODE -42");
+}
+
+TEST(DriverEndForCall, AMoveSentAndNotAnsweredIsLostNotUnreachable) {
+  // Only a call that never delivered its request says the driver is not there; a connection closed while the answer
+  // was awaited, or an error answer, may follow a move that was made: lost (and never sent again by the transport).
+  EXPECT_EQ(driverEndForCall(CallEnd::kAnswered), DriverEnd::kSucceeded);
+  EXPECT_EQ(driverEndForCall(CallEnd::kTimedOut), DriverEnd::kTimedOut);
+  EXPECT_EQ(driverEndForCall(CallEnd::kUnreachable), DriverEnd::kUnreachable);
+  EXPECT_EQ(driverEndForCall(CallEnd::kClosed), DriverEnd::kLost);
+  EXPECT_EQ(driverEndForCall(CallEnd::kFailed), DriverEnd::kLost);
+  for (CallEnd end : {CallEnd::kTimedOut, CallEnd::kUnreachable, CallEnd::kClosed, CallEnd::kFailed}) {
+    EXPECT_EQ(verdictForDriverEnd(Verdict::kSafe, driverEndForCall(end), 0), Verdict::kDriverUnavailable)
+        << moverl_tcpros::callEndName(end);
+    EXPECT_FALSE(resultKnown(driverEndForCall(end))) << moverl_tcpros::callEndName(end);
+  }
+  for (DriverEnd end : {DriverEnd::kSucceeded, DriverEnd::kAborted, DriverEnd::kRejected, DriverEnd::kPreempted}) {
+    EXPECT_TRUE(resultKnown(end));
+  }
 }
 
 TEST(RealTimeWindow, CoversFromTheStateToTheSettledEnd) {

@@ -479,7 +479,7 @@ TEST_F(ShieldTest, SceneFactsMissingFailClosed) {
 
 TEST_F(ShieldTest, SceneThatDoesNotAnswerFailsClosed) {
   make();
-  for (CallEnd end : {CallEnd::kTimedOut, CallEnd::kUnreachable}) {
+  for (CallEnd end : {CallEnd::kTimedOut, CallEnd::kUnreachable, CallEnd::kClosed, CallEnd::kFailed}) {
     scene.validate_ends = {end};
     const StepResult r = step();
     EXPECT_EQ(r.verdict, Verdict::kSceneUnavailable);
@@ -517,6 +517,10 @@ TEST_F(ShieldTest, DriverEndsMapToVerdicts) {
   EXPECT_EQ(driver.state_reads, reads + 1);  // no state read after a lost move (only the one before)
   driver.ends = {DriverEnd::kUnreachable};
   EXPECT_EQ(step().verdict, Verdict::kDriverUnavailable);
+  driver.ends = {DriverEnd::kLost};  // sent, then the connection closed: it may have moved; fail closed, no state
+  const int before = driver.state_reads;
+  EXPECT_EQ(step().verdict, Verdict::kDriverUnavailable);
+  EXPECT_EQ(driver.state_reads, before + 1);
 }
 
 TEST_F(ShieldTest, UntimeableMoveFailsAsExecution) {

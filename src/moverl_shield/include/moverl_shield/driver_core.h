@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "moverl_shield/shield_core.h"
+#include "moverl_tcpros/call_end.h"
 
 namespace moverl_shield {
 
@@ -46,8 +47,8 @@ std::string clampToLimits(std::vector<double>* q, std::vector<double>* measured,
 ///        e_i = budget / (n * r_i), bounds the sum. \throws std::invalid_argument for a non-positive budget or bound.
 std::vector<double> pathTolerances(double budget, const std::vector<double>& radius_bounds);
 
-/// \brief How a call with a deadline ended.
-enum class CallEnd { kAnswered, kUnreachable, kTimedOut };
+/// How a call with a deadline ended (the shield's service calls go over moverl_tcpros; its CallEnd is ROS-free).
+using moverl_tcpros::CallEnd;
 
 /// \brief control_msgs/FollowJointTrajectoryResult error codes (checked against the message in the node).
 enum class TrajectoryError : std::int32_t {
@@ -61,13 +62,24 @@ enum class TrajectoryError : std::int32_t {
 
 /// \brief How a driver ended a move the shield sent.
 enum class DriverEnd {
-  kSucceeded,   ///< the move finished within its tolerances
-  kAborted,     ///< the driver aborted it while executing
-  kRejected,    ///< the driver refused it before moving
-  kPreempted,   ///< another goal replaced it (someone else commands the robot)
-  kTimedOut,    ///< no result by the deadline (the shield cancelled it)
-  kUnreachable  ///< the driver is not there (no action server, or its connection broke)
+  kSucceeded,    ///< the move finished within its tolerances
+  kAborted,      ///< the driver aborted it while executing
+  kRejected,     ///< the driver refused it before moving
+  kPreempted,    ///< another goal replaced it (someone else commands the robot)
+  kTimedOut,     ///< no result by the deadline (the shield cancelled it)
+  kUnreachable,  ///< the driver is not there (no action server, or its connection broke before the move was sent)
+  kLost,         ///< the move was sent but no result came back: the connection closed while it was awaited, or the
+                 ///< driver answered with an error. It may have been made; it is never sent again
 };
+
+/// \brief What a driver call over a service (the simulator's ExecuteTrajectory, ResetRobot) that ended `end` means
+///        for its move: kTimedOut -> kTimedOut, kUnreachable -> kUnreachable (never delivered), kClosed and kFailed ->
+///        kLost (delivered, result unknown). kAnswered -> kSucceeded (the answer then says how the move ended).
+DriverEnd driverEndForCall(CallEnd end);
+
+/// \brief Whether the driver's state after a move that ended `end` is known (the shield adopts it), i.e. not
+///        kTimedOut, kUnreachable or kLost.
+bool resultKnown(DriverEnd end);
 
 /// \brief The verdict of a step whose decision was `decided` and whose move ended as `end` with `code`.
 ///
@@ -80,6 +92,7 @@ enum class DriverEnd {
 /// | preempted   | -                                      | EXECUTION_FAILED: another client commands the robot |
 /// | timed out   | -                                      | DRIVER_UNAVAILABLE (the goal was cancelled) |
 /// | unreachable | -                                      | DRIVER_UNAVAILABLE                        |
+/// | lost        | -                                      | DRIVER_UNAVAILABLE (it may have moved: not sent again) |
 Verdict verdictForDriverEnd(Verdict decided, DriverEnd end, std::int32_t code);
 
 /// \brief Name of a control_msgs/FollowJointTrajectoryResult error code ("PATH_TOLERANCE_VIOLATED", ...; "CODE <n>"

@@ -218,6 +218,45 @@ def test_a_reset_into_an_obstacle_is_unreachable_and_puts_the_robot_back(panda_u
         s.close()
 
 
+def test_a_reset_next_to_a_moving_obstacle_is_unreachable(panda_urdf, tmp_path):
+    """A teleport within reset_clearance of a moving obstacle (where its motion restarts) is refused like one into an
+    obstacle: a real robot never appears next to a person. Static objects do not count; beyond the clearance is fine."""
+    import pybullet
+
+    from moverl_sim.world import load_world
+
+    world = tmp_path / "visitor.yaml"
+    world.write_text(
+        "name: visitor\nobjects:\n"
+        "  - {id: table, shape: box, size: [1.5, 0.8, 0.03], xyz: [0.35, 0.0, -0.015]}\n"
+        "  - {id: visitor, shape: sphere, size: [0.05], xyz: [0.5, 0.0, 0.45],\n"
+        "     motion: {type: oscillate, axis: [0, 1, 0], amplitude: 0.3, period: 6.0}}\n"
+    )
+    s = make_sim(panda_urdf, load_world(world), physics_hz=HZ)
+    try:
+        s.reset_robot(HOME)
+        s.restart_motions()
+        body = next(b for b, _, _ in s._movers)
+        gap = min(pt[8] for pt in pybullet.getClosestPoints(s.robot, body, 1.0, physicsClientId=s._cid))
+        assert 0.02 < gap < 0.2, gap  # the visitor stands a few cm in front of the hand at motion time 0
+        assert s.near_moving(gap - 0.005) == [] and s.near_moving(gap + 0.005)
+        away = list(HOME)
+        away[0] = 1.0
+        s.reset_robot(away)
+        s.hold(50)  # the visitor walks on; the reset puts it back
+        with pytest.raises(lockstep.Unreachable) as err:
+            lockstep.reset_robot(s, HOME, clearance=gap + 0.005)
+        assert "within reset_clearance" in str(err.value) and "/ visitor" in str(err.value)
+        assert s.joint_positions() == pytest.approx(away, abs=1e-12)  # put back
+        assert s.motion_epoch == s.sim_time  # the motions stay restarted
+        lockstep.reset_robot(s, HOME, clearance=gap - 0.005)
+        assert s.joint_positions() == pytest.approx(HOME, abs=1e-12)
+        lockstep.reset_robot(s, away, clearance=0.0)
+        lockstep.reset_robot(s, HOME, clearance=0.0)  # 0: only touching targets are refused
+    finally:
+        s.close()
+
+
 def test_an_invalid_reset_target_changes_nothing(panda_urdf, table_world):
     s = make_sim(panda_urdf, table_world, physics_hz=HZ)
     try:

@@ -615,6 +615,18 @@ class Simulator:
         stats.total_contact_substeps = self._total_contact_substeps
         return stats
 
+    def near_moving(self, distance):
+        """Pairs (robot link, moving object id) closer than `distance` (m) in the current configuration, with the
+        obstacles where they are now (PyBullet's closest points; links fixed to the base excluded, as for contacts)."""
+        names, link_object, base_fixed = self.link_names, self._link_object, self._base_fixed_links
+        pairs = set()
+        for body, _, _ in self._movers:
+            for pt in pybullet.getClosestPoints(self.robot, body, distance, physicsClientId=self._cid):
+                obj = link_object.get((body, pt[4]))
+                if obj is not None and pt[3] not in base_fixed and pt[8] < distance:
+                    pairs.add((names[pt[3]], obj))
+        return sorted(pairs)
+
     # ------------------------------------------------------------------ validation
     def _check_positions(self, q, what):
         bad = ~((q >= self._lower_np - POSITION_TOLERANCE) & (q <= self._upper_np + POSITION_TOLERANCE))

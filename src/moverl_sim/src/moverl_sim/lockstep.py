@@ -110,17 +110,20 @@ def run_motion(sim, motion, schedule=None, on_due=None):
     return sim.finish(motion), out
 
 
-def reset_robot(sim, positions):
+def reset_robot(sim, positions, clearance=0.0):
     """~reset_robot: teleport the robot to positions (no contacts counted) and restart the obstacles' motions (motion
     time 0 = now).
 
-    A robot cannot be placed inside an obstacle (where the motions restart, a person may stand on the sampled start):
-    a target touching the world is refused like a planned reset's unreachable target, the robot put back where it was
-    (the motions stay restarted).
+    A robot cannot be placed inside an obstacle (where the motions restart, a person may stand on the sampled start),
+    nor within `clearance` (m, sim.yaml reset_clearance) of a moving one: a real robot never appears next to a person,
+    it gets there through moves the shield checked, and a walking person would reach it before the cameras' first view.
+    Such a target is refused like a planned reset's unreachable target, the robot put back where it was (the motions
+    stay restarted).
 
     Raises:
         ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
-        Unreachable: the target touches the world (the message names the pairs).
+        Unreachable: the target touches the world, or lies within clearance of a moving obstacle (the message names
+            the pairs).
         RuntimeError: the robot cannot be put back (a dynamic robot pushed beyond a joint limit is not a valid
             configuration): it stays at the target. Not a refusal: the node's service answers with an error.
     """
@@ -128,10 +131,17 @@ def reset_robot(sim, positions):
     sim.reset_robot(list(positions))
     sim.restart_motions()
     touching = sim.contacts_now().world_pairs
-    if touching:
+    near = [] if touching or clearance <= 0.0 else sim.near_moving(clearance)
+    if touching or near:
         try:
             sim.reset_robot(before)
         except ValueError as exc:
             raise RuntimeError("cannot put the robot back where it was: %s" % exc) from exc
-        pairs = ", ".join(f"{a} / {b}" for a, b in sorted(touching))
-        raise Unreachable(f"the target touches the world where the obstacles' motions restart ({pairs})")
+        if touching:
+            pairs = ", ".join(f"{a} / {b}" for a, b in sorted(touching))
+            raise Unreachable(f"the target touches the world where the obstacles' motions restart ({pairs})")
+        pairs = ", ".join(f"{a} / {b}" for a, b in near)
+        raise Unreachable(
+            f"the target lies within reset_clearance ({clearance} m) of a moving obstacle where its motion restarts "
+            f"({pairs})"
+        )

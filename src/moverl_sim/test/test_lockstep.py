@@ -253,6 +253,12 @@ def test_a_reset_next_to_a_moving_obstacle_is_unreachable(panda_urdf, tmp_path):
         assert s.joint_positions() == pytest.approx(HOME, abs=1e-12)
         lockstep.reset_robot(s, away, clearance=0.0)
         lockstep.reset_robot(s, HOME, clearance=0.0)  # 0: only touching targets are refused
+        # The sensed modes: the motions go on across a reset (the visitor does not jump back), and the clearance is
+        # measured where the visitor is now.
+        s.hold(30)
+        epoch, visitor = s.motion_epoch, s.obstacle_positions()["visitor"]
+        lockstep.reset_robot(s, away, clearance=gap + 0.005, restart=False)
+        assert s.motion_epoch == epoch and s.obstacle_positions()["visitor"] == visitor
     finally:
         s.close()
 

@@ -370,13 +370,21 @@ class MoveRLReachEnv(gym.Env):
                 raise MoveRLError(f"could not read the robot's state: {res.message}")
             return res
         attempts = 1 if start is not None else self.config.start_sampling_attempts
+        # Samples the driver refuses (the simulator does not teleport the robot into or next to an obstacle where its
+        # motion restarts, where the map does not show it yet): after a tenth of the attempts, from the whole range
+        # (the KUKA iiwa's home lies inside the human world's walking person).
+        refused = 0
         for _ in range(attempts):
-            q = np.asarray(start, dtype=np.float64) if start is not None else self._sample_start()
+            if start is not None:
+                q = np.asarray(start, dtype=np.float64)
+            else:
+                q = self._sample_start(near_home=refused < max(1, attempts // 10))
             res = self._backend.reset(q)
             if res.success:
                 return res
             if not res.unreachable:
                 break
+            refused += 1
         raise MoveRLError(f"could not bring the robot to the start configuration: {res.message}")
 
     def _sample_goal(self) -> np.ndarray:
@@ -393,13 +401,13 @@ class MoveRLReachEnv(gym.Env):
             f"random samples of world '{self.world_name}'"
         )
 
-    def _sample_start(self) -> np.ndarray:
+    def _sample_start(self, near_home: bool = True) -> np.ndarray:
         """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform; when no
-        sample near home is free, uniform)."""
+        sample near home is free, or near_home is false, uniform)."""
         lo, hi = self.limits.lower, self.limits.upper
         ranges = [(lo, hi)]
         noise = self.config.start_noise
-        if noise > 0:
+        if noise > 0 and near_home:
             ranges.insert(0, (np.maximum(lo, self._home - noise), np.minimum(hi, self._home + noise)))
         for a, b in ranges:
             for _ in range(self.config.start_sampling_attempts):

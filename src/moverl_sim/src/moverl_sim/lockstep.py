@@ -110,26 +110,27 @@ def run_motion(sim, motion, schedule=None, on_due=None):
     return sim.finish(motion), out
 
 
-def reset_robot(sim, positions, clearance=0.0):
-    """~reset_robot: teleport the robot to positions (no contacts counted) and restart the obstacles' motions (motion
-    time 0 = now).
+def reset_robot(sim, positions, clearance=0.0, restart=True):
+    """~reset_robot: teleport the robot to positions (no contacts counted) and, with `restart`, restart the obstacles'
+    motions (motion time 0 = now). Without it (the sensed modes: the scene knows moving things only from the cameras,
+    and a person does not teleport back to the start of its walk under their eyes) the motions go on.
 
     A robot cannot be placed inside an obstacle (where the motions restart, a person may stand on the sampled start),
     nor within `clearance` (m, sim.yaml reset_clearance) of a moving one: a real robot never appears next to a person,
     it gets there through moves the shield checked, and a walking person would reach it before the cameras' first view.
-    Such a target is refused like a planned reset's unreachable target, the robot put back where it was (the motions
-    stay restarted).
+    Such a target is refused like a planned reset's unreachable target, the robot put back where it was.
 
     Raises:
         ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
         Unreachable: the target touches the world, or lies within clearance of a moving obstacle (the message names
-            the pairs).
+            the pairs). The robot is put back; restarted motions stay restarted.
         RuntimeError: the robot cannot be put back (a dynamic robot pushed beyond a joint limit is not a valid
             configuration): it stays at the target. Not a refusal: the node's service answers with an error.
     """
     before = list(sim.joint_positions())
     sim.reset_robot(list(positions))
-    sim.restart_motions()
+    if restart:
+        sim.restart_motions()
     touching = sim.contacts_now().world_pairs
     near = [] if touching or clearance <= 0.0 else sim.near_moving(clearance)
     if touching or near:

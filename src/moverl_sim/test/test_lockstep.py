@@ -218,9 +218,10 @@ def test_a_reset_into_an_obstacle_is_unreachable_and_puts_the_robot_back(panda_u
         s.close()
 
 
-def test_a_reset_next_to_a_moving_obstacle_is_unreachable(panda_urdf, tmp_path):
-    """A teleport within reset_clearance of a moving obstacle (where its motion restarts) is refused like one into an
-    obstacle: a real robot never appears next to a person. Static objects do not count; beyond the clearance is fine."""
+def test_a_reset_a_moving_obstacle_can_reach_soon_is_unreachable(panda_urdf, tmp_path):
+    """A teleport where a moving obstacle can reach the robot within reset_clearance_time at its top speed is refused
+    like one into an obstacle: a real robot never appears next to a person. Static objects do not count; farther is
+    fine; a slow obstacle needs less room than a fast one."""
     import pybullet
 
     from moverl_sim.world import load_world
@@ -230,7 +231,7 @@ def test_a_reset_next_to_a_moving_obstacle_is_unreachable(panda_urdf, tmp_path):
         "name: visitor\nobjects:\n"
         "  - {id: table, shape: box, size: [1.5, 0.8, 0.03], xyz: [0.35, 0.0, -0.015]}\n"
         "  - {id: visitor, shape: sphere, size: [0.05], xyz: [0.5, 0.0, 0.45],\n"
-        "     motion: {type: oscillate, axis: [0, 1, 0], amplitude: 0.3, period: 6.0}}\n"
+        "     motion: {type: oscillate, axis: [0, 1, 0], amplitude: 0.3, period: 6.0}}\n"  # 0.314 m/s at most
     )
     s = make_sim(panda_urdf, load_world(world), physics_hz=HZ)
     try:
@@ -238,26 +239,27 @@ def test_a_reset_next_to_a_moving_obstacle_is_unreachable(panda_urdf, tmp_path):
         s.restart_motions()
         body = next(b for b, _, _ in s._movers)
         gap = min(pt[8] for pt in pybullet.getClosestPoints(s.robot, body, 1.0, physicsClientId=s._cid))
+        speed = 2 * np.pi * 0.3 / 6.0
         assert 0.02 < gap < 0.2, gap  # the visitor stands a few cm in front of the hand at motion time 0
-        assert s.near_moving(gap - 0.005) == [] and s.near_moving(gap + 0.005)
+        assert s.near_moving((gap - 0.005) / speed) == [] and s.near_moving((gap + 0.005) / speed)
         away = list(HOME)
         away[0] = 1.0
         s.reset_robot(away)
         s.hold(50)  # the visitor walks on; the reset puts it back
         with pytest.raises(lockstep.Unreachable) as err:
-            lockstep.reset_robot(s, HOME, clearance=gap + 0.005)
-        assert "within reset_clearance" in str(err.value) and "/ visitor" in str(err.value)
+            lockstep.reset_robot(s, HOME, clearance_time=(gap + 0.005) / speed)
+        assert "reset_clearance_time" in str(err.value) and "/ visitor" in str(err.value)
         assert s.joint_positions() == pytest.approx(away, abs=1e-12)  # put back
         assert s.motion_epoch == s.sim_time  # the motions stay restarted
-        lockstep.reset_robot(s, HOME, clearance=gap - 0.005)
+        lockstep.reset_robot(s, HOME, clearance_time=(gap - 0.005) / speed)
         assert s.joint_positions() == pytest.approx(HOME, abs=1e-12)
-        lockstep.reset_robot(s, away, clearance=0.0)
-        lockstep.reset_robot(s, HOME, clearance=0.0)  # 0: only touching targets are refused
-        # The sensed modes: the motions go on across a reset (the visitor does not jump back), and the clearance is
-        # measured where the visitor is now.
+        lockstep.reset_robot(s, away, clearance_time=0.0)
+        lockstep.reset_robot(s, HOME, clearance_time=0.0)  # 0: only touching targets are refused
+        # The sensed modes: the motions go on across a reset (the visitor does not jump back), and the room needed is
+        # measured from where the visitor is now.
         s.hold(30)
         epoch, visitor = s.motion_epoch, s.obstacle_positions()["visitor"]
-        lockstep.reset_robot(s, away, clearance=gap + 0.005, restart=False)
+        lockstep.reset_robot(s, away, clearance_time=(gap + 0.005) / speed, restart=False)
         assert s.motion_epoch == epoch and s.obstacle_positions()["visitor"] == visitor
     finally:
         s.close()

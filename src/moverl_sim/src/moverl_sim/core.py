@@ -615,16 +615,20 @@ class Simulator:
         stats.total_contact_substeps = self._total_contact_substeps
         return stats
 
-    def near_moving(self, distance):
-        """Pairs (robot link, moving object id) closer than `distance` (m) in the current configuration, with the
-        obstacles where they are now (PyBullet's closest points; links fixed to the base excluded, as for contacts)."""
+    def near_moving(self, seconds):
+        """Pairs (robot link, moving object id) that a moving obstacle can close within `seconds` at its top speed (its
+        motion's, times motion_time_scale) in the current configuration, with the obstacles where they are now
+        (PyBullet's closest points; links fixed to the base excluded, as for contacts)."""
         names, link_object, base_fixed = self.link_names, self._link_object, self._base_fixed_links
         pairs = set()
-        for body, _, _ in self._movers:
-            for pt in pybullet.getClosestPoints(self.robot, body, distance, physicsClientId=self._cid):
-                obj = link_object.get((body, pt[4]))
-                if obj is not None and pt[3] not in base_fixed and pt[8] < distance:
-                    pairs.add((names[pt[3]], obj))
+        for body, obj, _ in self._movers:
+            reach = obj.motion.max_speed * self._motion_scale * seconds
+            if reach <= 0.0:
+                continue
+            for pt in pybullet.getClosestPoints(self.robot, body, reach, physicsClientId=self._cid):
+                name = link_object.get((body, pt[4]))
+                if name is not None and pt[3] not in base_fixed and pt[8] < reach:
+                    pairs.add((names[pt[3]], name))
         return sorted(pairs)
 
     # ------------------------------------------------------------------ validation

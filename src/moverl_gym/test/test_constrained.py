@@ -89,7 +89,7 @@ def test_unknown_contacts_give_a_nan_cost_and_no_penalty():
         finally:
             env.close()
         for _, info in steps:
-            assert info["contacts"] == -1 and math.isnan(info["cost_contact"]) and info["cost"] == 0.0
+            assert info["contacts"] == -1 and "cost_contact" not in info and info["cost"] == 0.0
         rewards.append([r for r, _ in steps])
     assert any(c > 0 for c in backends[0].truth)  # the arm did touch: the penalty would have applied
     assert rewards[0] == rewards[1]

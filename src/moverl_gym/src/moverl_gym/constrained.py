@@ -150,7 +150,10 @@ class PPOLagrangian(PPO):
         pos = self.rollout_buffer.pos
         for i, info in enumerate(infos):
             if self.cost_key not in info:
-                raise KeyError(f"PPOLagrangian: the env's info has no {self.cost_key!r} (its keys: {sorted(info)})")
+                raise KeyError(
+                    f"PPOLagrangian: the env's info has no {self.cost_key!r} (MoveRL: a driver without contact ground "
+                    f"truth; its keys: {sorted(info)})"
+                )
             cost = float(info[self.cost_key])
             if not math.isfinite(cost):
                 raise ValueError(

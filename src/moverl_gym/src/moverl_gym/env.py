@@ -485,8 +485,6 @@ class MoveRLReachEnv(gym.Env):
             "contacts_moving": int(res.contacts_moving),
             "contacts_resting": int(res.contacts_resting),
             "cost": float(discarded or contacts > 0),
-            # Ground truth for constrained RL: 1.0 if the step's motion made contact, NaN if contacts are unknown (-1)
-            "cost_contact": float(contacts > 0) if contacts >= 0 else float("nan"),
             "distance": d,
             "is_success": success,
             "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,
@@ -494,6 +492,10 @@ class MoveRLReachEnv(gym.Env):
             "graph_restarts": self.graph_restarts,
             "graph_failures": self.graph_failures,
         }
+        # Ground truth for constrained RL: 1.0 if the step's motion made contact. Absent when contacts are unknown (a
+        # driver without ground truth: a constrained agent cannot learn there, and NaN would make equal steps unequal).
+        if contacts >= 0:
+            info["cost_contact"] = float(contacts > 0)
         # The driver stopped the move on the way (a path or goal tolerance, e.g. the arm was blocked): the robot
         # stands where it stopped, and the episode ends here (truncated; info["driver_error"] says why).
         aborted = verdict == ABORTED

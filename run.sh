@@ -20,7 +20,8 @@ case "$cmd" in
 esac
 # shellcheck disable=SC1091
 source ./env.sh  # (none of run.sh's arguments reaches ROS's setup scripts: env.sh sees to it)
-scripts=src/moverl_gym/scripts
+scripts=src/moverl_gym/scripts  # the entry points
+tools=src/moverl_gym/tools      # audits, fuzzing, soak, benchmarks, probes
 demo=(--env MoveRL/PandaReachTable-v0 -n 5000 --log-folder runs/demo)
 case "$cmd" in
   demo)
@@ -33,8 +34,8 @@ case "$cmd" in
     exec python $scripts/train.py "${demo[@]}" "$@" ;;
   train) exec python $scripts/train.py "$@" ;;
   rllib) exec python $scripts/rllib_train.py "$@" ;;
-  scaling) exec python $scripts/scaling.py "$@" ;;
-  bench) exec python $scripts/benchmark.py "$@" ;;
+  scaling) exec python $tools/scaling.py "$@" ;;
+  bench) exec python $tools/benchmark.py "$@" ;;
   test)  exec bash tests/run_all.sh "$@" ;;
   lint)  exec bash tests/lint.sh "$@" ;;
   study) exec python $scripts/study.py "$@" ;;

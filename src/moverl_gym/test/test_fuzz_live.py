@@ -5,6 +5,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.live
+
 FUZZ = Path(__file__).resolve().parents[1] / "tools" / "fuzz_graph.py"
 
 

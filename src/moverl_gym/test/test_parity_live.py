@@ -18,6 +18,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+pytestmark = pytest.mark.live
+
 REPO = Path(__file__).resolve().parents[3]
 TOOLS = REPO / "src" / "moverl_gym" / "tools"
 TEST_ROBOTS = REPO / "src" / "moverl_gym" / "test" / "robots"

@@ -21,6 +21,8 @@ import yaml
 from moverl_gym.proctree import TreeWatch, alive, cmdline, tree
 from moverl_gym.reaper import is_loopback, listening_sockets
 
+pytestmark = pytest.mark.live
+
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 RUN = "rllib_ppo_PandaReachTable-v0_on_s4"
 STEPS = 800  # 2 iterations of 400 steps (rllib_ppo.yml: train_batch_size_per_learner)

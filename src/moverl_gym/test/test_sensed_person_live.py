@@ -16,6 +16,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.live
+
 REPO = Path(__file__).resolve().parents[3]
 AUDIT = REPO / "src" / "moverl_gym" / "tools" / "pushing_policy_audit.py"
 DEADLINE = 600  # s per run

@@ -9,6 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.live
+
 SOAK = Path(__file__).resolve().parents[1] / "tools" / "soak.py"
 GRAPH = {"env", "rosmaster", "rosout", "sim_node", "shield_node"}  # the shield hosts the planning scene
 

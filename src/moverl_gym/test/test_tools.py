@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.core
+
 TOOLS = Path(__file__).resolve().parents[1] / "tools"
 
 

@@ -16,6 +16,8 @@ from conftest import REPO_DIR
 
 from moverl_sim.ground_truth import compare, load, replay_by_substep
 
+pytestmark = pytest.mark.core
+
 FIXTURES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", "ground_truth")
 RUNS = sorted(f[: -len(".json.gz")] for f in os.listdir(FIXTURES) if f.endswith(".json.gz"))
 DEPTH_TOL = 1e-9  # m

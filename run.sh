@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # MoveRL entry points (run ./catkin_ws_setup.sh first). ./run.sh <command> --help (or -h): that command's options.
 #   ./run.sh demo     short safe PPO training on the table world; prints success, interventions, contacts, steps/s
-#   ./run.sh test     every test: lint, gtest (C++ cores), pytest (Python cores), rostest (live graph), env checks
+#   ./run.sh test     every test, as CI runs them: lint, then the tiers core, quick, live (tests/run_all.sh);
+#                     --quick: the cores and the fastest live checks; --no-live: the cores only
 #   ./run.sh lint     style checks only (clang-format, ruff, catkin_lint); --fix rewrites the files
 #   ./run.sh bench    speed benchmark (env steps/s shield on/off, bare PyBullet, panda-gym, check latencies)
 #   ./run.sh train .. moverl_gym's train.py with your arguments (SB3; --n-envs N parallel envs)

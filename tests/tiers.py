@@ -46,7 +46,9 @@ def tiers() -> list[str]:
 
 
 @dataclass
-class TestFile:
+class Entry:
+    """A test file: its kind and its tier."""
+
     path: Path  # relative to the repository
     kind: str  # pytest, rostest node, rostest, gtest
     tier: str | None  # None: no tier (the check fails)
@@ -90,11 +92,15 @@ def _pytest_marks(path: Path) -> list[str] | None:
     return None
 
 
-def _title(path: Path, width: int = 110) -> str:
-    """The first sentence of a file's docstring, at most `width` characters."""
-    doc = " ".join((ast.get_docstring(ast.parse(path.read_text())) or "").split())
-    first = re.split(r"(?<=\.)\s", doc, maxsplit=1)[0].rstrip(".:")
+def _first_sentence(text: str, width: int = 110) -> str:
+    """The first sentence of a text, on one line, at most `width` characters."""
+    first = re.split(r"(?<=\.)\s", " ".join(text.split()), maxsplit=1)[0].rstrip(".:")
     return first if len(first) <= width else first[: width - 3].rstrip() + "..."
+
+
+def _title(path: Path) -> str:
+    """The first sentence of a Python file's docstring."""
+    return _first_sentence(ast.get_docstring(ast.parse(path.read_text())) or "")
 
 
 def _one_tier(found: list[str], declared: list[str], where: str) -> tuple[str | None, str]:
@@ -119,12 +125,12 @@ def _gtests() -> dict[Path, tuple[str, str]]:
     return out
 
 
-def collect() -> list[TestFile]:
+def collect() -> list[Entry]:
     """Every test file of the repository with its kind and tier."""
     declared = tiers()
     nodes = rostest_nodes()
     gtests = _gtests()
-    files: list[TestFile] = []
+    files: list[Entry] = []
     for d in _test_dirs():
         for path in sorted(p for p in d.rglob("*") if p.is_file()):
             rel = path.relative_to(ROOT)
@@ -133,35 +139,37 @@ def collect() -> list[TestFile]:
             if path.suffix == ".test":
                 args = {a.get("name"): a.get("value") for a in ElementTree.parse(path).getroot().findall("arg")}
                 tier, problem = _one_tier([args["tier"]] if args.get("tier") else [], declared, '<arg name="tier">')
-                files.append(TestFile(rel, "rostest", tier, problem, title=f"rostest {path.stem}"))
+                comment = re.search(r"<!--(.*?)-->", path.read_text(), re.S)  # the file's first comment: what it tests
+                title = f"rostest {path.stem}" + (f": {_first_sentence(comment.group(1))}" if comment else "")
+                files.append(Entry(rel, "rostest", tier, problem, title=title))
             elif path.suffix == ".cpp":
                 if path.resolve() in gtests:
                     pkg, binary = gtests[path.resolve()]
                     built = (ROOT / "devel" / "lib" / pkg / binary).is_file()
                     problem = "" if built else f"devel/lib/{pkg}/{binary} is not built (./catkin_ws_setup.sh)"
                     tier = "core" if built else None
-                    files.append(TestFile(rel, "gtest", tier, problem, f"gtest {binary}", f"devel/lib/{pkg}/{binary}"))
+                    files.append(Entry(rel, "gtest", tier, problem, f"gtest {binary}", f"devel/lib/{pkg}/{binary}"))
                 else:
-                    files.append(TestFile(rel, "gtest", None, "named by no catkin_add_gtest of its package"))
+                    files.append(Entry(rel, "gtest", None, "named by no catkin_add_gtest of its package"))
             elif _is_pytest_name(path):
                 marks = _pytest_marks(path)
                 if path.resolve() in nodes:
                     by = ", ".join(t.name for t in nodes[path.resolve()])
                     if marks:
                         problem = f"a rostest node (of {by}) with a pytestmark: its tier is its .test file's"
-                        files.append(TestFile(rel, "rostest node", None, problem))
+                        files.append(Entry(rel, "rostest node", None, problem))
                     else:
-                        files.append(TestFile(rel, "rostest node", f"({by})"))
+                        files.append(Entry(rel, "rostest node", f"({by})"))
                     continue
                 tier, problem = _one_tier(marks or [], declared, "module-level pytestmark")
                 if marks is None:
                     problem = f"no module-level pytestmark (pytestmark = pytest.mark.<{'|'.join(declared)}>)"
                 title = f"pytest {path.stem}: {_title(path)}" if tier and tier != "core" else f"pytest {path.stem}"
-                files.append(TestFile(rel, "pytest", tier, problem, title=title))
+                files.append(Entry(rel, "pytest", tier, problem, title=title))
     return files
 
 
-def check(files: list[TestFile]) -> int:
+def check(files: list[Entry]) -> int:
     width = max(len(str(f.path)) for f in files)
     for f in files:
         print(f"{str(f.path):<{width}}  {f.kind:<12}  {f.tier or 'NONE: ' + f.problem}")

@@ -15,7 +15,7 @@ from moverl_gym.graph import GraphError, LaunchedGraph
 from moverl_gym.launch_args import LaunchArgError
 from moverl_gym.paths import config_file
 
-pytestmark = pytest.mark.live
+pytestmark = pytest.mark.quick
 
 
 def start(tmp_path, **args):

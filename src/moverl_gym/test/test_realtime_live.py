@@ -12,7 +12,7 @@ import pytest
 
 import moverl_gym  # noqa: F401
 
-pytestmark = pytest.mark.live
+pytestmark = pytest.mark.quick
 
 STEPS = 20
 

@@ -16,7 +16,7 @@ import pytest
 
 import moverl_gym  # noqa: F401
 
-pytestmark = pytest.mark.live
+pytestmark = pytest.mark.quick
 
 SERVICE = "/shield/step"
 

@@ -57,6 +57,7 @@ def repo(tmp_path, monkeypatch):
     )
     write(tmp_path, "src/pkg/test/test_node.py", "import rostest\n")  # a rostest node: no pytestmark
     write(tmp_path, "src/pkg/test/helpers.py", "X = 1\n")  # not a test file
+    write(tmp_path, "src/pkg/test/peer.cpp", "// a helper executable, not a test file\n")
     monkeypatch.setattr(tiers, "ROOT", tmp_path)
     return tmp_path
 

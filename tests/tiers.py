@@ -17,8 +17,9 @@ A test file, and where its tier comes from:
 * rostest file (src/<pkg>/test/**/*.test): ``<arg name="tier" value="<tier>"/>`` among its top-level tags. run_all.sh
   runs every .test file of a tier once, with no arguments (a variant is a .test file of its own that includes another
   with other arguments, e.g. env_live_shield_off.test).
-* gtest source (src/<pkg>/test/**/*.cpp): named by a ``catkin_add_gtest(<binary> test/<file>.cpp)`` of its package's
-  CMakeLists.txt; tier core. run_all.sh runs devel/lib/<pkg>/<binary>, which must have been built.
+* gtest source (src/<pkg>/test/**/test_*.cpp or *_test.cpp; other .cpp files there are helpers): named by a
+  ``catkin_add_gtest(<binary> test/<file>.cpp ...)`` of its package's CMakeLists.txt; tier core. run_all.sh runs
+  devel/lib/<pkg>/<binary>, which must have been built.
 
     python tests/tiers.py check               every test file with its kind and tier; exit 1 naming each without one
     python tests/tiers.py list KIND TIER...   the files of KIND (pytest, rostest, gtest) in the tiers, one a line
@@ -142,7 +143,7 @@ def collect() -> list[Entry]:
                 comment = re.search(r"<!--(.*?)-->", path.read_text(), re.S)  # the file's first comment: what it tests
                 title = f"rostest {path.stem}" + (f": {_first_sentence(comment.group(1))}" if comment else "")
                 files.append(Entry(rel, "rostest", tier, problem, title=title))
-            elif path.suffix == ".cpp":
+            elif path.suffix == ".cpp" and (path.name.startswith("test_") or path.stem.endswith("_test")):
                 if path.resolve() in gtests:
                     pkg, binary = gtests[path.resolve()]
                     built = (ROOT / "devel" / "lib" / pkg / binary).is_file()

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # MoveRL entry points (run ./catkin_ws_setup.sh first). ./run.sh <command> --help (or -h): that command's options.
 #   ./run.sh demo     short safe PPO training on the table world; prints success, interventions, contacts, steps/s
-#   ./run.sh test     every test: lint, gtest (C++ cores), pytest (Python cores), rostest (live graph), env checks
+#   ./run.sh test     every test, as CI runs them: lint, then the tiers core, quick, live (tests/run_all.sh);
+#                     --quick: the cores and the fastest live checks; --no-live: the cores only
 #   ./run.sh lint     style checks only (clang-format, ruff, catkin_lint); --fix rewrites the files
 #   ./run.sh bench    speed benchmark (env steps/s shield on/off, bare PyBullet, panda-gym, check latencies)
 #   ./run.sh train .. moverl_gym's train.py with your arguments (SB3; --n-envs N parallel envs)
@@ -20,7 +21,8 @@ case "$cmd" in
 esac
 # shellcheck disable=SC1091
 source ./env.sh  # (none of run.sh's arguments reaches ROS's setup scripts: env.sh sees to it)
-scripts=src/moverl_gym/scripts
+scripts=src/moverl_gym/scripts  # the entry points
+tools=src/moverl_gym/tools      # audits, fuzzing, soak, benchmarks, probes
 demo=(--env MoveRL/PandaReachTable-v0 -n 5000 --log-folder runs/demo)
 case "$cmd" in
   demo)
@@ -33,8 +35,8 @@ case "$cmd" in
     exec python $scripts/train.py "${demo[@]}" "$@" ;;
   train) exec python $scripts/train.py "$@" ;;
   rllib) exec python $scripts/rllib_train.py "$@" ;;
-  scaling) exec python $scripts/scaling.py "$@" ;;
-  bench) exec python $scripts/benchmark.py "$@" ;;
+  scaling) exec python $tools/scaling.py "$@" ;;
+  bench) exec python $tools/benchmark.py "$@" ;;
   test)  exec bash tests/run_all.sh "$@" ;;
   lint)  exec bash tests/lint.sh "$@" ;;
   study) exec python $scripts/study.py "$@" ;;

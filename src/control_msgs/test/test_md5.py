@@ -6,6 +6,8 @@ import pytest
 
 from control_msgs import msg
 
+pytestmark = pytest.mark.core
+
 # From the control_msgs 1.5 release (ROS Noetic), as published drivers see them.
 NOETIC_MD5 = {
     "FollowJointTrajectoryGoal": "69636787b6ecbde4d61d711979bc7ecb",

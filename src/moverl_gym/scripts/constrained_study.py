@@ -39,6 +39,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from moverl_gym import constrained_study as cs
+from moverl_gym import options
 from moverl_gym.study import env_id
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -81,7 +82,7 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, help=argparse.SUPPRESS)
     p.add_argument("--value", type=float, help=argparse.SUPPRESS)
     p.add_argument("--folder", type=Path, help=argparse.SUPPRESS)
-    p.add_argument("--mode", choices=("on", "off"), help=argparse.SUPPRESS)
+    p.add_argument("--mode", choices=options.SHIELD, help=argparse.SUPPRESS)
     p.add_argument("--runs", nargs="*", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.quick:

@@ -24,11 +24,10 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-import moverl_gym  # noqa: F401  (registers the env ids)
-from moverl_gym.launch_args import CHOICES
+from moverl_gym import options
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument(
         "model",
@@ -38,21 +37,31 @@ def parse_args(argv=None):
     )
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--deterministic", action="store_true", help="mean action instead of sampling")
-    p.add_argument("--seed", type=int, default=1000, help="env seed (start configurations); not a training seed")
-    p.add_argument("--shield", choices=("on", "off"), default=None, help="default: as in training")
-    p.add_argument("--graph", default="auto", choices=("auto", "launch", "attach"))
-    p.add_argument(
-        "--obstacles",
-        choices=CHOICES["obstacles"],
-        default=None,
-        help="what the planning scene knows of the obstacles (default: as in training)",
+    # The options train.py and rllib_train.py share (moverl_gym.options); a default of None: as in training.
+    options.add(
+        p,
+        "seed",
+        "shield",
+        "obstacles",
+        "task",
+        "graph",
+        "video",
+        seed=dict(default=1000, help="env seed: episode i starts from reset(seed=seed + i); not a training seed"),
+        shield=dict(default=None, help="default: as in training"),
+        obstacles=dict(default=None, help="what the planning scene knows of the obstacles (default: as in training)"),
+        task=dict(
+            help="override a key of the task as trained (config/env.yaml then, with the run's --task), e.g. "
+            "--task start_noise=0; repeatable"
+        ),
+        video=dict(help="record the first N episodes to <run>/videos (mp4)"),
     )
     p.add_argument("--world", default=None, help="another world (name in worlds/ or file) than the env id's")
     p.add_argument("--out", type=Path, default=None, help="JSON file (default <run>/eval.json)")
-    p.add_argument(
-        "--video", type=int, default=0, metavar="N", help="record the first N episodes to <run>/videos (mp4)"
-    )
-    return p.parse_args(argv)
+    return p
+
+
+def parse_args(argv=None):
+    return build_parser().parse_args(argv)
 
 
 def resolve(path: Path) -> tuple[Path, dict]:
@@ -90,9 +99,9 @@ def main(argv=None) -> int:
     from moverl_gym.task import TaskConfig
 
     known = {f.name for f in fields(TaskConfig)}  # a run of an older version may have recorded keys since removed
-    kwargs = dict(
-        shield=shield, graph=args.graph, task={k: v for k, v in (config.get("task") or {}).items() if k in known}
-    )
+    task = {k: v for k, v in (config.get("task") or {}).items() if k in known}
+    task.update(options.task_dict(args.task))
+    kwargs = dict(shield=shield, graph=args.graph, task=task)
     obstacles = args.obstacles or config.get("obstacles", "objects")
     if obstacles != "objects":
         kwargs["launch_args"] = {"obstacles": obstacles}
@@ -152,6 +161,7 @@ def main(argv=None) -> int:
         "shield": bool(shield),
         "trained_with_shield": bool(config["shield"]),
         "obstacles": obstacles,
+        "task_overrides": options.task_dict(args.task),
         "world": args.world,
         "deterministic": args.deterministic,
         "episodes": len(episodes),

@@ -8,14 +8,21 @@ ROS graph, on a Ray cluster of its own on this machine (default) or on an existi
 
 Writes to <log-folder>/rllib_ppo_<env>_<shield>_s<seed>/: config.yaml, progress.jsonl (one line per iteration: steps,
 return, success, contacts, interventions by type, cost, graph failures and relaunches, env runner restarts, the node
-of every runner), TensorBoard events (every scalar of RLlib's result), checkpoints/iter_<n> every --checkpoint-freq
-iterations, the final checkpoint in checkpoint/ (resume from it, or `./run.sh eval` it), summary.json.
-Hyper-parameters: src/moverl_gym/config/hyperparams/rllib_ppo.yml keyed by env id.
+of every runner), TensorBoard events (every scalar of RLlib's result), checkpoints/model_<steps>_steps after the
+iteration that passes each multiple of --checkpoint-freq env steps, the final checkpoint in checkpoint/ (resume from
+it, or `./run.sh eval` it), summary.json. Hyper-parameters: src/moverl_gym/config/hyperparams/rllib_ppo.yml keyed by
+env id.
+
+The options are train.py's (moverl_gym.options: same names, units and choices; --n-envs is the number of env runners,
+--num-env-runners its RLlib name), plus the RLlib ones below. What RLlib cannot do is refused, not ignored: --algo
+other than ppo, goal-conditioned env ids (Dict observations), --graph attach (every runner launches its own graph),
+--device other than cpu.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -27,56 +34,84 @@ from pathlib import Path
 import yaml
 
 import moverl_gym
+from moverl_gym import options
 from moverl_gym.env import DISCARDED_COUNTERS
 from moverl_gym.training import load_hyperparams
 
 #: Keys of rllib_ppo.yml that are not PPOConfig.training() arguments.
-RUN_KEYS = ("num_env_runners", "n_timesteps", "fcnet_hiddens", "fcnet_activation")
+RUN_KEYS = ("n_envs", "n_timesteps", "fcnet_hiddens", "fcnet_activation")
+#: Shared options (moverl_gym.options) that RLlib honours only with some values -> (those values, why not others).
+CANNOT = {
+    "algo": (("ppo",), "rllib_train.py trains PPO only (sac and td3: train.py)"),
+    "env": (
+        tuple(moverl_gym.FLAT_ENV_IDS),
+        "the goal-conditioned ids (Dict observations, HER) train with train.py --algo sac or td3; RLlib's default "
+        "model takes a flat observation",
+    ),
+    "graph": (("auto", "launch"), "every env runner launches its own graph on a free port (--graph launch or auto)"),
+    "device": (("cpu",), "rllib_train.py's learner runs on the CPU, in the driver's process"),
+}
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="MoveRL/PandaReachTable-v0", help=f"env id, one of {moverl_gym.ENV_IDS}")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-n", "--n-timesteps", type=int, default=None, help="env steps over all runners (default: file)")
-    p.add_argument("--num-env-runners", type=int, default=None, help="default: from the hyper-parameter file")
-    p.add_argument("--shield", default="on", choices=("on", "off"))
-    p.add_argument(
-        "--recover",
-        default="auto",
-        choices=("auto", "on", "off"),
-        help="the env's own recovery from a failed graph (see train.py; auto: on with the launched simulator)",
+    options.add(
+        p,
+        *options.TRAINING,
+        n_envs=dict(
+            flags=("--num-env-runners",),
+            help="parallel envs, one env runner each (a Ray actor process with "
+            "one env and one ROS graph); default: n_envs of the hyper-parameter file",
+        ),
+        no_progress=dict(help="no progress output (a line per iteration)"),
     )
-    p.add_argument(
+    r = p.add_argument_group("RLlib")
+    r.add_argument(
         "--address",
         default=None,
         help="an existing Ray cluster (<host>:<port> of its head, as `ray start --head` prints); default: "
         "start a cluster of our own on this machine (127.0.0.1, free ports, own temp dir)",
     )
-    p.add_argument(
+    r.add_argument(
         "--local-nodes",
         type=int,
         default=1,
         help="nodes of the local cluster: 1 (default), or N > 1 for a multi-node cluster on this host (a "
         "head without CPUs plus N nodes sharing the runners, so runners run on different nodes)",
     )
-    p.add_argument("--log-folder", default="runs")
-    p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: rllib_ppo.yml)")
-    p.add_argument("--checkpoint-freq", type=int, default=10, help="iterations between checkpoints (0: final only)")
-    p.add_argument("--resume", type=Path, default=None, help="a checkpoint folder of an earlier run to continue")
-    p.add_argument(
+    r.add_argument("--resume", type=Path, default=None, help="a checkpoint folder of an earlier run to continue")
+    r.add_argument(
         "--runner-restart-delay",
         type=float,
         default=5.0,
         help="seconds before RLlib brings a restarted env runner back (RLlib's default is 60)",
     )
-    p.add_argument(
+    r.add_argument(
         "--sample-timeout",
         type=float,
         default=120.0,
         help="seconds a runner may take for one sample() before RLlib gives up on it",
     )
-    return p.parse_args(argv)
+    return p
+
+
+def parse_args(argv=None):
+    p = build_parser()
+    args = p.parse_args(argv)
+    options.refuse(p, args, CANNOT)
+    if args.address and args.local_nodes != 1:
+        p.error("--local-nodes: the nodes of a local cluster; with --address the cluster is the one given")
+    return args
+
+
+def env_kwargs(args) -> dict:
+    """The keyword arguments of gym.make for every runner's env: one graph each, launched on a free port."""
+    kwargs = dict(shield=args.shield == "on", graph="launch", recover=options.recover_value(args.recover))
+    if args.obstacles != "objects":
+        kwargs["launch_args"] = {"obstacles": args.obstacles}
+    if args.task:
+        kwargs["task"] = options.task_dict(args.task)
+    return kwargs
 
 
 def build_config(args, hp: dict, num_env_runners: int):
@@ -85,14 +120,10 @@ def build_config(args, hp: dict, num_env_runners: int):
 
     from moverl_gym import rllib
 
-    recover = {"auto": "auto", "on": True, "off": False}[args.recover]
     training = {k: v for k, v in hp.items() if k not in RUN_KEYS}
     return (
         PPOConfig()
-        .environment(
-            rllib.ENV_NAME,
-            env_config={"env_id": args.env, "shield": args.shield == "on", "graph": "launch", "recover": recover},
-        )
+        .environment(rllib.ENV_NAME, env_config={"env_id": args.env, **env_kwargs(args)})
         .env_runners(
             num_env_runners=num_env_runners,
             num_envs_per_env_runner=1,
@@ -175,14 +206,14 @@ def runner_nodes(algo) -> list[dict]:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.env not in moverl_gym.ENV_IDS:
-        print(f"unknown env id {args.env}; registered: {moverl_gym.ENV_IDS}", file=sys.stderr)
-        return 2
     hp = load_hyperparams("rllib_ppo", args.env, args.hyperparams)
+    if "num_env_runners" in hp:
+        print("rllib_ppo.yml: num_env_runners is called n_envs (as in train.py's files)", file=sys.stderr)
+        return 2
     n_timesteps = int(args.n_timesteps or hp.get("n_timesteps", 40000))
-    num_env_runners = int(args.num_env_runners or hp.get("num_env_runners", 2))
+    num_env_runners = int(args.n_envs or hp.get("n_envs", 2))
     if num_env_runners < 1:
-        print("--num-env-runners must be at least 1 (the env never runs in the driver)", file=sys.stderr)
+        print("n_envs must be at least 1 (the env never runs in the driver)", file=sys.stderr)
         return 2
     run = Path(args.log_folder) / f"rllib_ppo_{args.env.split('/')[-1]}_{args.shield}_s{args.seed}"
     run.mkdir(parents=True, exist_ok=True)
@@ -219,8 +250,10 @@ def main(argv=None) -> int:
                     "seed": args.seed,
                     "n_timesteps": n_timesteps,
                     "shield": args.shield == "on",
+                    "obstacles": args.obstacles,
+                    "task": options.task_dict(args.task),
                     "recover": args.recover,
-                    "num_env_runners": num_env_runners,
+                    "n_envs": num_env_runners,
                     "hyperparams": hp,
                     "address": args.address or f"local cluster, {args.local_nodes} node(s)",
                     "resumed_from": str(args.resume) if args.resume else None,
@@ -239,6 +272,7 @@ def main(argv=None) -> int:
         steps0 = int(algo.metrics.peek((ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME), default=0))  # resumed
         t0 = time.perf_counter()
         row = summarize({}, 0.0)
+        saved = steps0 // args.checkpoint_freq if args.checkpoint_freq else 0  # multiples of it passed so far
         while True:
             result = algo.train()
             row = summarize(result, time.perf_counter() - t0)
@@ -248,14 +282,17 @@ def main(argv=None) -> int:
             for key, value in flatten(result).items():
                 writer.add_scalar(key, value, row["env_steps"])
             writer.flush()
-            print(
-                f"iter {row['iteration']}: {row['env_steps']} steps, return {row['episode_return_mean']}, success "
-                f"{row['success_rate']}, contacts {row['contacts']}, interventions {row['interventions']}, graph "
-                f"restarts {row['graph_restarts']}, runner restarts {row['env_runner_restarts']}",
-                flush=True,
-            )
-            if args.checkpoint_freq and row["iteration"] % args.checkpoint_freq == 0:
-                algo.save_to_path(str((run / "checkpoints" / f"iter_{row['iteration']:05d}").resolve()))
+            if not args.no_progress:
+                print(
+                    f"iter {row['iteration']}: {row['env_steps']} steps, return {row['episode_return_mean']}, success "
+                    f"{row['success_rate']}, contacts {row['contacts']}, interventions {row['interventions']}, graph "
+                    f"restarts {row['graph_restarts']}, runner restarts {row['env_runner_restarts']}",
+                    flush=True,
+                )
+            # Env steps, as train.py counts them: a checkpoint after the iteration that passes each multiple.
+            if args.checkpoint_freq and row["env_steps"] // args.checkpoint_freq > saved:
+                saved = row["env_steps"] // args.checkpoint_freq
+                algo.save_to_path(str((run / "checkpoints" / f"model_{row['env_steps']}_steps").resolve()))
             if row["env_steps"] >= n_timesteps:
                 break
         wall = time.perf_counter() - t0
@@ -269,6 +306,14 @@ def main(argv=None) -> int:
         finally:
             if cluster is not None:
                 cluster.shutdown()
+    if args.video:
+        from moverl_gym.rllib import CheckpointPolicy
+        from moverl_gym.training import record_episodes
+
+        kwargs = {k: v for k, v in env_kwargs(args).items() if k != "recover"}
+        policy = functools.partial(CheckpointPolicy, run / "checkpoint")  # of the recording env's action space
+        record_episodes(policy, args.env, kwargs, run / "videos", args.video, args.seed + 10_000)
+        print(f"videos: {args.video} evaluation episodes in {run / 'videos'}")
 
     steps = row["env_steps"] - steps0  # this run's steps (a resumed run started at steps0)
     summary = dict(

@@ -24,7 +24,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from moverl_gym import study
+from moverl_gym import options, study
 
 ROOT = Path(__file__).resolve().parents[3]
 TRAIN = Path(__file__).resolve().parent / "train.py"
@@ -33,13 +33,13 @@ TRAIN = Path(__file__).resolve().parent / "train.py"
 THREADS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenarios", nargs="+", default=None, choices=study.SCENARIOS)
     p.add_argument("--seeds", nargs="+", type=int, default=None)
-    p.add_argument("--shields", nargs="+", default=["on", "off"], choices=("on", "off"))
+    p.add_argument("--shields", nargs="+", default=list(options.SHIELD), choices=options.SHIELD)
     p.add_argument("-n", "--n-timesteps", type=int, default=None, help="steps per run (default 40000)")
-    p.add_argument("--algo", default="ppo", choices=("ppo", "sac", "td3"))
+    options.add(p, "algo")
     p.add_argument(
         "--variant",
         default="",
@@ -47,12 +47,10 @@ def parse_args(argv=None):
         help="which id of each scenario: MoveRL/PandaReach<Scenario><variant>-v0 (Goal: the goal-conditioned ids, "
         "for SAC or TD3 with HER as config/hyperparams says)",
     )
-    p.add_argument(
-        "--task",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="passed to train.py: override a key of config/env.yaml, e.g. --task start_noise=0",
+    options.add(
+        p,
+        "task",
+        task=dict(help="passed to train.py: override a key of config/env.yaml, e.g. --task start_noise=0; repeatable"),
     )
     p.add_argument("--jobs", type=int, default=2, help="trainings at once (one per core)")
     p.add_argument("--out", type=Path, default=None, help="run folders (default runs/study)")
@@ -65,7 +63,11 @@ def parse_args(argv=None):
     p.add_argument("--plot-only", action="store_true", help="no training: aggregate what is in --out")
     p.add_argument("--last", type=int, default=200, help="success rate over the last N episodes")
     p.add_argument("--timeout", type=float, default=3600, help="seconds before a run is killed")
-    args = p.parse_args(argv)
+    return p
+
+
+def parse_args(argv=None):
+    args = build_parser().parse_args(argv)
     if args.quick:
         args.scenarios = args.scenarios or ["table"]
         args.seeds = args.seeds if args.seeds is not None else [0]

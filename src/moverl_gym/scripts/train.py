@@ -4,8 +4,9 @@
     ./run.sh train --env MoveRL/PandaReachTable-v0 --algo ppo --seed 0 -n 40000 --shield on --log-folder runs
 
 Writes to <log-folder>/<algo>_<env>_<shield>_s<seed>/: episodes.csv (per-episode return, length, success,
-shield interventions by type, ground-truth contacts, the sub-env it ran in), TensorBoard events, checkpoints, the
-final model and config.yaml (the resolved configuration). Prints a summary with steps/s at the end.
+shield interventions by type, ground-truth contacts, the sub-env it ran in), TensorBoard events, checkpoints (every
+--checkpoint-freq env steps), the final model and config.yaml (the resolved configuration). Prints a summary with
+steps/s at the end. The options are rllib_train.py's too (moverl_gym.options): same names, units and choices.
 
 Parallel envs (`--n-envs N`, or `n_envs` in the hyper-parameter file, RL Zoo style): N envs, each in its own process
 (SB3's SubprocVecEnv) with its own ROS graph on its own free port; env i is seeded with seed + i. As in RL Zoo,
@@ -31,72 +32,24 @@ from pathlib import Path
 
 import yaml
 
-import moverl_gym  # noqa: F401  (registers the env ids)
-from moverl_gym.launch_args import CHOICES
-from moverl_gym.training import EpisodeLogger, load_hyperparams
+from moverl_gym import options
+from moverl_gym.training import EpisodeLogger, load_hyperparams, record_episodes
 
 ALGOS = ("ppo", "sac", "td3")
 
 
-def parse_args(argv=None):
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--env", default="MoveRL/PandaReachTable-v0", help=f"env id, one of {moverl_gym.ENV_IDS}")
-    p.add_argument("--algo", default="ppo", choices=ALGOS)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-n", "--n-timesteps", type=int, default=None, help="default: from the hyper-parameter file")
-    p.add_argument(
-        "--n-envs",
-        type=int,
-        default=None,
-        help="parallel envs, one process and one ROS graph each (default: n_envs of the hyper-parameter "
-        "file, else 1); env i is seeded with seed + i",
-    )
-    p.add_argument("--shield", default="on", choices=("on", "off"))
-    p.add_argument(
-        "--obstacles",
-        default="objects",
-        choices=CHOICES["obstacles"],
-        help="what the shield knows (launched graph only): the world file's objects, the OctoMap built "
-        "from the world's depth cameras, both, or sensed (the static objects plus the OctoMap for what moves)",
-    )
-    p.add_argument(
-        "--task",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a key of config/env.yaml for this run, e.g. --task start_noise=0 (starts uniform over the whole "
-        "joint range); repeatable",
-    )
-    p.add_argument("--log-folder", default="runs")
-    p.add_argument("--hyperparams", type=Path, default=None, help="YAML keyed by env id (default: config/hyperparams)")
-    p.add_argument(
-        "--graph",
-        default="auto",
-        choices=("auto", "launch", "attach"),
-        help="attach to $ROS_MASTER_URI's graph or launch one on a free port",
-    )
-    p.add_argument(
-        "--recover",
-        default="auto",
-        choices=("auto", "on", "off"),
-        help="when a component of the graph fails, end the episode and relaunch the graph at the next reset "
-        "instead of stopping (auto: on when the env launches its graph with the simulator, never with "
-        "a real robot); every relaunch is logged (episodes.csv graph_failure, graph_restarts)",
-    )
-    p.add_argument("--checkpoint-freq", type=int, default=10000, help="steps between checkpoints (0: none)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--device", default="cpu")
-    p.add_argument(
-        "--video", type=int, default=0, metavar="N", help="record N evaluation episodes to <run>/videos (mp4)"
-    )
-    return p.parse_args(argv)
+    options.add(p, *options.TRAINING)  # the options rllib_train.py shares (moverl_gym.options)
+    return p
+
+
+def parse_args(argv=None):
+    return build_parser().parse_args(argv)
 
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.env not in moverl_gym.ENV_IDS:
-        print(f"unknown env id {args.env}; registered: {moverl_gym.ENV_IDS}", file=sys.stderr)
-        return 2
     from stable_baselines3 import PPO, SAC, TD3
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.logger import configure
@@ -108,35 +61,23 @@ def main(argv=None) -> int:
     n_envs = int(args.n_envs or hp.pop("n_envs", 1))
     hp.pop("n_envs", None)
     if n_envs < 1:
-        print(f"--n-envs must be at least 1, got {n_envs}", file=sys.stderr)
+        print(f"n_envs must be at least 1, got {n_envs} (hyper-parameter file)", file=sys.stderr)
+        return 2
+    if n_envs > 1 and args.graph == "attach":
+        print("n_envs > 1 needs one graph per env: use --graph launch (or auto)", file=sys.stderr)
         return 2
     policy = hp.pop("policy", "MlpPolicy")
     if isinstance(hp.get("replay_buffer_class"), str):  # RL Zoo style: the class by name
         import stable_baselines3
 
         hp["replay_buffer_class"] = getattr(stable_baselines3, hp["replay_buffer_class"])
-    if args.video < 0:
-        print(f"--video must be >= 0, got {args.video}", file=sys.stderr)
-        return 2
     shield = args.shield == "on"
     run = Path(args.log_folder) / f"{args.algo}_{args.env.split('/')[-1]}_{args.shield}_s{args.seed}"
     run.mkdir(parents=True, exist_ok=True)
 
     launch_args = {} if args.obstacles == "objects" else {"obstacles": args.obstacles}
-    task = {}
-    for item in args.task:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            print(f"--task takes KEY=VALUE, got {item!r}", file=sys.stderr)
-            return 2
-        task[key] = yaml.safe_load(value)
-    recover = {"auto": "auto", "on": True, "off": False}[args.recover]
-    if n_envs > 1 and args.graph == "attach":
-        print(
-            "--n-envs > 1 needs one graph per env: use --graph launch (or auto without a graph at ROS_MASTER_URI)",
-            file=sys.stderr,
-        )
-        return 2
+    task = options.task_dict(args.task)
+    recover = options.recover_value(args.recover)
     make = [
         _env_factory(
             args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, recover=recover, task=task)
@@ -170,7 +111,9 @@ def main(argv=None) -> int:
         episodes = EpisodeLogger(run / "episodes.csv")
         callbacks = [episodes]
         if args.checkpoint_freq > 0:
-            callbacks.append(CheckpointCallback(args.checkpoint_freq, str(run / "checkpoints"), name_prefix="model"))
+            # SB3's save_freq counts calls, each a step of every env: --checkpoint-freq counts env steps over all envs.
+            every = max(args.checkpoint_freq // n_envs, 1)
+            callbacks.append(CheckpointCallback(every, str(run / "checkpoints"), name_prefix="model"))
         t0 = time.perf_counter()
         model.learn(n_timesteps, callback=CallbackList(callbacks), progress_bar=not args.no_progress)
         wall = time.perf_counter() - t0
@@ -178,9 +121,9 @@ def main(argv=None) -> int:
     finally:
         env.close()
     if args.video:
-        record_videos(
-            model, args.env, dict(shield=shield, graph=args.graph, launch_args=launch_args, task=task), run, args
-        )
+        env_kwargs = dict(shield=shield, graph=args.graph, launch_args=launch_args, task=task)
+        record_episodes(model, args.env, env_kwargs, run / "videos", args.video, args.seed + 10_000)
+        print(f"videos: {args.video} evaluation episodes in {run / 'videos'}")
 
     s = episodes.summary(last=200)
     s.update(wall_time=wall, steps_per_second=n_timesteps / wall, run=str(run), shield=shield)
@@ -203,25 +146,6 @@ def main(argv=None) -> int:
         )
     print(f"outputs: {run}/episodes.csv, TensorBoard in {run}, model {run}/model.zip")
     return 0
-
-
-def record_videos(model, env_id: str, kwargs: dict, run: Path, args) -> None:
-    """args.video evaluation episodes of the trained policy (deterministic), recorded by Gymnasium's RecordVideo."""
-    from moverl_gym.training import recording_env
-
-    folder = run / "videos"
-    env = recording_env(env_id, kwargs, folder, args.video)
-    try:
-        for episode in range(args.video):
-            obs, _ = env.reset(seed=args.seed + 10_000 + episode)
-            done = False
-            while not done:
-                action, _ = model.predict(obs, deterministic=True)
-                obs, _, terminated, truncated, _ = env.step(action)
-                done = terminated or truncated
-    finally:
-        env.close()
-    print(f"videos: {args.video} evaluation episodes in {folder}")
 
 
 def _env_factory(env_id: str, kwargs: dict):

@@ -16,6 +16,8 @@ from moverl_gym import env
 from moverl_msgs.srv import ShieldStepResponse
 from moverl_sim import follow
 
+pytestmark = pytest.mark.core
+
 REPO = Path(__file__).resolve().parents[3]
 
 

@@ -22,6 +22,8 @@ from moverl_gym.env import MoveRLReachEnv
 from moverl_gym.paths import config_file
 from moverl_gym.task import ReachTask, TaskConfig
 
+pytestmark = pytest.mark.core
+
 
 # -- the env's cost signal and contact penalty ----------------------------------------------------------------------
 def test_contact_penalty_in_the_reward():

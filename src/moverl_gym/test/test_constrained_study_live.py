@@ -7,9 +7,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 from moverl_gym import constrained_study as cs
+
+pytestmark = pytest.mark.live
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "constrained_study.py"
 

@@ -25,6 +25,8 @@ import pytest
 
 import moverl_gym  # noqa: F401
 
+pytestmark = pytest.mark.live
+
 STEPS = 400
 SEED = 0
 EXPECTED = {

@@ -21,6 +21,8 @@ from live_helpers import GroundTruthContacts
 
 import moverl_gym  # noqa: F401
 
+pytestmark = pytest.mark.live
+
 TEST_WORLDS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "worlds")
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 NEAR_WALL = [-0.65] + HOME[1:]  # clear of the moving wall's swing; joint 1 towards +0.8 crosses it

@@ -13,6 +13,8 @@ import moverl_gym.bullet_backend
 from moverl_gym.env import VERDICTS
 from moverl_gym.errors import MoveRLError
 
+pytestmark = pytest.mark.core
+
 IDS = ["MoveRL/PandaReachTable-v0", "MoveRL/PandaReachHumanEE-v0", "MoveRL/PandaReachCase-v0"]
 
 

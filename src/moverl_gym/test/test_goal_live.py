@@ -15,11 +15,14 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 import yaml
 
 import moverl_gym  # noqa: F401
 from moverl_gym.paths import config_file
 from moverl_gym.task import TaskConfig
+
+pytestmark = pytest.mark.live
 
 TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 CASE_INTO = np.array([0.0, 1.0, 0.0, 1.0, 0.0, -0.5, 0.0])  # reach down and forward, into the case's walls

@@ -13,6 +13,8 @@ from moverl_gym.paths import config_file
 from moverl_gym.task import TaskConfig
 from moverl_sim.scene_view import ViewSettings
 
+pytestmark = pytest.mark.core
+
 
 def make(env_id, **kwargs):
     return gym.make(env_id, backend="bullet", shield=False, **kwargs)

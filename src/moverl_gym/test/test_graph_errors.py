@@ -15,6 +15,8 @@ from moverl_gym.graph import GraphError, LaunchedGraph
 from moverl_gym.launch_args import LaunchArgError
 from moverl_gym.paths import config_file
 
+pytestmark = pytest.mark.quick
+
 
 def start(tmp_path, **args):
     t0 = time.monotonic()

@@ -24,7 +24,9 @@ from moverl_gym import graph, reaper
 from moverl_gym import ros_backend as ros
 from moverl_gym.paths import world_file
 
-#: A clean close() takes ~1-2 s (scripts/graph_lifecycle.py). A stopped node is SIGKILLed at once, not after the
+pytestmark = pytest.mark.live
+
+#: A clean close() takes ~1-2 s (tools/graph_lifecycle.py). A stopped node is SIGKILLed at once, not after the
 #: grace period (graph.GRACE, 5 s): closing with one must take less than that.
 CLOSE_LIMIT = graph.GRACE
 NODES = ("/sim", "/shield")  # the default graph: the shield hosts the planning scene

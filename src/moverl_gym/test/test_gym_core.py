@@ -12,6 +12,8 @@ from moverl_gym.robot import ActionScaler, JointLimits, chain_reach
 from moverl_gym.task import ReachTask, TaskConfig
 from moverl_gym.training import load_hyperparams
 
+pytestmark = pytest.mark.core
+
 URDF = """<robot name="r">
   <link name="a"/><link name="b"/><link name="c"/>
   <joint name="j1" type="revolute"><parent link="a"/><child link="b"/>

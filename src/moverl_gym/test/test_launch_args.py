@@ -33,6 +33,8 @@ from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, LaunchArgError, ch
 from moverl_gym.paths import launch_file, repo_root
 from moverl_gym.proctree import TreeWatch
 
+pytestmark = pytest.mark.core
+
 REPO = repo_root()
 ENV_ID = "MoveRL/PandaReachTable-v0"
 LIMIT = 2.0  # s: a wrong argument is refused within this

@@ -21,6 +21,8 @@ from moverl_gym.launch_args import ARGS, check
 from moverl_gym.paths import launch_file, world_file
 from moverl_gym.proctree import TreeWatch
 
+pytestmark = pytest.mark.quick
+
 #: s: roslaunch's own start (~0.5 s) plus the check.
 LIMIT = 3.0
 

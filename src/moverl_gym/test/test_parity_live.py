@@ -1,10 +1,10 @@
 """Collision parity in CI (issue #15): for every robot config the repo ships (config/robots/*.yaml) and the test
 robots (src/moverl_gym/test/robots/*.yaml), short runs of the two long audits against the live graph:
 
-* scripts/collision_audit.py on every repo world: random states, near-boundary states, short paths and paths through
+* tools/collision_audit.py on every repo world: random states, near-boundary states, short paths and paths through
   contacts; no collision the physics engine sees may be missed by the scene, and each kind must have met contacts
   (so the run tested something); the test robots' known bad states (<robot>_states.yaml) are checked too;
-* scripts/pushing_policy_audit.py in the case world: a policy that pushes into the obstacles makes 0 contacts with the
+* tools/pushing_policy_audit.py in the case world: a policy that pushes into the obstacles makes 0 contacts with the
   shield on, and many with it off (so it does push).
 
 The long versions (10,000 states per world, 3,000 steps) and their figures: docs/audit, docs/pushing_policy.
@@ -18,8 +18,10 @@ from pathlib import Path
 import pytest
 import yaml
 
+pytestmark = pytest.mark.live
+
 REPO = Path(__file__).resolve().parents[3]
-SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
+TOOLS = REPO / "src" / "moverl_gym" / "tools"
 TEST_ROBOTS = REPO / "src" / "moverl_gym" / "test" / "robots"
 CONFIGS = sorted((REPO / "config" / "robots").glob("*.yaml")) + sorted(
     p for p in TEST_ROBOTS.glob("*.yaml") if isinstance(yaml.safe_load(p.read_text()), dict)
@@ -37,7 +39,7 @@ def _run(args, cwd):
 def test_collision_parity_short(config, tmp_path):
     states = TEST_ROBOTS / f"{config.stem}_states.yaml"
     args = [
-        SCRIPTS / "collision_audit.py",
+        TOOLS / "collision_audit.py",
         "--robot-config",
         config,
         "--worlds",
@@ -75,7 +77,7 @@ def test_collision_parity_short(config, tmp_path):
 def test_pushing_policy_short(config, tmp_path):
     on, out_on = _run(
         [
-            SCRIPTS / "pushing_policy_audit.py",
+            TOOLS / "pushing_policy_audit.py",
             "--robot-config",
             config,
             "--worlds",
@@ -92,7 +94,7 @@ def test_pushing_policy_short(config, tmp_path):
     assert on.returncode == 0, out_on[-5000:]
     off, out_off = _run(
         [
-            SCRIPTS / "pushing_policy_audit.py",
+            TOOLS / "pushing_policy_audit.py",
             "--robot-config",
             config,
             "--worlds",

@@ -8,8 +8,11 @@ import time
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import moverl_gym  # noqa: F401
+
+pytestmark = pytest.mark.quick
 
 STEPS = 20
 

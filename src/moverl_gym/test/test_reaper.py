@@ -19,6 +19,8 @@ import pytest
 from moverl_gym import reaper
 from moverl_gym.graph import loopback_shim
 
+pytestmark = pytest.mark.core
+
 # The fake roslaunch: three "nodes", then it waits; SIGINT ends it like a roslaunch that crashed (its nodes stay).
 FAKE_LAUNCH = r"""
 import subprocess, sys, time

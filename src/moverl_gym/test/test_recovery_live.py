@@ -13,7 +13,11 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from moverl_gym import proctree
+
+pytestmark = pytest.mark.live
 
 TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 STEPS = 1000

@@ -23,6 +23,8 @@ from live_helpers import Tool
 from moverl_gym.env import MoveRLReachEnv
 from moverl_gym.paths import world_file
 
+pytestmark = pytest.mark.live
+
 ROBOT = "panda"
 PARKED = [0.42, 0.0, 0.25]  # the hand's position (m, pointing down) where the robot is parked
 VISITOR = {

@@ -21,6 +21,8 @@ import yaml
 from moverl_gym.proctree import TreeWatch, alive, cmdline, tree
 from moverl_gym.reaper import is_loopback, listening_sockets
 
+pytestmark = pytest.mark.live
+
 SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
 RUN = "rllib_ppo_PandaReachTable-v0_on_s4"
 STEPS = 800  # 2 iterations of 400 steps (rllib_ppo.yml: train_batch_size_per_learner)
@@ -38,14 +40,14 @@ def train(folder: Path, steps: int, *extra, during=None):
         "4",
         "-n",
         str(steps),
-        "--num-env-runners",
+        "--n-envs",
         "2",
         "--local-nodes",
         "2",
         "--log-folder",
         str(folder),
         "--checkpoint-freq",
-        "1",
+        "400",
         *extra,
     ]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -101,7 +103,7 @@ def look_at_sockets(folder: Path, sockets: list):
 def clean_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("rllib")
     sockets = []
-    proc, out, err, watch = train(folder, STEPS, during=look_at_sockets(folder, sockets))
+    proc, out, err, watch = train(folder, STEPS, "--video", "1", during=look_at_sockets(folder, sockets))
     return folder, proc, out, err, watch, sockets
 
 
@@ -113,15 +115,26 @@ def test_multinode_cluster_runners_on_different_nodes(clean_run):
     nodes = yaml.safe_load((run / "config.yaml").read_text())["runners"]
     assert len(nodes) == 2 and nodes[0]["node_id"] != nodes[1]["node_id"], nodes
     assert len(raylets(watch)) == 3, "a head and two nodes, each its own raylet"
-    # One graph per runner, and no throw-away env with a graph of its own anywhere (driver, runners).
-    assert len(simulators(watch)) == 2, watch.cmdlines
+    # One graph per runner, and no throw-away env with a graph of its own anywhere (driver, runners); after training,
+    # one more: the env that records --video 1.
+    assert len(simulators(watch)) == 3, watch.cmdlines
+    assert len(list((run / "videos").glob("*.mp4"))) == 1, "--video 1: one recorded episode"
     last = progress(folder)[-1]
     assert last["env_steps"] >= STEPS and last["envs_created"] == 2
     assert last["contacts"] == 0 and last["contact_substeps"] == 0
     assert last["steps_without_ground_truth"] == 0, "the simulator measured contacts at every step"
     assert last["graph_failures"] == 0 and last["env_runner_restarts"] == 0 and last["healthy_env_runners"] == 2
     assert "ground-truth contacts (physics): 0 contact pairs" in out, out
-    assert (run / "checkpoint" / "algorithm_state.pkl").exists() and (run / "checkpoints" / "iter_00001").is_dir()
+    assert (run / "checkpoint" / "algorithm_state.pkl").exists()
+    # --checkpoint-freq counts env steps (as train.py's): one checkpoint per multiple of 400 passed, named by steps.
+    rows = progress(folder)
+    saved = sorted(p.name for p in (run / "checkpoints").iterdir())
+    expected, passed = [], 0
+    for r in rows:
+        if r["env_steps"] // 400 > passed:
+            passed = r["env_steps"] // 400
+            expected.append(f"model_{r['env_steps']}_steps")
+    assert saved == sorted(expected) and len(saved) >= 2, (saved, [r["env_steps"] for r in rows])
     assert list(run.glob("events.out.tfevents.*")), "TensorBoard events"
     assert_nothing_left(watch)
     print(f"\n{len(sockets)} listening sockets, all on loopback; last iteration: {last}")

@@ -10,6 +10,8 @@ from live_helpers import seeded_traces
 import moverl_gym  # noqa: F401
 from moverl_gym.registration import ROBOTS, SCENARIOS, env_id
 
+pytestmark = pytest.mark.live
+
 RANDOM_STEPS = 500
 CASES = [(robot, scenario) for robot in ROBOTS.values() for scenario in SCENARIOS]
 

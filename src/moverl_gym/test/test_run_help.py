@@ -12,6 +12,8 @@ import pytest
 
 from moverl_gym.paths import repo_root
 
+pytestmark = pytest.mark.core
+
 RUN = repo_root() / "run.sh"
 COMMANDS = re.findall(r"^#   \./run\.sh (\w+)", RUN.read_text(), flags=re.M)
 #: What each command's help starts with: the usage of the program the command runs.

@@ -1,5 +1,5 @@
 """A person the robot sees only through its depth cameras (issue 16), short versions of the long runs in
-docs/sensed_person (scripts/pushing_policy_audit.py --obstacles sensed):
+docs/sensed_person (tools/pushing_policy_audit.py --obstacles sensed):
 
 * the human scenario in the sensed mode (the planning scene knows the table from the world file, and the person only
   from the OctoMap built from the world's three cameras, with the predictive margin), shield on, a policy that keeps
@@ -16,8 +16,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.live
+
 REPO = Path(__file__).resolve().parents[3]
-AUDIT = REPO / "src" / "moverl_gym" / "scripts" / "pushing_policy_audit.py"
+AUDIT = REPO / "src" / "moverl_gym" / "tools" / "pushing_policy_audit.py"
 DEADLINE = 600  # s per run
 
 

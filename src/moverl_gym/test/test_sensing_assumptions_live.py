@@ -22,6 +22,8 @@ from live_helpers import Tool
 from moverl_gym.env import MoveRLReachEnv
 from moverl_gym.paths import world_file
 
+pytestmark = pytest.mark.live
+
 ROBOT = "panda"
 HAND = {"size": [0.18, 0.09, 0.025], "xyz": [0.35, 0.15, 0.0125]}  # lying flat on the table top (z = 0)
 SHAKE = {"type": "oscillate", "axis": [1, 0, 0], "amplitude": 0.001, "period": 2.0}  # 3 mm/s: sensed, not known

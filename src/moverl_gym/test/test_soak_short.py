@@ -1,4 +1,4 @@
-"""A short version of scripts/soak.py (the long run, 250,000 steps, is a script whose figures are in docs/soak): the
+"""A short version of tools/soak.py (the long run, 250,000 steps, is a script whose figures are in docs/soak): the
 sampling works on every graph it runs (three worlds and the OctoMap mode), every process of the graph is found and
 measured, and nothing leaks over the run that a short run can see: no file descriptor or process more at the end,
 zero contacts. (Memory growth and latency drift need the long run: short windows on a shared 2-core machine are
@@ -9,7 +9,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-SOAK = Path(__file__).resolve().parents[1] / "scripts" / "soak.py"
+import pytest
+
+pytestmark = pytest.mark.live
+
+SOAK = Path(__file__).resolve().parents[1] / "tools" / "soak.py"
 GRAPH = {"env", "rosmaster", "rosout", "sim_node", "shield_node"}  # the shield hosts the planning scene
 
 

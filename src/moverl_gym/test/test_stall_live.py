@@ -19,6 +19,8 @@ import pytest
 import moverl_gym  # noqa: F401
 from moverl_gym.errors import MoveRLError
 
+pytestmark = pytest.mark.live
+
 HOME = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 ACTION = np.array([0.3, 0.2, 0.0, 0.2, 0.0, 0.0, 0.0], dtype=np.float32)
 

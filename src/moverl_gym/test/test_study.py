@@ -12,6 +12,8 @@ import pytest
 from moverl_gym import study
 from moverl_gym.training import EPISODE_FIELDS
 
+pytestmark = pytest.mark.live
+
 STUDY = Path(__file__).resolve().parents[1] / "scripts" / "study.py"
 
 

@@ -16,6 +16,8 @@ import pytest
 
 import moverl_gym  # noqa: F401
 
+pytestmark = pytest.mark.quick
+
 SERVICE = "/shield/step"
 
 

@@ -1,4 +1,4 @@
-"""Unit tests of the pure functions of scripts/collision_audit.py and scripts/planner_benchmark.py (no ROS)."""
+"""Unit tests of the pure functions of tools/collision_audit.py and tools/planner_benchmark.py (no ROS)."""
 
 import importlib.util
 import math
@@ -7,11 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+pytestmark = pytest.mark.core
+
+TOOLS = Path(__file__).resolve().parents[1] / "tools"
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

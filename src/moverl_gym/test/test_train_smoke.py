@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+pytestmark = pytest.mark.live
+
 TRAIN = Path(__file__).resolve().parents[1] / "scripts" / "train.py"
 
 

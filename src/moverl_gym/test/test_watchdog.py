@@ -3,7 +3,11 @@
 import threading
 import time
 
+import pytest
+
 from moverl_gym.ros_backend import _Watchdog
+
+pytestmark = pytest.mark.core
 
 
 def test_fires_after_the_deadline_and_reports_it():

@@ -25,6 +25,8 @@ from moverl_gym.geometry_parity import compare, format_report
 from moverl_sim.robot_config import load_robot_config
 from moverl_sim.urdf import resolve_uri
 
+pytestmark = pytest.mark.core
+
 HERE = Path(__file__).resolve().parent
 FIXTURES = HERE / "fixtures" / "geometry"
 REPO = HERE.parents[2]

@@ -16,6 +16,8 @@ from moverl_sim.camera import (
 )
 from moverl_sim.world import WorldCamera, WorldFileError, load_world, parse_world, rpy_to_quaternion
 
+pytestmark = pytest.mark.core
+
 CAM = {
     "id": "front",
     "xyz": [1.2, 0.5, 1.0],

@@ -15,6 +15,8 @@ from conftest import HOME, make_sim
 from moverl_sim.camera_schedule import DUE_TOLERANCE, CameraSchedule, due_cameras, substeps_until_due
 from moverl_sim.lockstep import run_motion
 
+pytestmark = pytest.mark.core
+
 HZ = 240.0
 
 

@@ -8,6 +8,8 @@ from conftest import FIXED, HOME, JOINTS, make_sim
 from moverl_sim.core import InvalidTrajectory, LimitViolation, Simulator
 from moverl_sim.world import parse_world
 
+pytestmark = pytest.mark.core
+
 HOME_NP = np.array(HOME)
 INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
 FOLDED = [0.0, -0.785, 0.0, -3.136, 0.0, 0.0, 0.785]  # elbow fully folded: wrist hits the upper arm

@@ -15,6 +15,8 @@ from moverl_sim import follow
 from moverl_sim.core import ContactStats
 from moverl_sim.robot_config import load_robot_config
 
+pytestmark = pytest.mark.core
+
 LO, HI = [-3.0] * 7, [3.0] * 7
 INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
 ACCELERATION_LIMITS = np.array(load_robot_config(f"{REPO_DIR}/config/robots/panda.yaml")["acceleration_limits"])

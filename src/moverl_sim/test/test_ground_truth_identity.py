@@ -2,7 +2,7 @@
 node received on a live graph with the shield off, are those recorded with the code before the speed work (each
 fixture's simulator_commit): the same pairs (link and object names) at the same substeps, depths within 1e-9 m, the same
 moving / resting flag. No roscore: the recordings (fixtures/ground_truth/*.json.gz, made by
-src/moverl_gym/test/record_ground_truth.py, which checked them against the live graph's reports step by step) are
+src/moverl_gym/tools/record_ground_truth.py, which checked them against the live graph's reports step by step) are
 replayed through a Simulator in this process.
 
 Runs: random actions in the table, human and case worlds; the pushing policy in the case world (its 5 mm walls) and
@@ -15,6 +15,8 @@ import pytest
 from conftest import REPO_DIR
 
 from moverl_sim.ground_truth import compare, load, replay_by_substep
+
+pytestmark = pytest.mark.core
 
 FIXTURES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", "ground_truth")
 RUNS = sorted(f[: -len(".json.gz")] for f in os.listdir(FIXTURES) if f.endswith(".json.gz"))

@@ -16,6 +16,8 @@ from moverl_sim.camera_schedule import CameraSchedule
 from moverl_sim.core import InvalidTrajectory, LimitViolation
 from moverl_sim.world import load_world
 
+pytestmark = pytest.mark.core
+
 INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
 HZ = 240.0
 

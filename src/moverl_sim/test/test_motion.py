@@ -7,6 +7,8 @@ from conftest import HOME, make_sim
 
 from moverl_sim.world import ObjectMotion, WorldFileError, parse_world
 
+pytestmark = pytest.mark.core
+
 
 def _world(motion, **obj):
     o = {"id": "ball", "shape": "sphere", "size": [0.05], "xyz": [0.307, 0.5, 0.59], "motion": motion}

@@ -10,6 +10,8 @@ from pybullet_utils import bullet_client
 
 from moverl_sim.world import load_world, parse_world
 
+pytestmark = pytest.mark.core
+
 HUMAN_WORLD = os.path.join(REPO_DIR, "worlds", "human.yaml")
 # The hand in the person's left arm at the centre of the walk (PyBullet IK for the hand at (0.70, 0.35, 0.40),
 # pointing along +x). At motion time 1.5 s (the person 0.15 m to +y) it is in the torso, at 4.5 s (-y) in nothing.

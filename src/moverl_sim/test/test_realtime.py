@@ -14,6 +14,8 @@ from conftest import HOME, JOINTS, make_sim
 from moverl_sim import follow
 from moverl_sim.realtime import CATCH_UP, IDLE_REPORT_PERIOD, STALE_WINDOW, STALL_GAP, Pacer, RealtimeController
 
+pytestmark = pytest.mark.core
+
 HZ = 240.0
 INTO_TABLE = [0.0, 1.2, 0.0, -1.0, 0.0, 1.571, 0.785]  # hand pushed down into the table top
 

@@ -11,6 +11,8 @@ from conftest import REPO_DIR
 
 from moverl_sim.robot_config import KEYS, REQUIRED, RobotConfigError, load_robot_config, parse_robot
 
+pytestmark = pytest.mark.core
+
 REPO = Path(REPO_DIR)
 SHIPPED = sorted((REPO / "config" / "robots").glob("*.yaml"))
 TEST_ROBOTS = [

@@ -8,6 +8,8 @@ from conftest import PANDA_URI, PKG_DIR
 
 from moverl_sim.urdf import UrdfError, resolve_uri, robot_description
 
+pytestmark = pytest.mark.core
+
 SCRIPT = os.path.join(PKG_DIR, "scripts", "robot_description")
 
 

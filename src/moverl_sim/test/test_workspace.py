@@ -13,6 +13,8 @@ from moverl_sim.settings import sim_settings
 from moverl_sim.urdf import robot_description
 from moverl_sim.workspace import Workspace, _Kinematics
 
+pytestmark = pytest.mark.core
+
 ROBOTS = {
     "panda": os.path.join(REPO_DIR, "config", "robots", "panda.yaml"),
     "xarm6": os.path.join(REPO_DIR, "config", "robots", "xarm6.yaml"),

@@ -7,6 +7,8 @@ from conftest import TABLE_WORLD
 
 from moverl_sim.world import World, WorldFileError, load_world, rpy_to_quaternion, sensing_problems
 
+pytestmark = pytest.mark.core
+
 
 def test_table_world_is_parsed():
     w = load_world(TABLE_WORLD)

@@ -1,5 +1,5 @@
 """Malformed inputs for every service and subscribed topic of a MoveRL graph (the generators need message classes
-only, no roscore; scripts/fuzz_graph.py sends them to a live graph and checks every node survives and answers).
+only, no roscore; tools/fuzz_graph.py sends them to a live graph and checks every node survives and answers).
 
 Each generator returns (label, message) pairs, built from a valid example so that exactly one thing is wrong: wrong
 sizes, NaN / inf / huge values, unknown or duplicated joint names, empty or non-monotonic trajectories, malformed

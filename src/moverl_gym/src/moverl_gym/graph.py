@@ -34,7 +34,7 @@ from .paths import launch_file, repo_root
 EXPOSE_ENV = "MOVERL_GRAPH_EXPOSE"
 #: Environment variable: seconds a graph gets to shut down cleanly on close() before SIGKILL (default GRACE).
 GRACE_ENV = "MOVERL_GRAPH_GRACE"
-#: Default grace period (s). A clean shutdown of the whole graph takes 1-2 s (scripts/graph_lifecycle.py).
+#: Default grace period (s). A clean shutdown of the whole graph takes 1-2 s (tools/graph_lifecycle.py).
 GRACE = 5.0
 #: Seconds after the SIGKILLs for the processes to be gone before close() gives up and raises.
 KILL_TIMEOUT = 5.0

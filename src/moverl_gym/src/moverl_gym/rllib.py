@@ -1,5 +1,5 @@
 """MoveRL on Ray RLlib (new API stack): the env creator, the safety metrics, a local Ray cluster of its own, and a
-policy loaded back from a checkpoint. Used by scripts/rllib_train.py, scripts/evaluate.py and scripts/scaling.py.
+policy loaded back from a checkpoint. Used by scripts/rllib_train.py, scripts/evaluate.py and tools/scaling.py.
 
 One env per env runner: every RLlib env runner is its own Ray worker process, rospy allows one ROS master per
 process, so each runner holds exactly one env (num_envs_per_env_runner=1, "sync" vectorisation: the env lives in the

@@ -174,3 +174,28 @@ def recording_env(env_id: str, kwargs: dict, folder: Path, episodes: int, name_p
         name_prefix=name_prefix,
         disable_logger=True,
     )
+
+
+def record_episodes(model, env_id: str, kwargs: dict, folder: Path, episodes: int, seed: int) -> None:
+    """`episodes` episodes of a trained policy (deterministic actions), recorded to folder by Gymnasium's RecordVideo.
+
+    Args:
+        model: anything with SB3's predict(obs, deterministic=...) -> (action, state), such as an SB3 model, or a
+            function of the env's action space that returns one (moverl_gym.rllib.CheckpointPolicy for an RLlib
+            checkpoint).
+        env_id, kwargs: the env, as gym.make takes them (a fresh env with render_mode="rgb_array").
+        seed: episode i starts from reset(seed=seed + i).
+    """
+    env = recording_env(env_id, kwargs, folder, episodes)
+    try:
+        if not hasattr(model, "predict"):
+            model = model(env.action_space)
+        for episode in range(episodes):
+            obs, _ = env.reset(seed=seed + episode)
+            done = False
+            while not done:
+                action, _ = model.predict(obs, deterministic=True)
+                obs, _, terminated, truncated, _ = env.step(action)
+                done = terminated or truncated
+    finally:
+        env.close()

@@ -3,7 +3,7 @@
 ROS-free. The contacts the simulator reports are what every safety claim rests on, so a change to how they are
 computed (the simulator's hot path, how its node serves a request) must leave them exactly as they were: the same
 pairs at the same physics substeps with the same depths. This module replays what a simulator node received on a live
-graph (its resets and trajectories, recorded by ``src/moverl_gym/test/record_ground_truth.py``) through a
+graph (its resets and trajectories, recorded by ``src/moverl_gym/tools/record_ground_truth.py``) through a
 ``Simulator`` in this process and lists every contact pair counted at every substep.
 
 ``replay_by_substep`` needs nothing but the Simulator's public API (``prepare``, ``advance`` one substep at a time with

@@ -2,8 +2,8 @@
 """Record what the simulator received on a live graph with the shield off, and the contacts it counted at every
 physics substep: the fixtures of src/moverl_sim/test/test_ground_truth_identity.py.
 
-    python src/moverl_gym/test/record_ground_truth.py                 # every run below, into the fixtures folder
-    python src/moverl_gym/test/record_ground_truth.py --runs case_pushing --steps 200 --out /tmp/gt
+    python src/moverl_gym/tools/record_ground_truth.py                 # every run below, into the fixtures folder
+    python src/moverl_gym/tools/record_ground_truth.py --runs case_pushing --steps 200 --out /tmp/gt
 
 Each run launches the env's graph (shield off, so every action is executed as commanded), steps it with a seeded
 policy (random actions in the table, human and case worlds; the pushing policy of pushing_policy_audit.py, which
@@ -54,9 +54,7 @@ EVENT_WAIT = 10.0  # s: an event not received by then fails the recording (the s
 
 
 def _pushing_module():
-    spec = importlib.util.spec_from_file_location(
-        "pushing_policy_audit", REPO / "src" / "moverl_gym" / "scripts" / "pushing_policy_audit.py"
-    )
+    spec = importlib.util.spec_from_file_location("pushing_policy_audit", HERE / "pushing_policy_audit.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod

@@ -2,7 +2,7 @@
 # Time the Python part of set-up on a fresh venv, as catkin_ws_setup.sh makes it (Debian's python3,
 # --system-site-packages), for each requirements file given; prints seconds and the venv's size. pip's cache is
 # whatever this machine has (warm after a first run): the figures are install times, not download times.
-#   bash src/moverl_gym/scripts/setup_time.sh <(git show <commit>:requirements.txt) requirements.txt
+#   bash src/moverl_gym/tools/setup_time.sh <(git show <commit>:requirements.txt) requirements.txt
 set -euo pipefail
 for req in "$@"; do
   venv=$(mktemp -d /tmp/moverl_setup_time.XXXXXX)

@@ -2,7 +2,7 @@
 # The attempt to use OmniSafe 0.5 (PPOLag, CPO) for issue 27, repeatable: a venv of its own with Debian's Python (the one
 # rospy is built for), our torch first, then OmniSafe. It prints what happens at each step; README "Constrained RL"
 # says why MoveRL ships its own PPO-Lagrangian (moverl_gym.constrained) instead. Nothing here is used by MoveRL.
-#   bash src/moverl_gym/scripts/omnisafe_attempt.sh [VENV_DIR]    (default: a new temporary folder, removed at the end)
+#   bash src/moverl_gym/tools/omnisafe_attempt.sh [VENV_DIR]    (default: a new temporary folder, removed at the end)
 set -uo pipefail
 dir=${1:-}
 if [ -z "$dir" ]; then

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Planned resets across a walking person seen only by cameras (issue 23): do they stay clear for their whole run?
 
-    python src/moverl_gym/scripts/sensed_reset_audit.py [--resets 25] [--out docs/sensed_resets]
+    python src/moverl_gym/tools/sensed_reset_audit.py [--resets 25] [--out docs/sensed_resets]
 
 A robot driven through the standard interface (FollowJointTrajectory, the simulator in real time) cannot be teleported:
 each episode's start is reached by a move the shield checks, at reset_velocity_scale (0.3: seconds per reset). With
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
         "",
         "Command:",
         "",
-        "    python src/moverl_gym/scripts/sensed_reset_audit.py"
+        "    python src/moverl_gym/tools/sensed_reset_audit.py"
         + (f" --resets {args.resets}" if args.resets != 25 else "")
         + (f" --scenarios {' '.join(args.scenarios)}" if args.scenarios != list(SCENARIOS) else "")
         + (f" --out {args.out}" if args.out else ""),

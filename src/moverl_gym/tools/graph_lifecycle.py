@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """What a launched graph leaves behind and where it listens (prints figures; not a test; ~4 min).
 
-    python src/moverl_gym/scripts/graph_lifecycle.py [--reps 3] [--steps 1000] [--expose-host ADDR]
+    python src/moverl_gym/tools/graph_lifecycle.py [--reps 3] [--steps 1000] [--expose-host ADDR]
                                                      [--sections 1,2,3,4,5] [--json out.json]
 
 Measures, counting the processes of each graph's own tree (LaunchedGraph.processes()):

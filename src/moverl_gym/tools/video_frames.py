@@ -2,7 +2,7 @@
 """A strip of frames from a recorded episode (an mp4 of RecordVideo, train.py --video or evaluate.py --video), evenly
 spaced from the first to the last frame, side by side in one PNG (for READMEs and reports).
 
-    python src/moverl_gym/scripts/video_frames.py runs/<run>/videos/eval-episode-1.mp4 out.png --n 4
+    python src/moverl_gym/tools/video_frames.py runs/<run>/videos/eval-episode-1.mp4 out.png --n 4
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Collision parity audit: the planning scene's verdicts against the physics engine's ground truth, for any robot.
 
-    python src/moverl_gym/scripts/collision_audit.py --worlds table human case -n 10000
-    python src/moverl_gym/scripts/collision_audit.py --robot-config my_arm.yaml --worlds table case -n 10000
-    python src/moverl_gym/scripts/collision_audit.py --worlds table human case -n 10000 --obstacles octomap
+    python src/moverl_gym/tools/collision_audit.py --worlds table human case -n 10000
+    python src/moverl_gym/tools/collision_audit.py --robot-config my_arm.yaml --worlds table case -n 10000
+    python src/moverl_gym/tools/collision_audit.py --worlds table human case -n 10000 --obstacles octomap
 
 Run it on your own arm before trusting the shield with it (README, "Checking your own arm"). First it compares the
 link shapes themselves (moverl_gym.geometry_parity: every point of PyBullet's shape of a link must be inside the
@@ -696,7 +696,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def command_line(args, defaults) -> str:
     """The command that reproduces this run (options that differ from the defaults)."""
-    parts = ["python src/moverl_gym/scripts/collision_audit.py"]
+    parts = ["python src/moverl_gym/tools/collision_audit.py"]
     if args.robot_config:
         parts.append(f"--robot-config {args.robot_config}")
     elif args.robot != defaults.robot:

@@ -10,7 +10,7 @@ configurations of the robot, and measures the distance of every point on the rob
 body's collision shapes in PyBullet (the planning scene's shapes contain PyBullet's: test_geometry_parity.py, so the
 distance to the scene's shapes is at most this). Points inside a shape count 0.
 
-    python src/moverl_gym/scripts/blind_zone.py [--robot panda | my_arm.yaml] [--worlds table human case]
+    python src/moverl_gym/tools/blind_zone.py [--robot panda | my_arm.yaml] [--worlds table human case]
         [-n 20] [--seed 0]
 
 Prints, per world, the points on the robot and on static objects, and their largest and 99.9th-percentile distance

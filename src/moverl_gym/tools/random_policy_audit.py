@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Random-policy contact audit over every registered env id, shield on and off (a long experiment, not a test).
 
-    python src/moverl_gym/scripts/random_policy_audit.py [--steps 10000] [--ids MoveRL/PandaReachCase-v0 ...]
-    python src/moverl_gym/scripts/random_policy_audit.py --control dynamic --shield on --steps 3000 \
+    python src/moverl_gym/tools/random_policy_audit.py [--steps 10000] [--ids MoveRL/PandaReachCase-v0 ...]
+    python src/moverl_gym/tools/random_policy_audit.py --control dynamic --shield on --steps 3000 \
         --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 MoveRL/PandaReachCase-v0 --out docs/dynamic_control
 
 For each id and shield setting: uniformly random actions from a fixed seed for --steps env steps (episodes
@@ -20,7 +20,7 @@ limits (the shield clamps states within config/shield.yaml's limit_tolerance and
 --world replaces every id's world (a name in worlds/ or a YAML path), e.g. the live tests' moving wall; --start
 fixes every episode's start configuration (reset option "start"), e.g. one clear of that wall's swing:
 
-    python src/moverl_gym/scripts/random_policy_audit.py --control dynamic --shield on --steps 3000 \
+    python src/moverl_gym/tools/random_policy_audit.py --control dynamic --shield on --steps 3000 \
         --ids MoveRL/PandaReachTable-v0 --world src/moverl_gym/test/worlds/moving_wall.yaml \
         --start -0.65 -0.785 0 -2.356 0 1.571 0.785 --out docs/dynamic_control/moving_wall
 """
@@ -160,7 +160,7 @@ def main(argv=None) -> int:
         w.writeheader()
         for r in rows:
             w.writerow({**r, "verdicts": json.dumps(r["verdicts"])})
-    cmd = f"python src/moverl_gym/scripts/random_policy_audit.py --steps {args.steps} --seed {args.seed}"
+    cmd = f"python src/moverl_gym/tools/random_policy_audit.py --steps {args.steps} --seed {args.seed}"
     if args.ids != p.get_default("ids"):
         cmd += " --ids " + " ".join(args.ids)
     for name in ("shield", "control", "world"):

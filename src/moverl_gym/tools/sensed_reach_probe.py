@@ -2,7 +2,7 @@
 """Can the goal be reached at all in the sensed mode? A scripted policy drives the joints straight at a goal
 configuration and keeps pushing while the shield holds the arm; per camera rate in simulated time.
 
-    python src/moverl_gym/scripts/sensed_reach_probe.py --world human --camera-rates 2 5 10 \
+    python src/moverl_gym/tools/sensed_reach_probe.py --world human --camera-rates 2 5 10 \
         --goal-q -0.022 0.052 0.023 -2.379 -0.002 2.431 0.003 --out docs/sensed_person/reach_probe
 
 The goal configuration is the one a world file's header gives as evidence for its goal (worlds/human.yaml). The
@@ -157,7 +157,7 @@ def main(argv=None) -> int:
                 }
             )
             print(json.dumps({k: v for k, v in rows[-1].items() if k != "per_episode"}), flush=True)
-    command = "python src/moverl_gym/scripts/sensed_reach_probe.py " + " ".join(
+    command = "python src/moverl_gym/tools/sensed_reach_probe.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )
     lines = [

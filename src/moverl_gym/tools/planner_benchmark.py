@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """OMPL planner benchmark on MoveRL's scenes (the paper's Fig. 4 on our worlds).
 
-    python src/moverl_gym/scripts/planner_benchmark.py --worlds table human case --pairs 50 --time-limit 0.1
+    python src/moverl_gym/tools/planner_benchmark.py --worlds table human case --pairs 50 --time-limit 0.1
 
 Problems: for each world, `pairs` start/goal pairs where both ends are free (/planning_scene/check_state VALID)
 but the straight joint-space segment collides (/planning_scene/check_path not VALID): exactly the problems the

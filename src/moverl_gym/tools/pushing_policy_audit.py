@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Pushing-policy contact audit: a policy that keeps driving the arm into the obstacles, shield on and off.
 
-    python src/moverl_gym/scripts/pushing_policy_audit.py --worlds case --steps 3000
-    python src/moverl_gym/scripts/pushing_policy_audit.py --robot-config my_arm.yaml --worlds table human case
-    python src/moverl_gym/scripts/pushing_policy_audit.py --worlds table human case --shield on --control dynamic \
+    python src/moverl_gym/tools/pushing_policy_audit.py --worlds case --steps 3000
+    python src/moverl_gym/tools/pushing_policy_audit.py --robot-config my_arm.yaml --worlds table human case
+    python src/moverl_gym/tools/pushing_policy_audit.py --worlds table human case --shield on --control dynamic \
         --out docs/dynamic_control/pushing
-    python src/moverl_gym/scripts/pushing_policy_audit.py --worlds human --shield on --obstacles octomap \
+    python src/moverl_gym/tools/pushing_policy_audit.py --worlds human --shield on --obstacles octomap \
         --mode realtime --out docs/sensed_person/realtime
 
 Random actions near home rarely reach the obstacles; this policy does. Before the run it samples configurations
@@ -344,7 +344,7 @@ def main(argv=None) -> int:
         w.writeheader()
         for r in rows:
             w.writerow({**r, "verdicts": json.dumps(r["verdicts"]), "targets": json.dumps(r["targets"])})
-    cmd = "python src/moverl_gym/scripts/pushing_policy_audit.py"
+    cmd = "python src/moverl_gym/tools/pushing_policy_audit.py"
     if args.robot_config:
         cmd += "".join(f" --robot-config {c}" for c in args.robot_config)
     cmd += " --worlds " + " ".join(args.worlds) + f" --steps {args.steps}"

@@ -3,7 +3,7 @@
 of the graph it launched (the env's own process, the simulator, the shield hosting the planning scene, ...), for
 several ids in one run, interleaved (this VM varies by 30 % between runs: compare ids within one run).
 
-    python src/moverl_gym/scripts/step_cost.py --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 --reps 2
+    python src/moverl_gym/tools/step_cost.py --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 --reps 2
 
 Random actions from a fixed seed, episodes reset as usual (resets included); 200 warm-up steps first. Each id runs in
 its own process (rospy allows one ROS master per process).

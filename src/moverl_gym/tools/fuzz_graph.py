@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Fuzz every service and subscribed topic of every node of a MoveRL graph with malformed inputs.
 
-    python src/moverl_gym/scripts/fuzz_graph.py [--out docs/fuzz]
+    python src/moverl_gym/tools/fuzz_graph.py [--out docs/fuzz]
 
 Two graphs, each launched on a free port in its own worker process:
   lockstep    the simulator's services, obstacles:=both (the planning scene subscribes to the world, the joint
@@ -554,7 +554,7 @@ def main(argv=None) -> int:
         (out / "fuzz.json").write_text(json.dumps(results, indent=2))
         (out / "fuzz.md").write_text(
             "# Fuzzing every service and subscribed topic\n\nCommand: `python "
-            "src/moverl_gym/scripts/fuzz_graph.py --out docs/fuzz` (see its docstring). Topics "
+            "src/moverl_gym/tools/fuzz_graph.py --out docs/fuzz` (see its docstring). Topics "
             "have no reply: a malformed message counts as refused when the subscriber's state "
             "shows it dropped it (the scene kept its world; its OctoMap status counted the cloud "
             "as dropped; the simulator's action server rejected the goal with a code and a "

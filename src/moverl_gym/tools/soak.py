@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Soak: run the graph for long and watch memory, file descriptors, processes, latency and contacts.
 
-    python src/moverl_gym/scripts/soak.py --out docs/soak                 # 200,000 + 50,000 steps (about 20 min)
-    python src/moverl_gym/scripts/soak.py --steps 3000 --octomap-steps 1000 --every 1000 --out /tmp/soak  # short
+    python src/moverl_gym/tools/soak.py --out docs/soak                 # 200,000 + 50,000 steps (about 20 min)
+    python src/moverl_gym/tools/soak.py --steps 3000 --octomap-steps 1000 --every 1000 --out /tmp/soak  # short
 
 A random policy with the shield on, 200,000 steps over the three worlds (table, human walking, case: a third each) and
 50,000 in the OctoMap mode (table world, sensed obstacles), each world in its own worker process and graph. Every
@@ -224,7 +224,7 @@ def main(argv=None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "soak.json").write_text(json.dumps(runs, indent=2))
         plot(runs, out / "soak.png")
-        cmd = "python src/moverl_gym/scripts/soak.py " + " ".join(argv if argv is not None else sys.argv[1:])
+        cmd = "python src/moverl_gym/tools/soak.py " + " ".join(argv if argv is not None else sys.argv[1:])
         (out / "soak.md").write_text(
             f"# Soak\n\nCommand: `{cmd}` (see its docstring). First sample after "
             f"{args.every} steps (warm-up), last at the end of each run.\n\n{table}\n\n"

@@ -2,9 +2,10 @@
 person walks up to it.
 
 The world is worlds/human.yaml's table, cameras and sensing, with the person replaced by a "visitor" (a 10 x 30 x
-30 cm box) that walks straight at the Panda's parked hand and back (x(t) = 0.75 - 0.3 sin(2 pi t / 6 s), at most
-0.31 m/s; its near face comes 5 cm past the hand) and a speed bound that covers it. The agent commands nothing (zero
-actions: stay where you are) for one period of the walk.
+30 cm box) that steps back and then walks straight at the Panda's parked hand (x(t) = 0.75 + 0.3 sin(2 pi t / 6 s),
+at most 0.31 m/s; at t = 4.5 s its near face comes 5 cm past the hand) and a speed bound that covers it. The agent
+commands nothing (zero actions: stay where you are) for one period of the walk. (Stepping back first: the simulator
+does not teleport the robot where a moving obstacle will walk into it within reset_clearance_time, config/sim.yaml.)
 
 * strategy plan (today's shield): every step holds still, and the visitor walks into the parked hand: contacts,
   all with the robot at rest;
@@ -32,7 +33,7 @@ VISITOR = {
     "shape": "box",
     "size": [0.1, 0.3, 0.3],
     "xyz": [0.75, 0.0, 0.25],
-    "motion": {"type": "oscillate", "axis": [-1, 0, 0], "amplitude": 0.3, "period": 6.0},
+    "motion": {"type": "oscillate", "axis": [1, 0, 0], "amplitude": 0.3, "period": 6.0},
     "observed": True,
 }
 STEPS = 120  # one period of the walk at the env's dt (0.05 s)

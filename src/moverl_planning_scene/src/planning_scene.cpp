@@ -417,8 +417,8 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
   }
   // Threatened: a cell a camera saw occupied (a person) lies within padding + the end margin of where the robot rests.
   // Space occupied only because no camera has seen it (unknown_occupied) is no threat to back away from: it is where
-  // the robot's own links and the person hide from the cameras, and the robot cannot leave it behind; the retreat
-  // never brings the robot closer to it than it stands (below).
+  // the robot's own links and the person hide from the cameras, and the robot cannot leave it behind (resting next to
+  // its own shadow, the KUKA iiwa searched for a retreat at every step and found none).
   if (c.occupancyFree(start_.data(), CellClass::kSeen)) return;  // resting here is covered by the margin
   out->threatened = true;
   // Not free at padding + end margin: the clearance is below that (plus the inflation's rounding).
@@ -432,15 +432,17 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
     out->path_check_time += since(t0);
   };
   if (!(seen > 0.0)) return done(" touching them: no move is known to back away, held");
-  out->clearance = seen;
-  m << " (" << seen << " m clear)";
-  // Unseen cells: up to `reach` (where a move's own margin keeps the robot from them anyway), no closer than now.
-  const double unseen = c.occupancyDistance(start_.data(), 0.0, reach, CellClass::kUnseen);
-  if (!(unseen > 0.0)) return done("; it touches space no camera has seen: no move is known to back away, held");
+  // The clearance from every occupied cell, seen or unseen: a retreat ends clearer of them, and no state of it comes
+  // closer to any of them than the robot stands, so nothing (the seen person, or one hidden in unseen space) can reach
+  // it sooner than if it held.
+  const double clear = c.occupancyDistance(start_.data(), 0.0, seen, CellClass::kAll);
+  if (!(clear > 0.0)) return done("; it touches space no camera has seen: no move is known to back away, held");
+  out->clearance = clear;
+  m << " (" << clear << " m clear" << (clear < seen ? " of every cell, " : ", ") << seen << " m of the seen ones)";
   const auto late = [&] { return Clock::now() >= deadline; };
   // The commanded move itself, when it backs away: accepted as it is.
-  double g = clearanceAbove(goal_, seen);
-  if (g >= seen + kRetreatGain && pathBacksAway(goal_, seen, unseen)) {
+  double g = clearanceAbove(goal_, clear);
+  if (g >= clear + kRetreatGain && pathBacksAway(goal_, clear)) {
     out->outcome = MotionOutcome::kValid;
     out->pairs.clear();
     out->last_free_fraction = -1.0;
@@ -463,7 +465,7 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
         q[i] = std::min(std::max(q[i], model_->lowerLimits()[i]), model_->upperLimits()[i]);
       }
       if (q == start_) return;
-      ends.push_back(clearanceAbove(q, seen));
+      ends.push_back(clearanceAbove(q, clear));
       candidates.push_back(std::move(q));
     };
     std::vector<double> gain(dof, 0.0);  // per joint: the gain of its move alone, signed by its direction
@@ -474,8 +476,8 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
         q[i] += f * req.retreat_reach[i];
         const std::size_t before = candidates.size();
         add(std::move(q));
-        if (candidates.size() > before && ends.back() - seen > std::fabs(gain[i])) {
-          gain[i] = std::copysign(ends.back() - seen, f);
+        if (candidates.size() > before && ends.back() - clear > std::fabs(gain[i])) {
+          gain[i] = std::copysign(ends.back() - clear, f);
         }
       }
     }
@@ -496,12 +498,12 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
     }
     std::vector<std::size_t> order;
     for (std::size_t k = 0; k < candidates.size(); ++k) {
-      if (ends[k] >= seen + kRetreatGain) order.push_back(k);
+      if (ends[k] >= clear + kRetreatGain) order.push_back(k);
     }
     std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return ends[a] > ends[b]; });
     for (std::size_t k : order) {
       if (late()) return done("; no move backing away found in the time the caller waits, held");
-      if (!pathBacksAway(candidates[k], seen, unseen)) continue;
+      if (!pathBacksAway(candidates[k], clear)) continue;
       out->retreat_state = candidates[k];
       out->retreat_clearance = ends[k];
       m << "; a move backs away (to " << ends[k] << " m clear)";
@@ -515,11 +517,10 @@ double PlanningScene::clearanceAbove(const std::vector<double>& q, double cleara
   double motion = 0.0;
   for (std::size_t i = 0; i < q.size(); ++i) motion += checker_->jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
   // No robot point moved more than `motion`: the clearance grew by at most that.
-  return checker_->occupancyDistance(q.data(), clearance + kRetreatGain, clearance + motion + kRetreatGain,
-                                     CellClass::kSeen);
+  return checker_->occupancyDistance(q.data(), clearance + kRetreatGain, clearance + motion + kRetreatGain);
 }
 
-bool PlanningScene::pathBacksAway(const std::vector<double>& q, double seen, double unseen) {
+bool PlanningScene::pathBacksAway(const std::vector<double>& q, double clearance) {
   FclCollisionChecker& c = *checker_;
   CollisionRequest fixed = verdict_only_;
   fixed.check_occupancy = false;  // the sensed cells: by clearance below
@@ -536,11 +537,10 @@ bool PlanningScene::pathBacksAway(const std::vector<double>& q, double seen, dou
   for (std::size_t i = 0; i < q.size(); ++i) motion += c.jointRadiusBound(i) * std::fabs(q[i] - start_[i]);
   const int n = std::max(1, static_cast<int>(std::ceil(motion / kRetreatResolution)));
   std::vector<double> s(q.size());
-  for (int k = 1; k <= n; ++k) {  // k = n: q itself, whose clearance from the seen cells the caller knows
+  for (int k = 1; k <= n; ++k) {  // k = n: q itself
     const double t = static_cast<double>(k) / n;
     for (std::size_t i = 0; i < q.size(); ++i) s[i] = start_[i] + t * (q[i] - start_[i]);
-    if (k < n && c.occupancyDistance(s.data(), seen, seen, CellClass::kSeen) < seen) return false;
-    if (c.occupancyDistance(s.data(), unseen, unseen, CellClass::kUnseen) < unseen) return false;
+    if (c.occupancyDistance(s.data(), clearance, clearance) < clearance) return false;
   }
   return true;
 }

@@ -547,9 +547,10 @@ TEST_F(PandaOctomap, ARobotRestingWithinTheMarginBacksAway) {
 /// sees, space no camera sees stays occupied, known-free cells (inside the robot) are turned free, and switching the
 /// rule off forgets only the prior.
 /// Retreat with unseen space around the robot (unknown_occupied): only cells a camera saw occupied make the robot
-/// back away (space no camera has seen, e.g. its own shadow, does not come closer); a retreat never brings any link
-/// closer to the unseen cells than it stands; and the search ends, holding, when the caller's time budget runs out.
-TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
+/// back away (space no camera has seen, e.g. its own shadow, does not come closer); a retreat ends clearer of every
+/// occupied cell and never brings any link closer to any of them, seen or unseen, than the robot stands (nothing can
+/// reach it sooner than if it held); and the search ends, holding, when the caller's time budget runs out.
+TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverCloserToAnyCell) {
   mps::OccupancyMapOptions o = mps::panda::mapOptions();
   const double reach = scene_->checker().reachRadius() + 0.3;
   o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
@@ -562,7 +563,7 @@ TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
   lean[1] = 0.3;
   lean[3] = -1.8;  // reaches towards x = 0.75
   // A camera behind the robot sees a wall at x = 0.75 (its rays clear the space before it); space the rays do not
-  // reach stays unseen. The robot's own cells (3 cm around its links at `lean`) are known free.
+  // reach stays unseen. The cells within kShell of its links at `lean` are known free.
   std::vector<Eigen::Vector3d> wall;
   for (double y = -0.4; y <= 0.4; y += 0.01) {
     for (double z = 0.0; z <= 0.8; z += 0.01) wall.emplace_back(0.75, y, z);
@@ -570,13 +571,14 @@ TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
   mps::MapUpdate u;
   map->computeUpdate(wall, {}, Eigen::Vector3d(-0.5, 0.0, 0.6), &u);
   std::vector<Eigen::AlignedBox3d> boxes;
-  checker.robotBoundingBoxes(lean.data(), 0.03, &boxes);
+  constexpr double kShell = 0.08;  // the known-free shell: the unseen space begins 8 cm from the links (the wall: 5-6)
+  checker.robotBoundingBoxes(lean.data(), kShell, &boxes);
   std::vector<Eigen::Vector3d> centers;
   std::vector<std::uint64_t> keys, free_keys;
   std::vector<std::uint8_t> mask;
   for (const auto& box : boxes) {
     map->unobservedCells(box, &centers, &keys);
-    checker.robotPointMask(lean.data(), centers, 0.03, &mask);
+    checker.robotPointMask(lean.data(), centers, kShell, &mask);
     for (std::size_t k = 0; k < keys.size(); ++k) {
       if (mask[k] != 0) free_keys.push_back(keys[k]);
     }
@@ -589,8 +591,8 @@ TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
   const double unseen0 = checker.occupancyDistance(lean.data(), 0.0, kFar, mps::CellClass::kUnseen);
   ASSERT_GT(seen0, 0.02);
   ASSERT_LT(seen0, 0.12) << "the wall is a few cm from the arm";
-  ASSERT_GT(unseen0, 0.0);
-  ASSERT_LT(unseen0, 0.1) << "unseen space lies close to the robot (beyond its known-free shell)";
+  ASSERT_GT(unseen0, seen0) << "the wall is the nearest";
+  ASSERT_LT(unseen0, 0.12) << "unseen space lies close to the robot (beyond its known-free shell)";
   EXPECT_DOUBLE_EQ(checker.occupancyDistance(lean.data(), 0.0, kFar), std::min(seen0, unseen0));
 
   std::vector<double> closer = lean;
@@ -606,39 +608,42 @@ TEST_F(PandaOctomap, RetreatBacksAwayFromSeenCellsNeverIntoUnseenSpace) {
   scene_->validateMotion(req, &mc, &sm);
   EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
   EXPECT_TRUE(mc.threatened) << mc.message;
-  EXPECT_NEAR(mc.clearance, seen0, 1e-9) << "the clearance that matters is from the seen cells";
+  EXPECT_NEAR(mc.clearance, std::min(seen0, unseen0), 1e-9) << "the clearance from every occupied cell";
   ASSERT_EQ(mc.retreat_state.size(), 7u) << mc.message;
-  EXPECT_GE(mc.retreat_clearance, seen0 + mps::PlanningScene::kRetreatGain);
-  // Checked independently, finely: from the seen cells no closer than the start (within half the retreat resolution),
-  // from the unseen ones no closer than the start either (up to padding + the end margin).
-  const double unseen_floor = std::min(unseen0, checker.options().padding + sm.end);
+  EXPECT_GE(mc.retreat_clearance, mc.clearance + mps::PlanningScene::kRetreatGain);
+  // Checked independently, finely: no state comes closer to any occupied cell than the start (within half the retreat
+  // resolution); the goal is clearer.
+  const double clear0 = std::min(seen0, unseen0);
   std::vector<double> q(7);
   for (int k = 0; k <= 200; ++k) {
     for (std::size_t i = 0; i < 7; ++i) q[i] = lean[i] + k / 200.0 * (mc.retreat_state[i] - lean[i]);
-    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar, mps::CellClass::kSeen),
-              seen0 - mps::PlanningScene::kRetreatResolution / 2)
-        << "at " << k / 2.0 << " %";
-    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar, mps::CellClass::kUnseen),
-              unseen_floor - mps::PlanningScene::kRetreatResolution / 2)
+    EXPECT_GE(checker.occupancyDistance(q.data(), 0.0, kFar), clear0 - mps::PlanningScene::kRetreatResolution / 2)
         << "at " << k / 2.0 << " %";
   }
-
-  // Unseen space alone within the margin (no seen cell near): not a threat, nothing searched.
-  sm.end = sm.plan = std::max(0.0, seen0 - checker.options().padding - 0.03);
-  ASSERT_LT(checker.options().padding + sm.end, seen0);
-  if (checker.options().padding + sm.end > unseen0) {
-    scene_->validateMotion(req, &mc, &sm);
-    EXPECT_FALSE(mc.threatened) << mc.message;
-    EXPECT_TRUE(mc.retreat_state.empty());
-  }
+  EXPECT_NEAR(checker.occupancyDistance(mc.retreat_state.data(), 0.0, kFar), mc.retreat_clearance, 1e-9);
 
   // Out of time: the search stops and the robot holds, saying why.
-  sm.end = sm.plan = seen0 + 0.02;
   req.time_budget = 1e-9;
   scene_->validateMotion(req, &mc, &sm);
   EXPECT_TRUE(mc.threatened) << mc.message;
   EXPECT_TRUE(mc.retreat_state.empty());
   EXPECT_NE(mc.message.find("time the caller waits"), std::string::npos) << mc.message;
+  req.time_budget = 0.0;
+
+  // Unseen space alone within the margin (the same map without the wall): not a threat, nothing searched.
+  auto blind = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(blind) << error;
+  mps::MapUpdate none;
+  blind->computeUpdate({}, {}, Eigen::Vector3d(-0.5, 0.0, 0.6), &none);
+  blind->addKnownFree(free_keys, &none);
+  blind->apply(none);
+  checker.setOccupancy(blind.get());
+  ASSERT_TRUE(checker.setOctreeMargin(sm.end));
+  ASSERT_FALSE(checker.occupancyFree(lean.data())) << "the unseen space lies within the margin";
+  ASSERT_TRUE(checker.setOctreeMargin(0.0));
+  scene_->validateMotion(req, &mc, &sm);
+  EXPECT_FALSE(mc.threatened) << mc.message;
+  EXPECT_TRUE(mc.retreat_state.empty());
   checker.setOccupancy(nullptr);
 }
 

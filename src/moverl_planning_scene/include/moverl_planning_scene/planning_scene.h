@@ -92,7 +92,7 @@ struct MotionCheck {
   double plan_horizon = 0.0;   ///< s: a returned plan is covered for a move lasting at most this long (0: any)
   // Retreat (a request with retreat_reach; ValidateMotion.srv):
   bool threatened = false;            ///< the robot would rest within the predictive margin of the seen cells
-  double clearance = -1.0;            ///< threatened: m the start is at least clear of the seen cells (-1: touching)
+  double clearance = -1.0;            ///< threatened: m the start is clear of every occupied cell (-1: touching)
   std::vector<double> retreat_state;  ///< threatened and refused: the goal of a move that backs away (empty: none)
   double retreat_clearance = -1.0;    ///< m that goal (or a commanded move accepted as backing away) is at least clear
 };
@@ -164,13 +164,13 @@ class PlanningScene {
   /// when it backs away or propose one that does (out->retreat_state). Stops (holding) at `deadline`.
   void retreat(const MotionRequest& request, double end_margin, std::chrono::steady_clock::time_point deadline,
                MotionCheck* out);
-  /// The clearance (m) of q from the seen cells when it is at least `clearance` + kRetreatGain, else less than that.
+  /// The clearance (m) of q from every occupied cell when it is at least `clearance` + kRetreatGain, else less.
   double clearanceAbove(const std::vector<double>& q, double clearance);
   /// True when the straight move start_ -> q backs away: q free of self collisions and the world objects, its path
   /// free of them (padded, at path_resolution), and its states every kRetreatResolution of robot-point motion (q
-  /// included) at least `seen` clear of the seen cells and at least `unseen` clear of the unseen ones (q's own
-  /// clearance from the seen cells is clearanceAbove's).
-  bool pathBacksAway(const std::vector<double>& q, double seen, double unseen);
+  /// included) at least `clearance` clear of every occupied cell, seen or unseen (q's own clearance is
+  /// clearanceAbove's).
+  bool pathBacksAway(const std::vector<double>& q, double clearance);
 
   std::unique_ptr<RobotModel> model_;
   std::unique_ptr<FclCollisionChecker> checker_;

@@ -615,20 +615,28 @@ class Simulator:
         stats.total_contact_substeps = self._total_contact_substeps
         return stats
 
-    def near_moving(self, seconds):
-        """Pairs (robot link, moving object id) that a moving obstacle can close within `seconds` at its top speed (its
-        motion's, times motion_time_scale) in the current configuration, with the obstacles where they are now
-        (PyBullet's closest points; links fixed to the base excluded, as for contacts)."""
+    def touched_within(self, seconds):
+        """Pairs (robot link, moving object id) that will touch in the current configuration within the next `seconds`
+        of simulated time, the obstacles moving as their motions say (at motion_time_scale), the robot held still:
+        PyBullet's closest points at instants at most 1 cm of obstacle motion apart (links fixed to the base excluded,
+        as for contacts). The obstacles are left where they are now."""
+        if seconds <= 0.0 or not self._movers:
+            return []
         names, link_object, base_fixed = self.link_names, self._link_object, self._base_fixed_links
+        now = self.motion_time
+        fastest = max(obj.motion.max_speed for _, obj, _ in self._movers) * self._motion_scale
+        n = max(1, int(np.ceil(fastest * seconds / 0.01)))
         pairs = set()
-        for body, obj, _ in self._movers:
-            reach = obj.motion.max_speed * self._motion_scale * seconds
-            if reach <= 0.0:
-                continue
-            for pt in pybullet.getClosestPoints(self.robot, body, reach, physicsClientId=self._cid):
-                name = link_object.get((body, pt[4]))
-                if name is not None and pt[3] not in base_fixed and pt[8] < reach:
-                    pairs.add((names[pt[3]], name))
+        try:
+            for k in range(1, n + 1):
+                self._place_movers(now + seconds * k / n)
+                for body, _, _ in self._movers:
+                    for pt in pybullet.getClosestPoints(self.robot, body, 0.0, physicsClientId=self._cid):
+                        name = link_object.get((body, pt[4]))
+                        if name is not None and pt[3] not in base_fixed and pt[8] <= 0.0:
+                            pairs.add((names[pt[3]], name))
+        finally:
+            self._place_movers(now)
         return sorted(pairs)
 
     # ------------------------------------------------------------------ validation

@@ -116,14 +116,14 @@ def reset_robot(sim, positions, clearance_time=0.0, restart=True):
     and a person does not teleport back to the start of its walk under their eyes) the motions go on.
 
     A robot cannot be placed inside an obstacle (where the motions restart, a person may stand on the sampled start),
-    nor where a moving one can reach it within `clearance_time` (s, sim.yaml reset_clearance_time) at its top speed: a
-    real robot never appears next to a person, it gets there through moves the shield checked.
+    nor where a moving one will touch it within `clearance_time` (s of its motion, sim.yaml reset_clearance_time): a
+    real robot never appears in a person's way, it gets there through moves the shield checked.
     Such a target is refused like a planned reset's unreachable target, the robot put back where it was.
 
     Raises:
         ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
-        Unreachable: the target touches the world, or a moving obstacle can reach it within clearance_time (the message
-            names the pairs). The robot is put back; restarted motions stay restarted.
+        Unreachable: the target touches the world, or a moving obstacle will touch it within clearance_time (the
+            message names the pairs). The robot is put back; restarted motions stay restarted.
         RuntimeError: the robot cannot be put back (a dynamic robot pushed beyond a joint limit is not a valid
             configuration): it stays at the target. Not a refusal: the node's service answers with an error.
     """
@@ -132,7 +132,7 @@ def reset_robot(sim, positions, clearance_time=0.0, restart=True):
     if restart:
         sim.restart_motions()
     touching = sim.contacts_now().world_pairs
-    near = [] if touching or clearance_time <= 0.0 else sim.near_moving(clearance_time)
+    near = [] if touching else sim.touched_within(clearance_time)
     if touching or near:
         try:
             sim.reset_robot(before)
@@ -143,6 +143,6 @@ def reset_robot(sim, positions, clearance_time=0.0, restart=True):
             raise Unreachable(f"the target touches the world where the obstacles' motions restart ({pairs})")
         pairs = ", ".join(f"{a} / {b}" for a, b in near)
         raise Unreachable(
-            f"a moving obstacle can reach the target within reset_clearance_time ({clearance_time} s) at its top speed "
+            f"a moving obstacle will touch the target within reset_clearance_time ({clearance_time} s of its motion) "
             f"({pairs})"
         )

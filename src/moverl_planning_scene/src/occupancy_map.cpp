@@ -95,6 +95,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->occupied_.assign(words, 0);
   m->clamped_.assign(words, 0);
   m->end_.assign(static_cast<std::size_t>(cells), 0);
+  m->end_slot_.assign(static_cast<std::size_t>(cells), 0);
   std::int64_t blocks = 1, supers = 1;
   for (int i = 0; i < 3; ++i) {
     m->blocks_[i] = ((m->size_[i] - 1) >> kBlockShift) + 1;
@@ -143,6 +144,8 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   //    does: one beam per end cell. end_ holds the flags of each cell's points (reset at the end), order_ the cells in
   //    the order of their first point (neighbouring pixels cast neighbouring beams one after another: cache).
   order_.clear();
+  order_end_.clear();
+  order_count_.clear();
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
     if (!p.allFinite()) {
@@ -170,7 +173,16 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
                          fz = static_cast<float>(end.z());
     const std::int64_t c = cellOf(Eigen::Vector3d(fx, fy, fz));
     if (c < 0) continue;
-    if (end_[c] == 0) order_.push_back(c);
+    if (end_[c] == 0) {
+      end_slot_[c] = static_cast<std::uint32_t>(order_.size());
+      order_.push_back(c);
+      order_end_.push_back(end);
+      order_count_.push_back(1);
+    } else {
+      const std::uint32_t n = end_slot_[c];
+      order_end_[n] += end;
+      ++order_count_[n];
+    }
     end_[c] |= flag | kPresent;
   }
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
@@ -186,22 +198,32 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     ++hit_cells;
     if (!(value_[c] == clamp_max_)) out->hits.push_back(static_cast<std::uint64_t>(c));  // a hit changes it
   }
-  // 3. Beams from the origin to each end cell's centre, clipped to the map bounds: the cells from the first one up
-  //    to, excluding, the end cell (as octomap's computeRayKeys), each counted once per cloud. A 3D DDA over the
+  // 3. Beams from the origin to the centroid of each end cell's points (octomap's discretized insertion casts to the
+  //    cell's centre: with a sparse cloud of a static scene the same centres are hit every view, and a cell that no
+  //    centre's beam crosses is never seen free again once a person left it, although a point's own line of sight
+  //    crosses it; a lone point's beam is its line of sight), clipped to the map bounds: the cells from the first one up to, excluding, the end cell (as octomap's computeRayKeys), each
+  //    counted once per cloud. A 3D DDA over the
   //    grid's indices (Amanatides & Woo). A cell where only fixture points end was seen down to the fixture's surface
   //    (anything above it would have stopped a beam): the end cell counts as seen free too. A robot's end cell marks
   //    nothing: what was seen there stays (a hand that was seen keeps its cells when it comes within the filter).
   std::size_t free_cells = 0;
   const double inv = inv_resolution_;
   const std::int64_t stride[3] = {size_[1] * size_[2], size_[2], 1};
-  for (std::int64_t c_end : order_) {
+  for (std::size_t n = 0; n < order_.size(); ++n) {
+    const std::int64_t c_end = order_[n];
+    // The centroid of the points that end in the cell, kept inside it (a lone point: the point itself).
     const std::int64_t ek = c_end % size_[2], ej = (c_end / size_[2]) % size_[1], ei = c_end / (size_[1] * size_[2]);
-    const Eigen::Vector3d end = centre(ei, ej, ek);
+    const Eigen::Array3d lo = centre(ei, ej, ek).array() - 0.5 * options_.resolution;
+    const double inset = 1e-6 * options_.resolution;
+    const Eigen::Vector3d end = (order_end_[n].array() / order_count_[n])
+                                    .max(lo + inset)
+                                    .min(lo + (options_.resolution - inset))
+                                    .matrix();
     const bool through_end = (end_[c_end] & ~kPresent) == kFixture;
     end_[c_end] = 0;  // reset for the next cloud
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
-    const Eigen::Vector3d a = origin + t0 * (end - origin), b = origin + t1 * (end - origin), d = b - a;
+    const Eigen::Vector3d a = origin + t0 * (end - origin), b = t1 >= 1.0 ? end : Eigen::Vector3d(origin + t1 * (end - origin)), d = b - a;
     std::int64_t at[3], last[3], step[3];
     double t_max[3], t_delta[3];
     bool inside = true;

@@ -9,7 +9,9 @@
  * the cells before them but mark nothing occupied; points on a static world object the scene knows exactly clear
  * their end cell too (the beam saw the space down to the object's surface). Within one cloud a cell hit by any beam
  * stays occupied even when other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to
- * its centre; a cell where any obstacle point ends is hit, whatever else ends there). Beams are clipped to `bounds`
+ * the centroid of its points, not to its centre as octomap does: a camera that sees a static scene hits the same cells
+ * every view, and a cell that no centre's beam crosses would stay occupied for ever once a person left it, although a
+ * point's line of sight crosses it; a cell where any obstacle point ends is hit, whatever else ends there). Beams are clipped to `bounds`
  * (the robot's reach and margin). Clearing: when an obstacle moves away, beams now pass through its old cells and turn
  * them free.
  *
@@ -186,6 +188,9 @@ class OccupancyMap {
   std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
   std::vector<std::uint8_t> end_;          ///< computeUpdate's scratch: the flags of the points ending in a cell
   std::vector<std::int64_t> order_;        ///< computeUpdate's scratch: the end cells, in the order of their points
+  std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
+  std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
+  std::vector<std::uint32_t> end_slot_;     ///< computeUpdate's scratch: a cell's index in order_ (valid if listed)
   std::vector<std::uint64_t> observed_;    ///< a bit per cell: hit or seen free at least once since the last clear
   std::vector<std::uint64_t> occupied_;    ///< a bit per cell: log-odds >= the threshold
   std::vector<std::uint64_t> clamped_;     ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)

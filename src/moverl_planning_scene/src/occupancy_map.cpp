@@ -201,8 +201,8 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   // 3. Beams from the origin to the centroid of each end cell's points (octomap's discretized insertion casts to the
   //    cell's centre: with a sparse cloud of a static scene the same centres are hit every view, and a cell that no
   //    centre's beam crosses is never seen free again once a person left it, although a point's own line of sight
-  //    crosses it; a lone point's beam is its line of sight), clipped to the map bounds: the cells from the first one up to, excluding, the end cell (as octomap's computeRayKeys), each
-  //    counted once per cloud. A 3D DDA over the
+  //    crosses it; a lone point's beam is its line of sight), clipped to the map bounds: the cells from the first one
+  //    up to, excluding, the end cell (as octomap's computeRayKeys), each counted once per cloud. A 3D DDA over the
   //    grid's indices (Amanatides & Woo). A cell where only fixture points end was seen down to the fixture's surface
   //    (anything above it would have stopped a beam): the end cell counts as seen free too. A robot's end cell marks
   //    nothing: what was seen there stays (a hand that was seen keeps its cells when it comes within the filter).
@@ -215,15 +215,14 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     const std::int64_t ek = c_end % size_[2], ej = (c_end / size_[2]) % size_[1], ei = c_end / (size_[1] * size_[2]);
     const Eigen::Array3d lo = centre(ei, ej, ek).array() - 0.5 * options_.resolution;
     const double inset = 1e-6 * options_.resolution;
-    const Eigen::Vector3d end = (order_end_[n].array() / order_count_[n])
-                                    .max(lo + inset)
-                                    .min(lo + (options_.resolution - inset))
-                                    .matrix();
+    const Eigen::Vector3d end =
+        (order_end_[n].array() / order_count_[n]).max(lo + inset).min(lo + (options_.resolution - inset)).matrix();
     const bool through_end = (end_[c_end] & ~kPresent) == kFixture;
     end_[c_end] = 0;  // reset for the next cloud
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
-    const Eigen::Vector3d a = origin + t0 * (end - origin), b = t1 >= 1.0 ? end : Eigen::Vector3d(origin + t1 * (end - origin)), d = b - a;
+    const Eigen::Vector3d a = origin + t0 * (end - origin),
+                          b = t1 >= 1.0 ? end : Eigen::Vector3d(origin + t1 * (end - origin)), d = b - a;
     std::int64_t at[3], last[3], step[3];
     double t_max[3], t_delta[3];
     bool inside = true;

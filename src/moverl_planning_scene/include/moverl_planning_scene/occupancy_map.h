@@ -11,9 +11,9 @@
  * stays occupied even when other beams cross it. Points are grouped by the cell they end in (one beam per end cell, to
  * the centroid of its points, not to its centre as octomap does: a camera that sees a static scene hits the same cells
  * every view, and a cell that no centre's beam crosses would stay occupied for ever once a person left it, although a
- * point's line of sight crosses it; a cell where any obstacle point ends is hit, whatever else ends there). Beams are clipped to `bounds`
- * (the robot's reach and margin). Clearing: when an obstacle moves away, beams now pass through its old cells and turn
- * them free.
+ * point's line of sight crosses it; a cell where any obstacle point ends is hit, whatever else ends there). Beams are
+ * clipped to `bounds` (the robot's reach and margin). Clearing: when an obstacle moves away, beams now pass through its
+ * old cells and turn them free.
  *
  * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
  * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
@@ -184,16 +184,16 @@ class OccupancyMap {
   double inv_resolution_ = 0.0;
   std::int64_t offset_[3] = {0, 0, 0};  ///< floor(x / resolution) of the grid's cell 0, per axis
   std::int64_t size_[3] = {0, 0, 0};
-  std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed
-  std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
-  std::vector<std::uint8_t> end_;          ///< computeUpdate's scratch: the flags of the points ending in a cell
-  std::vector<std::int64_t> order_;        ///< computeUpdate's scratch: the end cells, in the order of their points
+  std::vector<float> value_;                ///< log-odds of each cell; NaN: never observed
+  std::vector<std::uint64_t> seen_, hit_;   ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
+  std::vector<std::uint8_t> end_;           ///< computeUpdate's scratch: the flags of the points ending in a cell
+  std::vector<std::int64_t> order_;         ///< computeUpdate's scratch: the end cells, in the order of their points
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
   std::vector<std::uint32_t> end_slot_;     ///< computeUpdate's scratch: a cell's index in order_ (valid if listed)
-  std::vector<std::uint64_t> observed_;    ///< a bit per cell: hit or seen free at least once since the last clear
-  std::vector<std::uint64_t> occupied_;    ///< a bit per cell: log-odds >= the threshold
-  std::vector<std::uint64_t> clamped_;     ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
+  std::vector<std::uint64_t> observed_;     ///< a bit per cell: hit or seen free at least once since the last clear
+  std::vector<std::uint64_t> occupied_;     ///< a bit per cell: log-odds >= the threshold
+  std::vector<std::uint64_t> clamped_;      ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
   // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.
   std::vector<std::uint8_t> block_count_;
   std::vector<std::uint8_t> block_dirty_;  ///< per block: cells not at clamp_min (unknown ones included)

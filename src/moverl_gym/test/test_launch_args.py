@@ -389,3 +389,16 @@ def test_a_sensed_world_whose_bound_is_below_its_motion_is_refused(tmp_path):
     check({"obstacles": "objects", "world_file": str(cell)})
     cell.write_text(f"base: {base}\nname: cell\nobjects:\n{person}")
     check({"obstacles": "sensed", "world_file": str(cell)})  # ISO's bound, unknown space occupied
+
+
+@pytest.mark.parametrize(
+    "obstacles, strategy", [("objects", "plan"), ("octomap", "retreat"), ("both", "retreat"), ("sensed", "retreat")]
+)
+def test_the_default_strategy_backs_away_only_where_a_person_is_sensed(obstacles, strategy):
+    """With a sensed map a robot held still is walked into (docs/sensing.md): there the default is retreat; with the
+    world file's obstacles it is the paper's plan (retreat would do the same there). A given strategy wins."""
+    _, proc = roslaunch(f"obstacles:={obstacles}")
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(rf"^/shield/strategy: {strategy}$", proc.stdout, re.M), proc.stdout
+    _, proc = roslaunch(f"obstacles:={obstacles}", "strategy:=discard")
+    assert re.search(r"^/shield/strategy: discard$", proc.stdout, re.M), proc.stdout

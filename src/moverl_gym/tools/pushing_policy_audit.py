@@ -121,7 +121,6 @@ def worker(
     from gymnasium.wrappers import TimeLimit
 
     from moverl_gym.env import MoveRLReachEnv
-    from moverl_gym.launch_args import launch_defaults
     from moverl_gym.paths import config_file, world_file
     from moverl_gym.task import TaskConfig
     from moverl_sim.core import Simulator
@@ -173,6 +172,7 @@ def worker(
         moving = resting = 0  # who moved: contact pairs while the robot moved / rested
         lower, upper = inner.scaler.limits.lower, inner.scaler.limits.upper
         verdicts: dict[str, int] = {}
+        used = ""  # the strategy the shield reports (the launch file's default unless one was given)
         t0 = time.perf_counter()
         for _ in range(steps):
             action = policy.act(inner.q)
@@ -188,6 +188,7 @@ def worker(
             resting += max(info["contacts_resting"], 0)
             contact_steps += info["contacts"] > 0
             verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+            used = info.get("strategy") or used
             if term or trunc:
                 episodes += 1
                 env.reset()
@@ -202,7 +203,7 @@ def worker(
         "obstacles": obstacles or "objects",
         "mode": mode or "lockstep",
         **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
-        "strategy": (strategy or launch_defaults()["strategy"]) if shield else "",
+        "strategy": used if shield else "",
         "shield": shield,
         "steps": steps,
         "episodes": episodes,

@@ -74,4 +74,6 @@ def test_recovery_on_finishes_the_run_and_logs_the_restart(tmp_path):
 def test_recovery_off_stops_with_a_clear_error(tmp_path):
     code, out, err, _ = train_and_kill_the_simulator(tmp_path, "off")
     assert code != 0
-    assert "MoveRLError" in err and ("graph is down" in err or "unreachable" in err), err[-3000:]
+    # Whichever call the kill lands in (a connection refused, or closed while the answer was awaited), the error says
+    # that the graph went down, not only which call failed.
+    assert "MoveRLError" in err and "graph is down" in err, err[-3000:]

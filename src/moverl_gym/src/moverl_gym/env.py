@@ -71,6 +71,9 @@ DISCARDED = frozenset(
 )
 #: Counters of discarded steps per verdict for training logs and metrics ("discarded_self", ... in code order).
 DISCARDED_COUNTERS = tuple(VERDICTS[v] for v in sorted(DISCARDED) if VERDICTS[v].startswith("discarded_"))
+#: s a component failure waits for a launched graph's roslaunch to report a required node's death (the failure may be
+#: the graph going down; the error then says so)
+GRAPH_DOWN_WAIT = 2.0
 #: Verdicts after which the env cannot go on (MoveRLError), with the component that failed.
 FAILURES = {
     _Step.INVALID_REQUEST: "shield (invalid request)",
@@ -430,7 +433,9 @@ class MoveRLReachEnv(gym.Env):
             res = self._backend.step(target, self.config.dt)
             verdict = res.verdict
             if verdict in FAILURES:
-                raise MoveRLError(f"{FAILURES[verdict]} failed ({VERDICTS[verdict]}): {res.message}")
+                message = f"{FAILURES[verdict]} failed ({VERDICTS[verdict]}): {res.message}"
+                down = self._graph.down(GRAPH_DOWN_WAIT) if self._graph is not None else ""
+                raise MoveRLError(f"the graph is down ({down}): {message}" if down else message)
         except MoveRLError as exc:
             if not self.recover:
                 raise

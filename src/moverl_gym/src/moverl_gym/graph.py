@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import atexit
 import os
+import re
 import shutil
 import socket
 import tempfile
@@ -43,6 +44,10 @@ SHIM = "libmoverl_loopback.so"
 
 class GraphError(RuntimeError):
     """The ROS graph could not be started or reached."""
+
+
+#: roslaunch's line when a node declared required="true" (the simulator) exits: it then stops the whole graph
+REQUIRED_DIED = re.compile(r"REQUIRED process \[([^\]]+)\] has died")
 
 
 def free_port() -> int:
@@ -229,6 +234,21 @@ class LaunchedGraph:
             return False
         self._reaper.poll(0)
         return not self._reaper.ended and not any(e[0] in ("exit", "error") for e in self._reaper.events)
+
+    def down(self, wait: float) -> str:
+        """Why the graph is going down, or "" if it still runs after wait s: roslaunch logs a required node's death
+        (the simulator) at once and then stops the rest, which takes seconds. A component that failed mid-call (a
+        connection closed while its answer was awaited) may be the first sign of it."""
+        deadline = time.monotonic() + wait
+        while True:
+            died = REQUIRED_DIED.findall(self.log_tail(200))
+            if died:
+                return f"roslaunch: required node {died[-1]} died"  # roslaunch's process name: <node>-<n>
+            if not self.alive():
+                return "roslaunch exited"
+            if time.monotonic() >= deadline:
+                return ""
+            time.sleep(0.05)
 
     def processes(self) -> list[reaper.Proc]:
         """Every process of the graph: the reaper, its descendants, and any process carrying the graph's marker."""

@@ -73,17 +73,8 @@ def measure(robot: str, world_name: str, n: int, seed: int) -> dict:
             continue
         configs += 1
         for cam in cams:
-            _, _, _, zbuf, seg = p.getCameraImage(
-                cam.width,
-                cam.height,
-                viewMatrix=cam.view_matrix,
-                projectionMatrix=cam.projection_matrix,
-                renderer=pybullet.ER_TINY_RENDERER,
-                shadow=0,
-            )
-            seg = np.asarray(seg).reshape(-1)
-            depth = np.asarray(zbuf, dtype=np.float64).reshape(cam.height, cam.width)
-            depth = cam.far * cam.near / (cam.far - (cam.far - cam.near) * depth)
+            depth, seg = cam.render_segmented(sim.client_id)
+            seg = seg.reshape(-1)
             pts = cam.optical_to_world(cam.points_from_depth(depth))
             body_of = seg & ((1 << 24) - 1)  # PyBullet packs (link + 1) << 24 | body into the mask
             for body, name in bodies.items():

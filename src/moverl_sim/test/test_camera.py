@@ -270,6 +270,17 @@ def test_no_return_pixels_are_at_far(box_client):
     assert np.all(short.render(box_client)[:, 2] == np.float32(0.6))
 
 
+def test_segmented_render_is_the_depth_render_with_the_body_of_each_pixel(box_client):
+    cam = face_camera()
+    depth, seg = cam.render_segmented(box_client)
+    assert np.array_equal(depth, cam.render_depth(box_client))
+    hit = depth < cam.far
+    assert hit.sum() > 2000
+    assert np.all(seg[~hit] == -1), "no return: no body"
+    bodies = set(np.unique(seg[hit] & ((1 << 24) - 1)).tolist())
+    assert len(bodies) == 1, f"only the box is in view: {bodies}"
+
+
 def test_depth_from_zbuffer():
     near, far = 0.1, 3.5
     z = np.array([0.5, 1.0, 3.0])

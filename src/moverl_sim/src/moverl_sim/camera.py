@@ -173,20 +173,34 @@ class Camera:
         return out
 
     # ------------------------------------------------------------------ rendering
-    def render_zbuffer(self, client_id):
-        """Render the depth buffer (height x width float32, 0 at near .. 1 at far / no return) with PyBullet's
-        TinyRenderer in physics client ``client_id`` (e.g. Simulator.client_id)."""
-        _, _, _, zbuf, _ = pybullet.getCameraImage(
+    def _image(self, client_id, flags):
+        """PyBullet's TinyRenderer image of this camera in physics client ``client_id``: (zbuf, segmentation)."""
+        _, _, _, zbuf, seg = pybullet.getCameraImage(
             self.width,
             self.height,
             viewMatrix=self.view_matrix,
             projectionMatrix=self.projection_matrix,
             renderer=pybullet.ER_TINY_RENDERER,
-            flags=pybullet.ER_NO_SEGMENTATION_MASK,
+            flags=flags,
             shadow=0,
             physicsClientId=client_id,
         )
+        return zbuf, seg
+
+    def render_zbuffer(self, client_id):
+        """Render the depth buffer (height x width float32, 0 at near .. 1 at far / no return) with PyBullet's
+        TinyRenderer in physics client ``client_id`` (e.g. Simulator.client_id)."""
+        zbuf, _ = self._image(client_id, pybullet.ER_NO_SEGMENTATION_MASK)
         return np.asarray(zbuf, dtype=np.float32).reshape(self.height, self.width)
+
+    def render_segmented(self, client_id):
+        """Metric z-depth image (as render_depth) and what each pixel sees: PyBullet's segmentation mask (height x
+        width int, (link + 1) << 24 | body unique id; -1: no return)."""
+        zbuf, seg = self._image(client_id, 0)
+        depth = depth_from_zbuffer(
+            np.asarray(zbuf, dtype=np.float32).reshape(self.height, self.width), self.near, self.far
+        )
+        return depth, np.asarray(seg).reshape(self.height, self.width)
 
     def render_depth(self, client_id):
         """Metric z-depth image (height x width, float64; no return = far)."""

@@ -140,9 +140,10 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
-  // 1. End points (beyond max_range: cut there, free space only), grouped by cell as octomap's discretized insertion
-  //    does: one beam per end cell. end_ holds the flags of each cell's points (reset at the end), order_ the cells in
-  //    the order of their first point (neighbouring pixels cast neighbouring beams one after another: cache).
+  // 1. End points (beyond max_range: cut there, free space only), grouped by cell: one beam per end cell (step 3),
+  //    to the centroid of the cell's points (order_end_ sums them, order_count_ counts them). end_ holds the flags of
+  //    each cell's points (reset at the end), order_ the cells in the order of their first point (neighbouring
+  //    pixels cast neighbouring beams one after another: cache).
   order_.clear();
   order_end_.clear();
   order_count_.clear();

@@ -111,6 +111,43 @@ def test_bad_trajectories_are_rejected_without_moving(home_sim, case):
     assert home_sim.sim_time == t0 and home_sim.total_contact_substeps == total
 
 
+def test_kinematic_prepare_fast_path_gives_the_checked_paths_doubles(home_sim):
+    """prepare()'s plain-Python path (kinematic control) and its numpy path sample a trajectory to the same doubles,
+    bit for bit: segments shorter and longer than a substep, ends off the substep grid, a first point at t = 0 or
+    not, points beyond a limit by less than its tolerance (clamped), a path tolerance (checked, then unused)."""
+    sim = home_sim
+    rng = np.random.default_rng(7)
+    lower, upper, vmax = np.array(sim.lower), np.array(sim.upper), np.array(sim.velocity_limits)
+    for i in range(300):
+        m = int(rng.integers(1, 6))
+        times = np.cumsum(rng.choice([rng.uniform(0.001, 0.004), rng.uniform(0.004, 0.2)], size=m))
+        if i % 3 == 0:
+            times = np.concatenate(([0.0], times))
+        beyond = i % 5 == 0  # joint 4 at its upper limit, its points beyond it by less than the tolerance
+        sim.reset_robot(HOME[:3] + [sim.upper[3] if beyond else HOME[3]] + HOME[4:])
+        q, rows = np.array(sim.joint_positions()), []
+        for k, t in enumerate(times):
+            dt = t - (times[k - 1] if k else 0.0)
+            q = np.clip(q + rng.uniform(-0.9, 0.9, 7) * vmax * dt, lower, upper) if t > 0 else q
+            rows.append(q.tolist())
+            if beyond:
+                rows[-1][3] = sim.upper[3] + 5e-7
+        tolerance = [] if i % 2 else [0.1] * 7
+        fast = sim._prepare_linear(times.tolist(), rows, tolerance)
+        checked = sim._prepare_checked(times.tolist(), rows, tolerance)
+        assert fast is not None, (times, rows)
+        assert (fast.n, fast.targets, fast.velocities, fast.final) == (
+            checked.n,
+            checked.targets,
+            checked.velocities,
+            checked.final,
+        )
+    for case in sorted(BAD):  # what is wrong is left to the numpy path, which names it
+        _, times, positions = BAD[case]
+        assert sim._prepare_linear(times, positions) is None, case
+    assert sim._prepare_linear([0.1], [HOME], [0.1] * 6) is None  # a path tolerance of the wrong size
+
+
 def test_error_messages_name_the_joint(home_sim):
     with pytest.raises(LimitViolation, match="panda_joint4"):
         home_sim.execute([5.0], [HOME[:3] + [0.1] + HOME[4:]])

@@ -329,6 +329,10 @@ class Simulator:
         self._effort = [float(joint_info[name][10]) if joint_info[name][10] > 0 else 1000.0 for name in joints]
         self._lower_np, self._upper_np = limits.lower.copy(), limits.upper.copy()
         self._vmax_np = limits.velocity.copy()
+        # The same bounds as Python floats, for prepare's fast path (computed by numpy: the same doubles).
+        self._lower_tol = tuple((self._lower_np - POSITION_TOLERANCE).tolist())
+        self._upper_tol = tuple((self._upper_np + POSITION_TOLERANCE).tolist())
+        self._vmax_tol = tuple((self._vmax_np * (1.0 + VELOCITY_TOLERANCE)).tolist())
 
         # Uncontrolled movable joints: held at fixed_joint_positions (default 0 clipped to the limits).
         for name in fixed:
@@ -694,6 +698,81 @@ class Simulator:
         are samples of straight moves).
         Raises InvalidTrajectory or LimitViolation.
         """
+        if self.control == "kinematic":
+            motion = self._prepare_linear(times, positions, path_tolerance)
+            if motion is not None:
+                return motion
+        return self._prepare_checked(times, positions, path_tolerance, velocities, accelerations)
+
+    def _prepare_linear(self, times, positions, path_tolerance=None):
+        """prepare() of a valid trajectory for kinematic control, in plain Python: the same doubles as
+        _prepare_checked's numpy code (the same operations in the same order on IEEE doubles), at a fraction of its
+        cost for the few points and joints of an env step (numpy's per-call overhead dominated the simulator's step).
+        None when anything is off (a bad value, a limit, a start away from the current state): _prepare_checked then
+        names it."""
+        n = len(self.joint_indices)
+        isfinite = math.isfinite
+        try:
+            t = [float(x) for x in times]
+            P = [[float(x) for x in row] for row in positions]
+        except (TypeError, ValueError):
+            return None
+        m = len(t)
+        if m == 0 or len(P) != m or any(len(row) != n for row in P):
+            return None
+        if path_tolerance is not None and len(path_tolerance) > 0:  # valid, then unused: kinematic control is exact
+            try:
+                tolerance = [float(x) for x in path_tolerance]
+            except (TypeError, ValueError):
+                return None
+            if len(tolerance) != n or not isfinite(sum(tolerance)) or min(tolerance) < 0:
+                return None
+        if not isfinite(sum(t)) or t[0] < 0 or any(t[i + 1] - t[i] <= 0 for i in range(m - 1)):
+            return None  # (a finite sum: every value is finite)
+        lo, hi = self._lower_tol, self._upper_tol
+        for row in P:
+            if not isfinite(sum(row)) or any(x < a or x > b for x, a, b in zip(row, lo, hi)):
+                return None
+        lower, upper = self.lower, self.upper
+        current = [min(max(x, a), b) for x, a, b in zip(self.joint_positions(), lower, upper)]
+        if t[0] == 0.0:
+            if max(abs(x - c) for x, c in zip(P[0], current)) > START_TOLERANCE:
+                return None
+            P[0] = current
+        else:
+            t.insert(0, 0.0)
+            P.insert(0, current)
+        P = [[min(max(x, a), b) for x, a, b in zip(row, lower, upper)] for row in P]
+        T = t[-1]
+        nsub = int(math.ceil(T * self.physics_hz - 1e-9)) if T > 0 else 0
+        if nsub == 0:
+            return Motion([], [], tuple(P[-1]), None)
+        segments = len(t) - 1
+        dts = [t[i + 1] - t[i] for i in range(segments)]
+        vel = [[(b - a) / dt for a, b in zip(P[i], P[i + 1])] for i, dt in enumerate(dts)]
+        vmax = self._vmax_tol
+        if any(abs(v) > limit for row in vel for v, limit in zip(row, vmax)):
+            return None
+        dt = self.dt
+        targets, velocities = [], []
+        s = 0
+        start, t0, span, rows = P[0], t[0], dts[0], [[v] for v in vel[0]]  # segment s (rows: shared by its substeps)
+        step = [y - x for x, y in zip(P[0], P[1])]
+        for k in range(1, nsub + 1):
+            ts = min(k * dt, T)
+            if s + 1 < segments and t[s + 1] < ts:  # searchsorted(side="left") - 1, clipped
+                while s + 1 < segments and t[s + 1] < ts:
+                    s += 1
+                start, t0, span, rows = P[s], t[s], dts[s], [[v] for v in vel[s]]
+                step = [y - x for x, y in zip(P[s], P[s + 1])]
+            alpha = (ts - t0) / span
+            targets.append([[x + alpha * d] for x, d in zip(start, step)])
+            velocities.append(rows)
+        targets[-1] = [[x] for x in P[-1]]
+        return Motion(targets, velocities, tuple(P[-1]), None)
+
+    def _prepare_checked(self, times, positions, path_tolerance=None, velocities=None, accelerations=None):
+        """prepare() for every trajectory, with the check of each value and the message naming what is wrong."""
         n = len(self.joint_indices)
         try:
             t = np.asarray(times, dtype=float).reshape(-1)

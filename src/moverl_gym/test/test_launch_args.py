@@ -64,6 +64,7 @@ WRONG = {
     "initial_positions": ("[0, 0]", ("7 controlled joints",)),
     "mute_cameras": ("[nope]", ("no camera nope", "its cameras: left, right")),
     "motion_time_scale": ("0", ("positive number",)),
+    "camera_rate": ("-30", ("positive number",)),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")

@@ -16,8 +16,9 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
       obstacle would block them). Not asserted for every configuration visited: a visited pose can touch cells
       that were unknown (hidden by the robot itself) at the time and were seen later, a legitimate verdict.
   (e) lockstep renders keep simulated time (test_camera_schedule): after a reset every camera renders at the reset's
-      sim time; over 20 env steps of dt = 0.05 s and one 0.6 s hold each camera's clouds are stamped exactly 1/rate
-      of sim time apart (also in the middle of a move, with a joint state stamped alike for the self filter), and a
+      sim time; over 20 env steps of dt = 0.05 s and one 0.6 s hold each camera's clouds are stamped exactly
+      1/camera_rate of sim time apart (also in the middle of a move, with a joint state stamped alike for the self
+      filter), and a
       cloud stamped within a step has arrived when the step's call returns (give or take ARRIVAL_SLACK).
   (f) unknown is occupied (a world's `sensing: unknown_occupied: true`, switched on here by publishing the world with
       it): with the same map, every configuration that collides with unknown cells free also collides with them
@@ -55,7 +56,9 @@ DT = 0.05
 WAIT = 30.0  # s (wall) for the map to take in new views
 ENV_STEPS = 300
 CAMERAS = ("right_optical_frame", "left_optical_frame")
-CAMERA_PERIOD = 0.25  # s of sim time: 1 / rate of both cameras of worlds/sensed_box.yaml (rate 4.0)
+# s of sim time: 1 / camera_rate of sensed_obstacle.test (5), which overrides the world file's rate (4.0): the stamps
+# show that the launch argument reached the cameras.
+CAMERA_PERIOD = 0.2
 ARRIVAL_SLACK = 0.01  # s (wall) a cloud may be handled after the call that rendered it returned (see its use)
 
 

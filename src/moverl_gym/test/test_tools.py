@@ -208,22 +208,3 @@ def test_pushing_targets_penetrate_and_spread_over_objects():
     assert set(per) == {"wall", "floor"} and per["wall"] == per["floor"] == 20
     assert all(any(d >= push.MIN_DEPTH for d in contacts(q).values()) for q in targets)
     assert all(q[0] >= 0.55 or q[1] < -0.8 for q in targets)  # deep enough
-
-
-probe = _load("sensed_reach_probe")
-
-
-def test_a_camera_rate_variant_is_the_same_cell(tmp_path):
-    """The reach probe's world at another camera rate keeps the cell's sensing (never inherited from a base: without
-    it the variant got the scene's 1.6 m/s bound and its margins blocked every move)."""
-    from moverl_gym.paths import world_file
-    from moverl_sim.world import load_world
-
-    base = load_world(world_file("human"))
-    variant = load_world(probe.with_camera_rate(world_file("human"), 10.0, tmp_path))
-    assert [c.rate for c in variant.cameras] == [10.0] * len(base.cameras)
-    assert (variant.sensed_speed_bound, variant.sensed_unknown_occupied) == (
-        base.sensed_speed_bound,
-        base.sensed_unknown_occupied,
-    )
-    assert [o.id for o in variant.objects] == [o.id for o in base.objects]

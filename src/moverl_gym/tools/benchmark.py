@@ -92,17 +92,16 @@ def worker_graph(
     driver: str = "sim_service",
     env_id: str = "MoveRL/PandaReachTable-v0",
     scene_process: str = "shield",
+    camera_rate: float | None = None,
 ) -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
 
-    env = gym.make(
-        env_id,
-        shield=shield,
-        graph="launch",
-        launch_args={"obstacles": obstacles, "driver": driver, "scene_process": scene_process},
-    )
+    launch_args = {"obstacles": obstacles, "driver": driver, "scene_process": scene_process}
+    if camera_rate is not None:
+        launch_args["camera_rate"] = camera_rate
+    env = gym.make(env_id, shield=shield, graph="launch", launch_args=launch_args)
     try:
         _rollout(env, 200 if driver == "sim_service" else 20, seed)  # warm-up: connections, caches
         rate, cpu, infos = _rollout(env, steps, seed)
@@ -194,6 +193,14 @@ def _count(items):
     return out
 
 
+#: Steps of the sensed rows at camera rates of 10 Hz and more (each step renders: ~0.1 s per step at 30 Hz).
+SENSED_STEPS = 300
+#: The sensed rows, camera rate (renders per simulated second) -> worker; None: the world file's (2 Hz).
+SENSED = {None: "shield_sensed_human", 10.0: "shield_sensed_human_10hz", 30.0: "shield_sensed_human_30hz"}
+#: issue 25's targets: a sensed row's steps/s at least this fraction of the world-file human row's in the same run.
+SENSED_TARGETS = {10.0: 1 / 4, 30.0: 1 / 10}
+
+
 def run_worker(name: str, args) -> dict:
     return run_json_worker(
         __file__,
@@ -207,6 +214,33 @@ def _median(runs, key):
     return float(np.median([r[key] for r in runs]))
 
 
+def sensed_rows(args) -> int:
+    """--sensed: the human world from the world file, then sensed at each camera rate, in one run (issue 25)."""
+    base = run_worker("shield_on_human", args)
+    rows = {}
+    for rate, name in SENSED.items():
+        print(f"measuring {name} ...", flush=True)
+        rows[rate] = run_worker(name, args)
+    print(f"\n== the human world, shield ON, lockstep, 160x120 cameras, {os.cpu_count()} cores ==")
+    print(f"{'configuration':44s} {'steps':>6s} {'steps/s':>9s} {'CPU ms/step':>12s} {'ratio':>7s}  target  contacts")
+    print(
+        f"{'world file (the person from the script)':44s} {base['steps']:6d} {base['steps_per_s']:9.1f} "
+        f"{base['cpu_ms_per_step']:12.2f} {1.0:7.3f}"
+    )
+    for rate, r in rows.items():
+        label = f"sensed, 3 cameras at {rate:g} Hz" if rate else "sensed, 3 cameras at the world's 2 Hz"
+        target = SENSED_TARGETS.get(rate)
+        ratio = r["steps_per_s"] / base["steps_per_s"]
+        print(
+            f"{label:44s} {r['steps']:6d} {r['steps_per_s']:9.1f} {r['cpu_ms_per_step']:12.2f} {ratio:7.3f}  "
+            f"{'>= %.3f' % target if target else '      '}  {r['contacts']}"
+        )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"world_file": base, "sensed": {str(k): v for k, v in rows.items()}}, f, indent=2)
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--steps", type=int, default=3000, help="env steps per measurement")
@@ -214,6 +248,12 @@ def main(argv=None) -> int:
     p.add_argument("--plans", type=int, default=50, help="planning problems (straight path colliding) to time")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--only-ratios", action="store_true", help="measure the shield-on worlds and panda-gym only")
+    p.add_argument(
+        "--sensed",
+        action="store_true",
+        help="measure the human world with the world file and with the person sensed at the world's camera rate, "
+        "10 Hz and 30 Hz only, and print each sensed row's ratio to the world-file row",
+    )
     p.add_argument("--json", help="also write all figures to this file")
     p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -228,6 +268,13 @@ def main(argv=None) -> int:
             "shield_octomap": lambda: worker_graph(True, args.steps, args.seed, 0, "octomap"),
             # the person seen only by the 3 cameras (table from the world file; issue 16)
             "shield_sensed_human": lambda: worker_graph(True, args.steps, args.seed, 0, "sensed", env_id=human),
+            # the same at a real depth camera's rates (every camera of the world; issue 25): fewer steps, each renders
+            "shield_sensed_human_10hz": lambda: worker_graph(
+                True, min(args.steps, SENSED_STEPS), args.seed, 0, "sensed", env_id=human, camera_rate=10.0
+            ),
+            "shield_sensed_human_30hz": lambda: worker_graph(
+                True, min(args.steps, SENSED_STEPS), args.seed, 0, "sensed", env_id=human, camera_rate=30.0
+            ),
             # real time: a step lasts at least dt of wall time, so fewer steps say as much
             "shield_standard": lambda: worker_graph(
                 True, min(args.steps, 500), args.seed, 0, driver="follow_joint_trajectory"
@@ -238,6 +285,8 @@ def main(argv=None) -> int:
         print(json.dumps(fn()))
         return 0
 
+    if args.sensed:
+        return sensed_rows(args)
     reps = {"shield_on": [], "shield_on_human": [], "pandagym": []}
     for rep in range(args.reps):
         for name in reps:
@@ -247,7 +296,7 @@ def main(argv=None) -> int:
     others = (
         ()
         if args.only_ratios
-        else ("shield_scene_own", "shield_standard", "shield_octomap", "shield_sensed_human", "shield_off", "bullet")
+        else ("shield_scene_own", "shield_standard", "shield_octomap", *SENSED.values(), "shield_off", "bullet")
     )
     for name in others:
         print(f"measuring {name} ({args.steps} steps) ...", flush=True)
@@ -284,7 +333,9 @@ def main(argv=None) -> int:
         ("shield_scene_own", "  shield ON, planning scene in its own process (table)"),
         ("shield_standard", "  shield ON, standard driver, simulator in real time"),
         ("shield_octomap", "  shield ON, obstacles sensed (depth cameras + OctoMap)"),
-        ("shield_sensed_human", "  shield ON, human, the person sensed (3 cameras)"),
+        ("shield_sensed_human", "  shield ON, human, the person sensed (3 cameras, 2 Hz)"),
+        ("shield_sensed_human_10hz", "  shield ON, human, the person sensed (3 cameras, 10 Hz)"),
+        ("shield_sensed_human_30hz", "  shield ON, human, the person sensed (3 cameras, 30 Hz)"),
         ("shield_off", "MoveRL, full ROS graph, shield OFF"),
         ("bullet", "same task in PyBullet, no ROS, no shield"),
     ):

@@ -8,8 +8,8 @@ configuration and keeps pushing while the shield holds the arm; per camera rate 
 The goal configuration is the one a world file's header gives as evidence for its goal (worlds/human.yaml). The
 shield inflates the robot against the sensed cells by speed_bound x (map age + step + latency): the map age grows up
 to one camera period between renders, so the camera rate decides how close the hand may come to a sensed person.
-Each rate runs in its own ROS graph (--obstacles, default sensed), with the world's cameras set to that rate (a
-temporary world file based on the given one). Writes <out>/probe.md and probe.json: per rate, episodes that reach the
+Each rate runs in its own ROS graph (--obstacles, default sensed), with the world's cameras set to that rate (launch
+argument camera_rate). Writes <out>/probe.md and probe.json: per rate, episodes that reach the
 goal (the env's is_success), steps to get there, the closest distance, the shield's verdicts, ground-truth contacts,
 steps/s.
 """
@@ -19,12 +19,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from moverl_gym.launch_args import CHOICES, SENSED_OBSTACLES
 from moverl_gym.workers import run_json_worker
@@ -39,9 +37,13 @@ def worker(args) -> dict:
     goal_q = np.asarray(args.goal_q, dtype=float)
     env = gym.make(
         env_id(args.robot, "Human"),
-        world=args.world_file,
+        world=args.world,
         graph="launch",
-        launch_args={"obstacles": args.obstacles, **({"strategy": args.strategy} if args.strategy else {})},
+        launch_args={
+            "obstacles": args.obstacles,
+            "camera_rate": args.worker_rate,
+            **({"strategy": args.strategy} if args.strategy else {}),
+        },
         task={"max_episode_steps": args.max_steps},
     )
     u = env.unwrapped
@@ -77,38 +79,6 @@ def worker(args) -> dict:
     return {"episodes": episodes, "steps_per_s": steps / (time.perf_counter() - t0)}
 
 
-def with_camera_rate(world: Path, rate: float, folder: Path) -> Path:
-    """A world file based on `world` whose cameras render at `rate` per simulated second."""
-    from moverl_sim.world import load_world
-
-    cameras = []
-    for c in load_world(world).cameras:
-        cameras.append(
-            {
-                "id": c.id,
-                "xyz": list(c.xyz),
-                "target": list(c.target),
-                "up": list(c.up),
-                "width": c.width,
-                "height": c.height,
-                "fov": c.fov,
-                "near": c.near,
-                "far": c.far,
-                "rate": rate,
-            }
-        )
-    if not cameras:
-        raise SystemExit(f"{world} has no cameras")
-    out = folder / f"{world.stem}_cameras_{rate:g}hz.yaml"
-    variant = {"base": str(world.resolve()), "cameras": cameras}
-    # The same cell: its sensing stated again (a world file never takes sensing: from its base).
-    sensing = yaml.safe_load(world.read_text()).get("sensing")
-    if sensing is not None:
-        variant["sensing"] = sensing
-    out.write_text(yaml.safe_dump(variant, sort_keys=False))
-    return out
-
-
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
@@ -121,42 +91,36 @@ def main(argv=None) -> int:
     p.add_argument("--max-steps", type=int, default=100, help="steps per episode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="write probe.md and probe.json here")
-    p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+    p.add_argument("--worker-rate", type=float, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-    if args.worker:
-        args.world_file = str(args.worker)
+    if args.worker_rate is not None:
         print(json.dumps(worker(args)))
         return 0
-    from moverl_gym.paths import world_file
-
-    world = world_file(args.world)
     rows = []
-    with tempfile.TemporaryDirectory(prefix="moverl_probe_") as tmp:
-        for rate in args.camera_rates:
-            variant = with_camera_rate(world, rate, Path(tmp))
-            print(f"camera rate {rate:g} Hz: {args.episodes} episodes ...", flush=True)
-            worker_args = [*(argv if argv is not None else sys.argv[1:]), "--worker", variant]
-            r = run_json_worker(__file__, worker_args, f"camera rate {rate:g}", timeout=600 + 120 * args.episodes)
-            eps = r["episodes"]
-            verdicts = {}
-            for e in eps:
-                for k, v in e["verdicts"].items():
-                    verdicts[k] = verdicts.get(k, 0) + v
-            reached = [e["reached_at"] for e in eps if e["reached_at"] is not None]
-            rows.append(
-                {
-                    "camera_rate": rate,
-                    "episodes": len(eps),
-                    "reached": len(reached),
-                    "steps_to_goal_mean": float(np.mean(reached)) if reached else None,
-                    "closest_mean": float(np.mean([e["closest"] for e in eps])),
-                    "contacts": int(sum(e["contacts"] for e in eps)),
-                    "verdicts": dict(sorted(verdicts.items())),
-                    "steps_per_s": r["steps_per_s"],
-                    "per_episode": eps,
-                }
-            )
-            print(json.dumps({k: v for k, v in rows[-1].items() if k != "per_episode"}), flush=True)
+    for rate in args.camera_rates:
+        print(f"camera rate {rate:g} Hz: {args.episodes} episodes ...", flush=True)
+        worker_args = [*(argv if argv is not None else sys.argv[1:]), "--worker-rate", str(rate)]
+        r = run_json_worker(__file__, worker_args, f"camera rate {rate:g}", timeout=600 + 120 * args.episodes)
+        eps = r["episodes"]
+        verdicts = {}
+        for e in eps:
+            for k, v in e["verdicts"].items():
+                verdicts[k] = verdicts.get(k, 0) + v
+        reached = [e["reached_at"] for e in eps if e["reached_at"] is not None]
+        rows.append(
+            {
+                "camera_rate": rate,
+                "episodes": len(eps),
+                "reached": len(reached),
+                "steps_to_goal_mean": float(np.mean(reached)) if reached else None,
+                "closest_mean": float(np.mean([e["closest"] for e in eps])),
+                "contacts": int(sum(e["contacts"] for e in eps)),
+                "verdicts": dict(sorted(verdicts.items())),
+                "steps_per_s": r["steps_per_s"],
+                "per_episode": eps,
+            }
+        )
+        print(json.dumps({k: v for k, v in rows[-1].items() if k != "per_episode"}), flush=True)
     command = "python src/moverl_gym/tools/sensed_reach_probe.py " + " ".join(
         argv if argv is not None else sys.argv[1:]
     )

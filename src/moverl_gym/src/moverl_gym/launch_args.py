@@ -85,6 +85,7 @@ OPEN: dict[str, str] = {
     "initial_positions": "a list of one number per controlled joint, or empty",
     "mute_cameras": "a list of camera ids of the world file, or empty (fault injection)",
     "motion_time_scale": "a positive number, or empty (experiments: obstacles faster than declared)",
+    "camera_rate": "a positive number of renders per simulated second for every camera, or empty (the world file's)",
 }
 #: The obstacle modes that sense (a depth-camera map): their worlds' sensing assumptions are checked
 #: (moverl_sim.world.sensing_problems).
@@ -219,7 +220,7 @@ def _open_values(values: dict[str, str], whole: bool) -> list[str]:
     for name in ("action", "joint_states"):
         if name in values and not _ROS_NAME.match(values[name]):
             problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
-    for name in ("physics_hz", "motion_time_scale"):
+    for name in ("physics_hz", "motion_time_scale", "camera_rate"):
         if values.get(name):
             try:
                 x = float(values[name])

@@ -1,7 +1,6 @@
 """The tier rules (tests/tiers.py, conftest.py) on a repository made up for the test: each kind of test file gets its
 tier from where the rules say, and a file in no tier (or two) is named, by the check and by pytest itself. No ROS."""
 
-import importlib.util
 import shutil
 import subprocess
 import sys
@@ -10,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
+from moverl_gym.paths import load_script
+
 pytestmark = pytest.mark.core
 
 ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("moverl_tiers_under_test", ROOT / "tests" / "tiers.py")
-tiers = sys.modules["moverl_tiers_under_test"] = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(tiers)
+tiers = load_script(ROOT / "tests" / "tiers.py", "moverl_tiers_under_test", register=True)
 
 PYPROJECT = """
 [tool.pytest.ini_options]

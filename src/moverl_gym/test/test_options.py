@@ -2,7 +2,6 @@
 choices; evaluate.py and study.py those that apply; what RLlib cannot honour is refused, never ignored. No ROS."""
 
 import argparse
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -11,6 +10,7 @@ import yaml
 import moverl_gym
 from moverl_gym import options
 from moverl_gym.launch_args import CHOICES
+from moverl_gym.paths import load_script
 
 pytestmark = pytest.mark.core
 
@@ -19,10 +19,7 @@ HYPERPARAMS = Path(__file__).resolve().parents[1] / "config" / "hyperparams"
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(SCRIPTS / f"{name}.py")
 
 
 train = _load("train")

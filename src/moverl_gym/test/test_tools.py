@@ -1,11 +1,12 @@
 """Unit tests of the pure functions of tools/collision_audit.py and tools/planner_benchmark.py (no ROS)."""
 
-import importlib.util
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from moverl_gym.paths import load_script
 
 pytestmark = pytest.mark.core
 
@@ -13,10 +14,7 @@ TOOLS = Path(__file__).resolve().parents[1] / "tools"
 
 
 def _load(name):
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(TOOLS / f"{name}.py")
 
 
 audit = _load("collision_audit")

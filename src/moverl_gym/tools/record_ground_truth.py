@@ -22,7 +22,6 @@ code with itself. Re-record only when the inputs must change (a new robot model,
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import subprocess
 import sys
 import threading
@@ -54,10 +53,9 @@ EVENT_WAIT = 10.0  # s: an event not received by then fails the recording (the s
 
 
 def _pushing_module():
-    spec = importlib.util.spec_from_file_location("pushing_policy_audit", HERE / "pushing_policy_audit.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from moverl_gym.paths import load_script
+
+    return load_script(HERE / "pushing_policy_audit.py")
 
 
 def make_sim(world: str):

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import sys
 from pathlib import Path
+from types import ModuleType
 
 
 def repo_root() -> Path:
@@ -34,3 +37,20 @@ def robot_config_file(robot: str) -> Path:
 
 def launch_file(name: str = "moverl.launch") -> Path:
     return repo_root() / "launch" / name
+
+
+def load_script(path: Path, name: str | None = None, register: bool = False) -> ModuleType:
+    """A Python file that is not in a package (an entry point, a tool, a test helper) as a module, run once.
+
+    Args:
+        path: the file.
+        name: the module's name (default: the file's stem).
+        register: also put it in sys.modules under that name (what dataclasses and pickling of its classes need).
+    """
+    name = name or Path(path).stem
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    if register:
+        sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -55,6 +55,20 @@ def test_seed_determinism():
         env.close()
 
 
+def test_a_closed_env_says_so():
+    """step() and reset() after close() raise Gymnasium's ClosedEnvironmentError, not an AttributeError of an internal
+    object (and close() twice is fine)."""
+    env = make("MoveRL/PandaReachTable-v0")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    env.close()
+    env.close()
+    with pytest.raises(gym.error.ClosedEnvironmentError, match="closed env"):
+        env.step(env.action_space.sample())
+    with pytest.raises(gym.error.ClosedEnvironmentError, match="closed env"):
+        env.reset(seed=1)
+
+
 def test_reward_success_and_truncation():
     env = make("MoveRL/PandaReachTable-v0", task={"max_episode_steps": 5})
     try:

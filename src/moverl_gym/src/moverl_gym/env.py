@@ -298,6 +298,8 @@ class MoveRLReachEnv(gym.Env):
 
     # -- gym API -------------------------------------------------------------------------------------------
     def reset(self, *, seed=None, options=None):
+        if self._backend is None:
+            raise gym.error.ClosedEnvironmentError("reset() on a closed env: make a new one")
         super().reset(seed=seed)
         options = options or {}
         restarted = None
@@ -426,6 +428,8 @@ class MoveRLReachEnv(gym.Env):
 
     def step(self, action):
         if self.q is None or self._failure is not None:
+            if self._backend is None:
+                raise gym.error.ClosedEnvironmentError("step() on a closed env: make a new one")
             raise gym.error.ResetNeeded("call reset() before step()")
         target = self.scaler.command(self.q, action)  # raises ValueError on bad shape / NaN / inf
         t0 = time.perf_counter()
@@ -557,6 +561,7 @@ class MoveRLReachEnv(gym.Env):
         view, self._view = getattr(self, "_view", None), None
         if view is not None:
             view.close()
+        self.q = None  # step() and reset() refuse a closed env
         if self._backend is not None:
             backend, self._backend = self._backend, None
             backend.close()

@@ -5,6 +5,15 @@ several ids in one run, interleaved (this VM varies by 30 % between runs: compar
 
     python src/moverl_gym/tools/step_cost.py --ids MoveRL/PandaReachTable-v0 MoveRL/PandaReachHuman-v0 --reps 2
 
+An id may carry launch arguments after commas, e.g. the person sensed by cameras at 10 Hz:
+
+    python src/moverl_gym/tools/step_cost.py --ids MoveRL/PandaReachHuman-v0 \
+        MoveRL/PandaReachHuman-v0,obstacles=sensed,camera_rate=10 --steps 300
+
+With a sensed map, the planning scene's own account of its integration time (~octomap_status.integration_time of
+every cloud) is summed too: the shield process's CPU splits into integrating clouds and the rest (the checks); the
+simulator's is mostly rendering then.
+
 Random actions from a fixed seed, episodes reset as usual (resets included); 200 warm-up steps first. Each id runs in
 its own process (rospy allows one ROS master per process).
 """
@@ -15,18 +24,49 @@ import argparse
 import json
 import os
 import sys
+import threading
 import time
 
 from moverl_gym.workers import run_json_worker
 
 
-def worker(env_id: str, steps: int, seed: int) -> dict:
+def parse_id(text: str) -> tuple[str, dict]:
+    """ "ID[,key=value...]" -> (ID, launch arguments), checked as the launch checks them."""
+    from moverl_gym.launch_args import check
+
+    env_id, *pairs = text.split(",")
+    launch_args = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep:
+            raise SystemExit(f"step_cost.py: {pair!r} in {text!r} is not key=value")
+        launch_args[key] = value
+    check(launch_args)
+    return env_id, launch_args
+
+
+def worker(text: str, steps: int, seed: int) -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
     from moverl_gym.proctree import cmdline, context_switches, cpu_seconds, tree
 
-    env = gym.make(env_id)
+    env_id, launch_args = parse_id(text)
+    env = gym.make(env_id, launch_args=launch_args)
+    integration = None  # ~octomap_status.integration_time of each cloud, while measuring (a sensed map only)
+    measuring = threading.Event()
+    if launch_args.get("obstacles", "objects") != "objects":
+        import rospy
+
+        from moverl_msgs.msg import OctomapStatus
+
+        integration = []
+
+        def on_status(msg):
+            if measuring.is_set():
+                integration.append(msg.integration_time)
+
+        rospy.Subscriber("/planning_scene/octomap_status", OctomapStatus, on_status)
     try:
         env.reset(seed=seed)
         env.action_space.seed(seed)
@@ -47,9 +87,11 @@ def worker(env_id: str, steps: int, seed: int) -> dict:
                 line.split()[0] if line else "?"
             )
         c0, s0 = cpu_seconds(procs), context_switches(procs)
+        measuring.set()
         t0 = time.perf_counter()
         run(steps)
         wall = time.perf_counter() - t0
+        measuring.clear()
         c1, s1 = cpu_seconds(procs), context_switches(procs)
     finally:
         env.close()
@@ -60,13 +102,23 @@ def worker(env_id: str, steps: int, seed: int) -> dict:
     for key, n in s1.items():
         if key in s0:
             switches[names[key]] = switches.get(names[key], 0.0) + (n - s0[key]) / steps
-    return {
-        "env_id": env_id,
+    out = {
+        "env_id": text,
         "steps_per_s": steps / wall,
         "ms_per_step": per,
         "total_ms": sum(per.values()),
         "switches_per_step": switches,
     }
+    if integration is not None:
+        out["clouds_per_step"] = len(integration) / steps
+        out["integration_ms_per_step"] = 1000.0 * sum(integration) / steps
+    return out
+
+
+def _column(text: str) -> str:
+    """An id's column header: the id without its namespace, its launch arguments shortened."""
+    name = text.split("/")[-1].replace("obstacles=", "").replace("camera_rate=", "cam ")
+    return name[-27:].rjust(28)
 
 
 def main(argv=None) -> int:
@@ -80,6 +132,13 @@ def main(argv=None) -> int:
     if args.worker:
         print(json.dumps(worker(args.worker, args.steps, args.seed)))
         return 0
+    from moverl_gym.launch_args import LaunchArgError
+
+    for text in args.ids:  # a wrong launch argument is refused before anything starts
+        try:
+            parse_id(text)
+        except LaunchArgError as exc:
+            raise SystemExit(f"step_cost.py: {text}: {exc}") from None
     results: dict[str, list] = {i: [] for i in args.ids}
     for rep in range(args.reps):
         for env_id in args.ids:
@@ -90,16 +149,21 @@ def main(argv=None) -> int:
             )
     print("\nCPU ms per env step, mean over reps (processes under 0.02 ms left out):")
     names = sorted({n for rs in results.values() for r in rs for n in r["ms_per_step"]})
-    print("process".ljust(24) + "".join(i.split("/")[-1].rjust(28) for i in args.ids))
+    print("process".ljust(24) + "".join(_column(i) for i in args.ids))
     for n in names:
         vals = [sum(r["ms_per_step"].get(n, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
         if max(vals) >= 0.02:
             print(n.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
     totals = [sum(r["total_ms"] for r in results[i]) / len(results[i]) for i in args.ids]
     print("total".ljust(24) + "".join(f"{v:28.3f}" for v in totals))
+    if any("integration_ms_per_step" in r for rs in results.values() for r in rs):
+        print("\nthe planning scene's integration of clouds (its ~octomap_status.integration_time), mean over reps:")
+        for key, label in (("clouds_per_step", "clouds per step"), ("integration_ms_per_step", "integration ms/step")):
+            vals = [sum(r.get(key, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
+            print(label.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
     # Each context switch is a thread put to sleep and woken: what a hand-off between threads costs on the step's path.
     print("\ncontext switches per env step (every thread of each process), mean over reps (under 0.05 left out):")
-    print("process".ljust(24) + "".join(i.split("/")[-1].rjust(28) for i in args.ids))
+    print("process".ljust(24) + "".join(_column(i) for i in args.ids))
     for n in names:
         vals = [sum(r["switches_per_step"].get(n, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
         if max(vals) >= 0.05:

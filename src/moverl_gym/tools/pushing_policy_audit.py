@@ -117,6 +117,7 @@ def worker(
     mode: str | None = None,
     motion_time_scale: float | None = None,
     strategy: str | None = None,
+    camera_rate: float | None = None,
 ) -> dict:
     from gymnasium.wrappers import TimeLimit
 
@@ -159,6 +160,7 @@ def worker(
                 **({"obstacles": obstacles} if obstacles else {}),
                 **({"mode": mode} if mode else {}),
                 **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
+                **({"camera_rate": camera_rate} if camera_rate else {}),
                 **({"strategy": strategy} if strategy else {}),
             },
         ),
@@ -203,6 +205,7 @@ def worker(
         "obstacles": obstacles or "objects",
         "mode": mode or "lockstep",
         **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
+        **({"camera_rate": camera_rate} if camera_rate else {}),
         "strategy": used if shield else "",
         "shield": shield,
         "steps": steps,
@@ -258,6 +261,12 @@ def main(argv=None) -> int:
     )
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock")
     p.add_argument(
+        "--camera-rate",
+        type=float,
+        default=None,
+        help="renders per simulated second of every camera (default: the world file's rates)",
+    )
+    p.add_argument(
         "--strategy",
         nargs="+",
         choices=CHOICES["strategy"],
@@ -287,6 +296,7 @@ def main(argv=None) -> int:
                     args.mode,
                     args.motion_time_scale,
                     args.worker_strategy,
+                    args.camera_rate,
                 )
             )
         )
@@ -327,6 +337,7 @@ def main(argv=None) -> int:
                         *(["--obstacles", args.obstacles] if args.obstacles else []),
                         *(["--mode", args.mode] if args.mode else []),
                         *(["--motion-time-scale", args.motion_time_scale] if args.motion_time_scale else []),
+                        *(["--camera-rate", args.camera_rate] if args.camera_rate else []),
                         *(["--worker-strategy", strategy] if strategy else []),
                     ],
                     f"worker {config.name} {world} {what}",
@@ -349,7 +360,18 @@ def main(argv=None) -> int:
     if args.robot_config:
         cmd += "".join(f" --robot-config {c}" for c in args.robot_config)
     cmd += " --worlds " + " ".join(args.worlds) + f" --steps {args.steps}"
-    for name in ("shield", "seed", "spread", "switch", "noise", "control", "obstacles", "mode", "motion_time_scale"):
+    for name in (
+        "shield",
+        "seed",
+        "spread",
+        "switch",
+        "noise",
+        "control",
+        "obstacles",
+        "mode",
+        "motion_time_scale",
+        "camera_rate",
+    ):
         if getattr(args, name) != p.get_default(name):
             cmd += f" --{name.replace('_', '-')} {getattr(args, name)}"
     if args.strategy:
@@ -374,15 +396,17 @@ def main(argv=None) -> int:
         "(unsensed moves must be 0). at limit = steps whose command put a joint onto its URDF limit (with dynamic "
         "control the motors overshoot there; the env must not raise).",
         "",
-        "| robot | world | control | obstacles | clock | shield | steps | episodes | contacts | robot moving | "
-        "robot at rest | steps with contact | unsensed moves | at limit | verdicts | targets per object | steps/s |",
-        "|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|",
+        "| robot | world | control | obstacles | cameras | clock | shield | steps | episodes | contacts | "
+        "robot moving | robot at rest | steps with contact | unsensed moves | at limit | verdicts | "
+        "targets per object | steps/s |",
+        "|---|---|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---|---:|",
     ]
     for r in rows:
         v = ", ".join(f"{k} {n}" for k, n in sorted(r["verdicts"].items()))
         t = ", ".join(f"{k} {n}" for k, n in sorted(r["targets"].items()))
         lines.append(
-            f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | {r['mode']} | "
+            f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | "
+            f"{'%g Hz' % r['camera_rate'] if r.get('camera_rate') else 'world file'} | {r['mode']} | "
             f"{('on (' + r['strategy'] + ')') if r['shield'] else 'off'} | "
             f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['contacts_moving']} | "
             f"{r['contacts_resting']} | {r['steps_with_contact']} | "

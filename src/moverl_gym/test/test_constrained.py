@@ -80,7 +80,7 @@ class _NoGroundTruth(BulletBackend):
         return dataclasses.replace(res, contacts=-1, contact_substeps=-1)
 
 
-def test_unknown_contacts_give_a_nan_cost_and_no_penalty():
+def test_unknown_contacts_give_no_cost_contact_and_no_penalty():
     actions = np.random.default_rng(5).uniform(-1, 1, (300, 7)).astype(np.float32)
     rewards, backends = [], []
     for penalty in (0.0, -5.0):

@@ -13,9 +13,9 @@ max_pi min_lambda J_r - lambda (J_c - d):
 * PPO's clipped objective then runs on the advantage (A_r - lambda A_c) / (1 + lambda), A_r standardised and A_c
   centred over the rollout as OmniSafe does (SB3's per-batch normalisation follows; it keeps the ratio of the two).
 
-Everything else is SB3's PPO, unchanged (OmniSafe 0.5 itself cannot be installed next to MoveRL: README, "Constrained
-RL"). A test on a small constrained problem (test_constrained.py) checks that the multiplier ends above 0 and the cost
-at the limit when the constraint is active, and at 0 with plain PPO's behaviour when it is not.
+Everything else is SB3's PPO, unchanged (OmniSafe 0.5 itself cannot be installed next to MoveRL: docs/constrained.md).
+A test on a small constrained problem (test_constrained.py) checks that the multiplier ends above 0 and the cost at
+the limit when the constraint is active, and at 0 with plain PPO's behaviour when it is not.
 """
 
 from __future__ import annotations

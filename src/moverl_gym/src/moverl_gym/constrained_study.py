@@ -557,6 +557,7 @@ def lagrange_curves(runs: list[Run], path: Path, window: int = 10) -> Path:
         axes[0][j].set_title(world, fontsize=10)
         axes[1][j].set_xlabel("environment steps")
         axes[1][j].set_yscale("symlog", linthresh=1)
+        axes[1][j].set_ylim(bottom=0)  # a cost is never negative
         for i in range(2):
             axes[i][j].grid(alpha=0.3)
     axes[0][0].set_ylabel("Lagrange multiplier")

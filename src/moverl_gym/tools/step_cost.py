@@ -14,6 +14,11 @@ With a sensed map, the planning scene's own account of its integration time (~oc
 every cloud) is summed too: the shield process's CPU splits into integrating clouds and the rest (the checks); the
 simulator's is mostly rendering then.
 
+--profile NAME (sim, shield, env, ...: a process of the graph, named as in the table) also samples that process
+while it is measured: py-spy (`pip install py-spy`, not part of the set-up) for a Python process, perf for a C++ one;
+the frames with the largest shares of the samples are printed (py-spy: of the samples that held the GIL, inclusive;
+perf: self time by library and symbol).
+
 Random actions from a fixed seed, episodes reset as usual (resets included); 200 warm-up steps first. Each id runs in
 its own process (rospy allows one ROS master per process).
 """
@@ -23,7 +28,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -45,7 +53,71 @@ def parse_id(text: str) -> tuple[str, dict]:
     return env_id, launch_args
 
 
-def worker(text: str, steps: int, seed: int) -> dict:
+class Profiler:
+    """py-spy (Python processes) or perf (others) attached to one process from start() to stop()."""
+
+    def __init__(self, pid: int, python: bool, folder: str):
+        import shutil
+
+        self.python, self.out = python, os.path.join(folder, "profile.raw" if python else "perf.data")
+        tool = "py-spy" if python else "perf"
+        if shutil.which(tool) is None:
+            raise SystemExit(f"step_cost.py --profile: {tool} is not installed" + (" (pip install py-spy)" * python))
+        if python:
+            cmd = [
+                "py-spy",
+                "record",
+                "--gil",
+                "--nonblocking",
+                "-r",
+                "1000",
+                "-f",
+                "raw",
+                "-o",
+                self.out,
+                "-p",
+                str(pid),
+            ]
+        else:
+            cmd = ["perf", "record", "-F", "2000", "-g", "-o", self.out, "-p", str(pid)]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(1.0)  # attached
+
+    def stop(self, top: int = 25) -> list[str]:
+        self.proc.send_signal(signal.SIGINT)  # both write their output on SIGINT
+        try:
+            self.proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.python:
+            return _top_frames(self.out, top)
+        r = subprocess.run(
+            ["perf", "report", "-i", self.out, "--no-children", "--sort", "dso,symbol", "--stdio", "-g", "none"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        return [line.rstrip()[:150] for line in r.stdout.splitlines() if "%" in line and not line.startswith("#")][:top]
+
+
+def _top_frames(path: str, top: int) -> list[str]:
+    """py-spy's raw (collapsed) stacks -> the frames with the largest inclusive shares of the samples."""
+    shares: dict[str, int] = {}
+    total = 0
+    with open(path) as f:
+        for line in f:
+            stack, _, count = line.rstrip().rpartition(" ")
+            n = int(count)
+            total += n
+            for frame in set(stack.split(";")):
+                if "threading.py" not in frame:
+                    shares[frame] = shares.get(frame, 0) + n
+    ranked = sorted(shares.items(), key=lambda kv: -kv[1])[:top]
+    return [f"{100.0 * n / max(total, 1):5.1f} %  {frame[:140]}" for frame, n in ranked] + [f"({total} samples)"]
+
+
+def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict:
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
@@ -86,12 +158,23 @@ def worker(text: str, steps: int, seed: int) -> dict:
             names[(p.pid, p.start)] = name.replace("__name:=", "/") or os.path.basename(
                 line.split()[0] if line else "?"
             )
+        profiler = None
+        if profile:
+            target = [key for key, name in names.items() if name.lstrip("/") == profile.lstrip("/")]
+            if not target:
+                raise SystemExit(
+                    f"step_cost.py --profile {profile}: no such process (processes: {sorted(names.values())})"
+                )
+            pid = target[0][0]
+            folder = tempfile.mkdtemp(prefix="moverl_profile_")
+            profiler = Profiler(pid, "python" in cmdline(pid).split()[0], folder)
         c0, s0 = cpu_seconds(procs), context_switches(procs)
         measuring.set()
         t0 = time.perf_counter()
         run(steps)
         wall = time.perf_counter() - t0
         measuring.clear()
+        frames = profiler.stop() if profiler is not None else None
         c1, s1 = cpu_seconds(procs), context_switches(procs)
     finally:
         env.close()
@@ -109,6 +192,8 @@ def worker(text: str, steps: int, seed: int) -> dict:
         "total_ms": sum(per.values()),
         "switches_per_step": switches,
     }
+    if frames is not None:
+        out["profile"] = {"process": profile, "frames": frames}
     if integration is not None:
         out["clouds_per_step"] = len(integration) / steps
         out["integration_ms_per_step"] = 1000.0 * sum(integration) / steps
@@ -127,10 +212,13 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=2000)
     p.add_argument("--reps", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--profile", metavar="NAME", help="sample this process of the graph while measuring (sim, shield, env)"
+    )
     p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
-        print(json.dumps(worker(args.worker, args.steps, args.seed)))
+        print(json.dumps(worker(args.worker, args.steps, args.seed, args.profile)))
         return 0
     from moverl_gym.launch_args import LaunchArgError
 
@@ -142,11 +230,19 @@ def main(argv=None) -> int:
     results: dict[str, list] = {i: [] for i in args.ids}
     for rep in range(args.reps):
         for env_id in args.ids:
-            r = run_json_worker(__file__, ["--worker", env_id, "--steps", args.steps, "--seed", args.seed], env_id)
+            profile = ["--profile", args.profile] if args.profile and rep == 0 else []
+            r = run_json_worker(
+                __file__, ["--worker", env_id, "--steps", args.steps, "--seed", args.seed, *profile], env_id
+            )
             results[env_id].append(r)
             print(
                 f"rep {rep}: {env_id}: {r['steps_per_s']:.0f} steps/s, {r['total_ms']:.2f} ms CPU per step", flush=True
             )
+    for env_id in args.ids:
+        prof = results[env_id][0].get("profile")
+        if prof:
+            print(f"\n{env_id}: where {prof['process']} spends its time while measured (first repetition):")
+            print("\n".join("  " + line for line in prof["frames"]))
     print("\nCPU ms per env step, mean over reps (processes under 0.02 ms left out):")
     names = sorted({n for rs in results.values() for r in rs for n in r["ms_per_step"]})
     print("process".ljust(24) + "".join(_column(i) for i in args.ids))

@@ -1,0 +1,107 @@
+#!/usr/bin/env python3
+"""What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer (what the simulator uses)
+and by PyBullet's batched ray test over the same pixel rays, on one thread and on all, in this process (no ROS).
+
+    python src/moverl_gym/tools/render_cost.py --world human --renders 10
+
+The robot stands at its home configuration. Prints, per camera, CPU ms (this process, all threads) and wall ms per
+image, and how far the ray test's depths are from TinyRenderer's (z-depth, metres; pixels without a return count as
+the far plane in both). A baseline for a faster depth camera (issue 25).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pybullet
+
+#: Rays per rayTestBatch call: below PyBullet's limit (MAX_RAY_INTERSECTION_BATCH_SIZE, 16384; a call of exactly
+#: that many answered one ray fewer here).
+RAY_BATCH = 16000
+
+
+def ray_depth(camera, client_id: int, threads: int) -> np.ndarray:
+    """z-depth image of `camera` from rayTestBatch over its pixel rays (height x width, far where nothing is hit)."""
+    directions = np.stack([camera._rays_x, camera._rays_y, np.ones_like(camera._rays_x)], axis=1) @ camera.rotation.T
+    origin = np.asarray(camera.position)
+    ends = origin + directions * camera.far  # a ray of z-length far: the far plane, as the renderer's
+    starts = np.broadcast_to(origin, ends.shape)
+    fractions = []
+    for k in range(0, len(ends), RAY_BATCH):
+        hits = pybullet.rayTestBatch(
+            starts[k : k + RAY_BATCH].tolist(),
+            ends[k : k + RAY_BATCH].tolist(),
+            numThreads=threads,
+            physicsClientId=client_id,
+        )
+        fractions += [h[2] for h in hits]
+    return (np.asarray(fractions) * camera.far).reshape(camera.height, camera.width)
+
+
+def timed(fn, n: int) -> tuple[float, float, object]:
+    """(CPU ms, wall ms) per call of fn over n calls, and its last result."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    for _ in range(n):
+        out = fn()
+    return 1e3 * (time.process_time() - c0) / n, 1e3 * (time.perf_counter() - w0) / n, out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
+    p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
+    p.add_argument("--renders", type=int, default=10, help="images per camera and method")
+    args = p.parse_args(argv)
+    if args.renders < 1:
+        p.error("--renders must be at least 1")
+
+    from moverl_gym.paths import robot_config_file, world_file
+    from moverl_sim.camera import Camera
+    from moverl_sim.core import Simulator
+    from moverl_sim.robot_config import load_robot_config
+    from moverl_sim.settings import sim_settings
+    from moverl_sim.urdf import robot_description
+    from moverl_sim.world import load_world
+
+    world = load_world(world_file(args.world))
+    if not world.cameras:
+        raise SystemExit(f"render_cost.py: {world.source} has no cameras")
+    rc = load_robot_config(robot_config_file(args.robot))
+    with tempfile.TemporaryDirectory(prefix="moverl_render_cost_") as tmp:
+        urdf = Path(tmp) / "robot.urdf"
+        urdf.write_text(robot_description(rc["urdf"]))
+        sim = Simulator(
+            str(urdf),
+            rc["joints"],
+            rc["base_link"],
+            rc.get("fixed_joint_positions", {}),
+            world,
+            **sim_settings(),
+        )
+        try:
+            sim.reset_robot(rc["home"])
+            cid = sim.client_id
+            print(f"{world.source}, robot {rc['name']} at home, {args.renders} images per camera and method")
+            head = f"{'camera':8s} {'pixels':>9s} {'method':28s} {'CPU ms':>8s} {'wall ms':>8s}"
+            print(f"{head} {'|dz| median':>12s} {'max':>7s}")
+            for spec in world.cameras:
+                cam = Camera(spec)
+                cpu, wall, depth = timed(lambda: cam.render_depth(cid), args.renders)
+                size = f"{cam.width}x{cam.height}"
+                print(f"{cam.id:8s} {size:>9s} {'TinyRenderer (getCameraImage)':28s} {cpu:8.1f} {wall:8.1f}")
+                for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
+                    cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
+                    dz = np.abs(rays - depth)
+                    print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
+        finally:
+            sim.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

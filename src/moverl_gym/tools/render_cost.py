@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 import pybullet
@@ -65,41 +63,33 @@ def main(argv=None) -> int:
     from moverl_sim.core import Simulator
     from moverl_sim.robot_config import load_robot_config
     from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import robot_description
+    from moverl_sim.urdf import resolve_uri
     from moverl_sim.world import load_world
 
     world = load_world(world_file(args.world))
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
-    with tempfile.TemporaryDirectory(prefix="moverl_render_cost_") as tmp:
-        urdf = Path(tmp) / "robot.urdf"
-        urdf.write_text(robot_description(rc["urdf"]))
-        sim = Simulator(
-            str(urdf),
-            rc["joints"],
-            rc["base_link"],
-            rc.get("fixed_joint_positions", {}),
-            world,
-            **sim_settings(),
-        )
-        try:
-            sim.reset_robot(rc["home"])
-            cid = sim.client_id
-            print(f"{world.source}, robot {rc['name']} at home, {args.renders} images per camera and method")
-            head = f"{'camera':8s} {'pixels':>9s} {'method':28s} {'CPU ms':>8s} {'wall ms':>8s}"
-            print(f"{head} {'|dz| median':>12s} {'max':>7s}")
-            for spec in world.cameras:
-                cam = Camera(spec)
-                cpu, wall, depth = timed(lambda: cam.render_depth(cid), args.renders)
-                size = f"{cam.width}x{cam.height}"
-                print(f"{cam.id:8s} {size:>9s} {'TinyRenderer (getCameraImage)':28s} {cpu:8.1f} {wall:8.1f}")
-                for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
-                    cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
-                    dz = np.abs(rays - depth)
-                    print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
-        finally:
-            sim.close()
+    sim = Simulator(
+        resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings()
+    )
+    try:
+        sim.reset_robot(rc["home"])
+        cid = sim.client_id
+        print(f"{world.source}, robot {rc['name']} at home, {args.renders} images per camera and method")
+        head = f"{'camera':8s} {'pixels':>9s} {'method':28s} {'CPU ms':>8s} {'wall ms':>8s}"
+        print(f"{head} {'|dz| median':>12s} {'max':>7s}")
+        for spec in world.cameras:
+            cam = Camera(spec)
+            cpu, wall, depth = timed(lambda: cam.render_depth(cid), args.renders)
+            size = f"{cam.width}x{cam.height}"
+            print(f"{cam.id:8s} {size:>9s} {'TinyRenderer (getCameraImage)':28s} {cpu:8.1f} {wall:8.1f}")
+            for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
+                cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
+                dz = np.abs(rays - depth)
+                print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
+    finally:
+        sim.close()
     return 0
 
 

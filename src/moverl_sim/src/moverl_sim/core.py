@@ -572,9 +572,10 @@ class Simulator:
         self._motion_epoch = self._substeps_total
         self._place_movers(0.0)
 
-    def obstacle_positions(self):
-        """{object id: (x, y, z)} of every obstacle now (moving ones at the current motion time)."""
-        t = self.motion_time * self._motion_scale
+    def obstacle_positions(self, sim_time=None):
+        """{object id: (x, y, z)} of every obstacle now, or at simulated time `sim_time` (moving ones where their
+        motion, as restarted last, puts them then)."""
+        t = (self.motion_time if sim_time is None else sim_time - self.motion_epoch) * self._motion_scale
         return {o.id: o.position_at(t) for o in self.world.objects}
 
     @property

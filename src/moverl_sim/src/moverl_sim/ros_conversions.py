@@ -4,7 +4,7 @@ Imports message modules only (no roscore needed), so it is unit-testable.
 """
 
 import rospy
-from geometry_msgs.msg import Pose
+from geometry_msgs.msg import Pose, PoseStamped
 
 from moverl_msgs.msg import CollisionPair, ContactReport
 from moverl_msgs.msg import World as WorldMsg
@@ -119,4 +119,14 @@ def points_to_msg(points, width, height, frame_id, stamp_sec):
     msg.row_step = 12 * width
     msg.data = pts.tobytes()
     msg.is_dense = True
+    return msg
+
+
+def tracked_pose_msg(measurement, frame_id):
+    """moverl_sim.tracker.Measurement -> geometry_msgs/PoseStamped (stamp: when it was measured)."""
+    msg = PoseStamped()
+    msg.header.stamp = sim_stamp(measurement.stamp)
+    msg.header.frame_id = frame_id
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z, o.x, o.y, o.z, o.w = measurement.pose
     return msg

@@ -65,6 +65,7 @@ WRONG = {
     "mute_cameras": ("[nope]", ("no camera nope", "its cameras: left, right")),
     "motion_time_scale": ("0", ("positive number",)),
     "camera_rate": ("-30", ("positive number",)),
+    "obstacle_poses": ("vicon", ()),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")

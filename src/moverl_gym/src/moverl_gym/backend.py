@@ -35,6 +35,7 @@ class WorldInfo:
     goal: "tuple | None"  # the world's default end-effector goal
     obstacles: tuple  # of Obstacle
     motion_epoch: float = 0.0  # driver clock (s) at which motion time was 0
+    frame: str = "world"  # the frame of the poses (= the robot's base frame)
 
 
 @dataclass
@@ -73,8 +74,8 @@ class Backend(ABC):
     """A robot the env drives. Attributes set by every implementation:
 
     joints (names, configured order), urdf (URDF text), home (configuration), ee_link, robot_config (the robot config's
-    robot: mapping: urdf URI, joints, base_link, ...), shield_enabled, world
-    (WorldInfo), restartable (True when restart() can relaunch a failed backend: a simulated graph the env launched).
+    robot: mapping: urdf URI, joints, base_link, ...), shield_enabled, world (WorldInfo), obstacle_poses, restartable
+    (True when restart() can relaunch a failed backend: a simulated graph the env launched).
     """
 
     joints: list
@@ -85,6 +86,14 @@ class Backend(ABC):
     shield_enabled: bool
     world: WorldInfo
     restartable: bool = False
+    #: Where the observed obstacles' poses come from: "world_file" (their motion, computed by the env) or "tracker"
+    #: (track() feeds a moverl_gym.tracking.TrackedPoses; launch argument obstacle_poses).
+    obstacle_poses: str = "world_file"
+
+    def track(self, tracked) -> None:
+        """Feed `tracked` (moverl_gym.tracking.TrackedPoses) with every pose the tracker delivers, from now on and
+        after a restart(). Only when obstacle_poses == "tracker"."""
+        raise NotImplementedError(f"{type(self).__name__} has no tracker")
 
     @abstractmethod
     def step(self, target: np.ndarray, duration: float) -> StepResult:

@@ -4,7 +4,9 @@ The env's logic works on plain data (moverl_gym.backend): the ROS backend (the d
 graph the env launches or attaches to; the PyBullet backend (backend="bullet", no shield) steps the same robot and
 world in-process, without a roscore. Paper sections 4.2-4.6. Action: Box[-1, 1]^n, scaled to delta q within
 +-dt * qdot_limit, clipped to the joint limits (ActionScaler). Observation: joint angles (obs_type="joints") and/or
-the end-effector pose, the goal, and the pose of every observed obstacle (7 numbers each). Reward: ReachTask. Each
+the end-effector pose, the goal, and the pose of every observed obstacle (7 numbers each: from the world file's
+motion, or with launch argument obstacle_poses:=tracker the last pose a tracker delivered, moverl_gym.tracking).
+Reward: ReachTask. Each
 episode starts at a random collision-free configuration; it terminates at the goal and is truncated after
 config.max_episode_steps (config/env.yaml, or task={"max_episode_steps": n}): the env counts them itself.
 """
@@ -29,6 +31,7 @@ from .launch_args import check as check_launch_args
 from .paths import config_file
 from .robot import ActionScaler, JointLimits, chain_reach
 from .task import ReachTask, TaskConfig
+from .tracking import TrackedPoses
 
 #: Shield verdicts by code, named as in moverl_msgs/ShieldStep (the generated class is the one source of the codes).
 VERDICTS = {
@@ -188,6 +191,11 @@ class MoveRLReachEnv(gym.Env):
             elif backend == "bullet":
                 from .bullet_backend import BulletBackend
 
+                if launch_args.get("obstacle_poses", "world_file") != "world_file":
+                    raise LaunchArgError(
+                        "obstacle_poses:=tracker needs a ROS graph (backend='ros'): the PyBullet backend has no tracker"
+                    )
+
                 self._backend = BulletBackend(world, robot, launch_args.get("robot_config"), shield=shield)
             elif backend == "ros":
                 from .ros_backend import RosBackend
@@ -254,6 +262,14 @@ class MoveRLReachEnv(gym.Env):
                     group[1].append(7 * k)
         self._movers = [(offsets, np.asarray(m.axis), m) for m, offsets in groups]
         self._motion_epoch = w.motion_epoch
+        # obstacle_poses:=tracker: the observed obstacles' poses are the last ones a tracker delivered (the backend's
+        # subscribers feed self._tracked), not the motion's (moverl_gym.tracking).
+        self._tracked = None
+        if b.obstacle_poses == "tracker":
+            self._tracked = TrackedPoses(
+                [o.id for o in observed], self._obstacles0, self.config.track_timeout, frame=w.frame
+            )
+            b.track(self._tracked)
         n = self.limits.size
         # Bounded spaces: joint angles within the URDF limits (a reported state a hair beyond one is clipped onto it
         # in the observation), positions within the robot's reach of its base (end effector, goal), observed obstacles
@@ -261,7 +277,7 @@ class MoveRLReachEnv(gym.Env):
         self._goal_low, self._goal_high = np.full(3, -self.reach), np.full(3, self.reach)
         ee_low = np.concatenate([self._goal_low, -np.ones(4)])
         ee_high = np.concatenate([self._goal_high, np.ones(4)])
-        ob_low, ob_high = _obstacle_bounds(observed)
+        ob_low, ob_high = _obstacle_bounds(observed, self.config.observation_margin)
         low = ([self.limits.lower] if obs_type_has_joints(self.obs_type) else []) + [ee_low, self._goal_low, ob_low]
         high = ([self.limits.upper] if obs_type_has_joints(self.obs_type) else []) + [ee_high, self._goal_high, ob_high]
         self._obs_low, self._obs_high = np.concatenate(low), np.concatenate(high)
@@ -283,6 +299,16 @@ class MoveRLReachEnv(gym.Env):
                 f"{self.reach:.3f} m of its base"
             )
         return task
+
+    def _observe_obstacles(self, stamp: float, info: dict) -> np.ndarray:
+        """The observed obstacles' poses for a state stamped `stamp`: the tracker's last ones (info gets
+        track_ages and tracks_lost) or the world file's motion."""
+        if self._tracked is None:
+            return self._obstacles_at(stamp)
+        poses, ages = self._tracked.read(stamp)
+        info["track_ages"] = ages
+        info["tracks_lost"] = self._tracked.lost(ages)
+        return poses
 
     def _obstacles_at(self, stamp: float) -> np.ndarray:
         """Observed obstacle poses at the state stamp `stamp` (motion time = stamp - the motion epoch)."""
@@ -355,10 +381,11 @@ class MoveRLReachEnv(gym.Env):
         self.q = res.q
         self._motion_epoch = res.motion_epoch  # a simulator reset restarts the obstacles' motions; a move does not
         self._stamp = res.stamp
-        self._obstacles = self._obstacles_at(res.stamp)
+        info = {}
+        self._obstacles = self._observe_obstacles(res.stamp, info)
         self.ee = self._backend.ee_pose(self.q)
         self.distance = self.task.distance(self.ee[:3])
-        info = {"distance": self.distance, "is_success": self.task.is_success(self.distance)}
+        info.update(distance=self.distance, is_success=self.task.is_success(self.distance))
         if res.moves:  # a planned reset (a driver that cannot teleport): what it ran
             info["reset_moves"], info["reset_path_duration"] = res.moves, res.path_duration
         return self._observation(), info
@@ -472,7 +499,10 @@ class MoveRLReachEnv(gym.Env):
         self.q = res.q
         self.ee = res.ee
         self._stamp = res.stamp
-        if self._movers:
+        tracks = {}
+        if self._tracked is not None:
+            self._obstacles = self._observe_obstacles(res.stamp, tracks)
+        elif self._movers:
             self._obstacles = self._obstacles_at(res.stamp)
         d = self.task.distance(self.ee[:3])
         discarded = verdict in DISCARDED
@@ -500,6 +530,7 @@ class MoveRLReachEnv(gym.Env):
             "message": res.message,  # the shield's words on the step (why an action was discarded, ...)
             "graph_restarts": self.graph_restarts,
             "graph_failures": self.graph_failures,
+            **tracks,
         }
         # Ground truth for constrained RL: 1.0 if the step's motion made contact. Absent when contacts are unknown (a
         # driver without ground truth: a constrained agent cannot learn there, and NaN would make equal steps unequal).
@@ -571,10 +602,13 @@ def obs_type_has_joints(obs_type: str) -> bool:
     return obs_type == "joints"
 
 
-def _obstacle_bounds(observed) -> tuple[np.ndarray, np.ndarray]:
+def _obstacle_bounds(observed, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Bounds of the observed obstacles' poses (7 numbers each): the positions over their whole motion (oscillate:
-    displacement in [-A (1 + sin phase), A (1 - sin phase)] along the axis from the pose at motion time 0), 1 mm
-    wider for float32 rounding; quaternions in [-1, 1]."""
+    displacement in [-A (1 + sin phase), A (1 - sin phase)] along the axis from the pose at motion time 0), `margin`
+    (config/env.yaml observation_margin: what a tracker may report beyond) and 1 mm (float32 rounding) wider;
+    quaternions in [-1, 1]."""
+    if not (np.isfinite(margin) and margin >= 0.0):
+        raise ValueError(f"observation_margin must be a number of metres >= 0, got {margin!r}")
     low, high = [], []
     for o in observed:
         p = np.asarray(o.pose[:3], dtype=np.float64)
@@ -583,6 +617,6 @@ def _obstacle_bounds(observed) -> tuple[np.ndarray, np.ndarray]:
             m, axis = o.motion, np.asarray(o.motion.axis, dtype=np.float64)
             ends = [p + axis * m.amplitude * (s - np.sin(m.phase)) for s in (-1.0, 1.0)]
             lo, hi = np.minimum(*ends), np.maximum(*ends)
-        low += [lo - 1e-3, -np.ones(4)]
-        high += [hi + 1e-3, np.ones(4)]
+        low += [lo - margin - 1e-3, -np.ones(4)]
+        high += [hi + margin + 1e-3, np.ones(4)]
     return (np.concatenate(low), np.concatenate(high)) if low else (np.zeros(0), np.zeros(0))

@@ -72,6 +72,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "scene_process": ("shield", "own"),  # launch files only: moverl.launch maps it onto shield.launch's scene
     "mode": ("lockstep", "realtime"),  # moverl_sim/scripts/sim_node (moverl.launch derives the sim's mode from it)
     "control": ("", "kinematic", "dynamic"),  # sim_node and moverl_sim.core; "": config/sim.yaml's
+    "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).
 OPEN: dict[str, str] = {

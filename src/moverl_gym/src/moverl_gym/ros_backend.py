@@ -250,6 +250,8 @@ class RosBackend(Backend):
         self._graph = None
         self._proxies = ()
         self._watchdog = None
+        self._tracked = None  # the TrackedPoses that track() feeds
+        self._subscribers = []
         try:
             self._connect(graph)
         except BaseException:
@@ -328,6 +330,12 @@ class RosBackend(Backend):
                 "goal_time + result_margin), so that a stalled component is reported by the shield, naming it"
             )
         self.world = _world_info(self._world(GetWorld._request_class()).world)
+        # The arguments the graph was launched with (moverl.launch stores them, checked): an attached graph's too.
+        self.obstacle_poses = str(
+            (rospy.get_param("/moverl/launch_args", None) or self._launch_args).get("obstacle_poses", "world_file")
+        )
+        if self._tracked is not None:  # a restart: the new master does not know the old subscribers
+            self._subscribe()
         simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
         self.restartable = simulated  # never a real robot's graph, nor one this env did not launch
 
@@ -374,6 +382,37 @@ class RosBackend(Backend):
             },
         )
 
+    def track(self, tracked) -> None:
+        if self.obstacle_poses != "tracker":
+            raise RuntimeError(f"the graph was launched with obstacle_poses:={self.obstacle_poses}, not tracker")
+        self._tracked = tracked
+        self._subscribe()
+
+    def _subscribe(self) -> None:
+        """One subscriber per tracked object (moverl_sim.tracker.TOPIC); its callback, in rospy's receive thread, only
+        stores the pose (TrackedPoses.update): nothing of it runs on the step's path."""
+        import rospy
+        from geometry_msgs.msg import PoseStamped
+
+        from moverl_sim.tracker import TOPIC
+
+        self._unsubscribe()
+        tracked = self._tracked
+
+        def on_pose(msg, oid):
+            p, o = msg.pose.position, msg.pose.orientation
+            tracked.update(oid, msg.header.stamp.to_sec(), (p.x, p.y, p.z, o.x, o.y, o.z, o.w), msg.header.frame_id)
+
+        self._subscribers = [
+            rospy.Subscriber(TOPIC.format(id=oid), PoseStamped, on_pose, callback_args=oid, queue_size=100)
+            for oid in tracked.ids
+        ]
+
+    def _unsubscribe(self) -> None:
+        for sub in self._subscribers:
+            sub.unregister()
+        self._subscribers = []
+
     def reset(self, q: "np.ndarray | None") -> ResetResult:
         res = self._reset(self._srv["reset"](positions=[] if q is None else [float(x) for x in q]))
         return ResetResult(
@@ -413,6 +452,7 @@ class RosBackend(Backend):
         """Close the service connections, then stop the graph if this backend launched it: every process of the
         graph is gone when close() returns (see moverl_gym.graph.LaunchedGraph.close)."""
         try:
+            self._unsubscribe()
             for p in self._proxies:
                 p.close()
             self._proxies = ()
@@ -455,4 +495,5 @@ def _world_info(w) -> WorldInfo:
         goal=tuple(w.goal) if len(w.goal) else None,
         obstacles=tuple(obstacles),
         motion_epoch=w.motion_epoch.to_sec(),
+        frame=w.header.frame_id or "world",
     )

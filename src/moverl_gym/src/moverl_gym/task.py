@@ -30,6 +30,8 @@ class TaskConfig:
     reset_timeout: float
     max_graph_restarts: int
     restart_min_steps: int
+    observation_margin: float
+    track_timeout: float
 
     @classmethod
     def from_yaml(cls, path: Path, **overrides) -> "TaskConfig":

@@ -43,12 +43,17 @@ def build_parser() -> argparse.ArgumentParser:
         "seed",
         "shield",
         "obstacles",
+        "launch",
         "task",
         "graph",
         "video",
         seed=dict(default=1000, help="env seed: episode i starts from reset(seed=seed + i); not a training seed"),
         shield=dict(default=None, help="default: as in training"),
         obstacles=dict(default=None, help="what the planning scene knows of the obstacles (default: as in training)"),
+        launch=dict(
+            help="an argument of launch/moverl.launch for the evaluation's graph (not the training's), e.g. --launch "
+            "obstacle_poses=tracker --launch camera_rate=30 --launch mode=realtime; repeatable"
+        ),
         task=dict(
             help="override a key of the task as trained (config/env.yaml then, with the run's --task), e.g. "
             "--task start_noise=0; repeatable"
@@ -103,8 +108,8 @@ def main(argv=None) -> int:
     task.update(options.task_dict(args.task))
     kwargs = dict(shield=shield, graph=args.graph, task=task)
     obstacles = args.obstacles or config.get("obstacles", "objects")
-    if obstacles != "objects":
-        kwargs["launch_args"] = {"obstacles": obstacles}
+    launch = options.launch_dict(args.launch)
+    kwargs["launch_args"] = ({"obstacles": obstacles} if obstacles != "objects" else {}) | launch
     if args.world:
         kwargs["world"] = args.world
     if args.video > 0:
@@ -143,6 +148,10 @@ def main(argv=None) -> int:
                 if info.get("discarded"):
                     ep[info.get("verdict", "discarded")] += 1  # by verdict: discarded_pose, ..., discarded_unseen
                 ep["replanned"] += int(info.get("verdict") == "replanned")
+                if "tracks_lost" in info:  # obstacle_poses:=tracker
+                    ep["steps_with_lost_tracks"] += int(info["tracks_lost"] > 0)
+                    ages = info["track_ages"][np.isfinite(info["track_ages"])]
+                    ep["track_age_sum"] += float(ages.mean()) if ages.size else 0.0
                 ep["truncated"] += int(info.get("verdict") == "truncated")
             ep["success"] = int(bool(info.get("is_success", False)))
             episodes.append(dict(ep))
@@ -161,6 +170,7 @@ def main(argv=None) -> int:
         "shield": bool(shield),
         "trained_with_shield": bool(config["shield"]),
         "obstacles": obstacles,
+        "launch": launch,
         "task_overrides": options.task_dict(args.task),
         "world": args.world,
         "deterministic": args.deterministic,
@@ -177,6 +187,11 @@ def main(argv=None) -> int:
         "interventions_per_episode": float(col("interventions").mean()),
         "replanned_total": int(col("replanned").sum()),
         "truncated_total": int(col("truncated").sum()),
+        "discarded_unseen_total": int(col("discarded_unseen").sum()),
+        "steps_with_lost_tracks": int(col("steps_with_lost_tracks").sum()),
+        "mean_track_age": float(col("track_age_sum").sum() / col("length").sum())
+        if launch.get("obstacle_poses") == "tracker"
+        else None,
         "wall_time": wall,
         "steps_per_second": float(col("length").sum() / wall) if wall > 0 else float("nan"),
         "per_episode": episodes,

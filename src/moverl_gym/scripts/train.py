@@ -41,6 +41,7 @@ ALGOS = ("ppo", "sac", "td3")
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     options.add(p, *options.TRAINING)  # the options rllib_train.py shares (moverl_gym.options)
+    options.add(p, "launch")
     return p
 
 
@@ -76,6 +77,7 @@ def main(argv=None) -> int:
     run.mkdir(parents=True, exist_ok=True)
 
     launch_args = {} if args.obstacles == "objects" else {"obstacles": args.obstacles}
+    launch_args.update(options.launch_dict(args.launch))
     task = options.task_dict(args.task)
     recover = options.recover_value(args.recover)
     make = [
@@ -98,6 +100,7 @@ def main(argv=None) -> int:
             "n_timesteps": n_timesteps,
             "shield": shield,
             "obstacles": args.obstacles,
+            "launch": options.launch_dict(args.launch),
             "policy": policy,
             "hyperparams": {k: getattr(v, "__name__", v) for k, v in hp.items()},
             "task": vars(env.get_attr("config", [0])[0]),

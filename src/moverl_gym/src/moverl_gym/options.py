@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from .launch_args import CHOICES
+from .launch_args import ARGS, CHOICES
 from .registration import ENV_IDS
 from .task import TaskConfig
 
@@ -73,6 +73,39 @@ def task_dict(items: list[str]) -> dict:
     return out
 
 
+#: moverl.launch's arguments that --launch does not take: the env's own (world, robot, shield) and --obstacles'.
+LAUNCH_OWN = {
+    "world": "--world or the env id",
+    "world_file": "--world",
+    "robot": "the env id",
+    "shield": "--shield",
+    "obstacles": "--obstacles",
+}
+
+
+def launch_item(text: str) -> str:
+    """An argparse type for --launch NAME=VALUE: refuses a malformed item, an unknown argument of moverl.launch (with
+    the closest one) and the arguments that have an option of their own; the value is checked with the others when the
+    env is made (moverl_gym.launch_args.check, before anything starts)."""
+    name, sep, _ = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"takes NAME=VALUE, got {text!r}")
+    if name in LAUNCH_OWN:
+        raise argparse.ArgumentTypeError(f"{name}: give it as {LAUNCH_OWN[name]}")
+    if name not in ARGS:
+        close = difflib.get_close_matches(name, ARGS, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise argparse.ArgumentTypeError(
+            f"no launch argument {name!r}{hint}; launch/moverl.launch's: {', '.join(ARGS)}"
+        )
+    return text
+
+
+def launch_dict(items: list[str]) -> dict:
+    """--launch items (checked by launch_item) as the env's launch_args, the values as given."""
+    return dict(item.partition("=")[::2] for item in items)
+
+
 def recover_value(text: str) -> "bool | str":
     """--recover as the env's recover= argument."""
     return {"auto": "auto", "on": True, "off": False}[text]
@@ -117,6 +150,17 @@ OPTIONS: dict[str, tuple[tuple[str, ...], dict]] = {
             choices=CHOICES["obstacles"],
             help="what the shield knows (launched graph only): the world file's objects, the OctoMap built from the "
             "world's depth cameras, both, or sensed (the static objects plus the OctoMap for what moves)",
+        ),
+    ),
+    "launch": (
+        ("--launch",),
+        dict(
+            type=launch_item,
+            action="append",
+            default=[],
+            metavar="NAME=VALUE",
+            help="an argument of launch/moverl.launch for the launched graph, e.g. --launch camera_rate=30 --launch "
+            "obstacle_poses=tracker --launch mode=realtime; repeatable",
         ),
     ),
     "task": (

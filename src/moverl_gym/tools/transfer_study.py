@@ -1,0 +1,222 @@
+#!/usr/bin/env python3
+"""The transfer experiment of issue 25: a policy trained on the world file, deployed on the cell as a real robot sees it.
+
+    python src/moverl_gym/tools/transfer_study.py --seeds 0 1 2                 # ~1 h on 2 cores
+    python src/moverl_gym/tools/transfer_study.py --quick --out /tmp/transfer   # the pipeline in ~2 min (CI)
+
+1. Train PPO (paper settings, config/hyperparams/ppo.yml) on MoveRL/PandaReachHuman-v0 with the world file, in lockstep
+   (train.py), one run per seed; and, once (the first seed), PPO directly in the sensed mode with 30 Hz cameras
+   (--obstacles sensed --launch camera_rate=30, lockstep), with a budget of its own (--sensed-steps).
+2. Evaluate every final policy deterministically (evaluate.py, --episodes each, a graph of its own per evaluation):
+   * world_file: as trained (lockstep, the world file's shapes and script);
+   * cell: the shield with the cameras' map (obstacles:=sensed, every camera at 30 Hz), the observation from the
+     tracker (obstacle_poses:=tracker: config/sim.yaml's latency, noise and dropouts), in real time;
+   * cell_iso: the cell, in a human world whose sensing speed bound is ISO 13855's 1.6 m/s
+     (src/moverl_gym/test/worlds/human_iso_speed.yaml) instead of the walk's 0.16 m/s.
+   The sensed-trained policy is evaluated in the cell.
+3. Write <docs>/results.md and results.csv (per condition: success mean and 95 % t-interval over seeds, contacts,
+   steps/s, actions discarded as unseen, steps with a lost track, mean track age; success against the world file's)
+   and runs.csv (one row per evaluation). Resumable: a run with its model, or an evaluation with its JSON, is not
+   redone.
+
+Figures vary with the machine's load (steps/s, and in real time what the cameras manage to render): results.md says
+when and where it ran.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[3]
+SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
+ENV = "MoveRL/PandaReachHuman-v0"
+ISO_WORLD = REPO / "src" / "moverl_gym" / "test" / "worlds" / "human_iso_speed.yaml"
+CELL = ["--obstacles", "sensed", "--launch", "camera_rate=30", "--launch", "obstacle_poses=tracker", "--launch",
+        "mode=realtime"]  # fmt: skip
+CONDITIONS = {
+    "world_file": ("the world file, lockstep (as trained)", []),
+    "cell": ("cameras at 30 Hz + tracker, real time", CELL),
+    "cell_iso": ("the cell with ISO's 1.6 m/s speed bound", [*CELL, "--world", str(ISO_WORLD)]),
+}
+METRICS = ("success_rate", "contacts_total", "steps_per_second", "discarded_unseen_total", "steps_with_lost_tracks",
+           "mean_track_age", "interventions_per_episode", "mean_length")  # fmt: skip
+
+
+def run(cmd: list[str], log: Path, timeout: float) -> None:
+    log.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.monotonic()
+    with open(log, "w") as f:
+        f.write(" ".join(cmd) + "\n")
+        f.flush()
+        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=timeout, env=os.environ)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed (exit {proc.returncode}); see {log}:\n{log.read_text()[-2000:]}")
+    print(f"  done in {time.monotonic() - t0:.0f} s: {log.stem}", flush=True)
+
+
+def train_cmd(out: Path, seed: int, steps: int, extra: list[str]) -> list[str]:
+    return [sys.executable, str(SCRIPTS / "train.py"), "--env", ENV, "--algo", "ppo", "--seed", str(seed), "-n",
+            str(steps), "--log-folder", str(out), "--no-progress", "--recover", "off", *extra]  # fmt: skip
+
+
+def run_folder(out: Path, seed: int) -> Path:
+    return out / f"ppo_{ENV.split('/')[-1]}_on_s{seed}"
+
+
+def mean_ci(values):
+    from moverl_gym.constrained_study import mean_ci as ci
+
+    return ci(values)
+
+
+def fmt(m, h, scale=1.0, digits=1):
+    import math
+
+    if m is None or (isinstance(m, float) and math.isnan(m)):
+        return "-"
+    if h is None or math.isnan(h):
+        return f"{m * scale:.{digits}f}"
+    return f"{m * scale:.{digits}f} ± {h * scale:.{digits}f}"
+
+
+def report(rows: list[dict], docs: Path, args, started: str, wall: float) -> None:
+    docs.mkdir(parents=True, exist_ok=True)
+    keys = ["policy", "condition", "seed", *METRICS, "episodes", "json"]
+    with open(docs / "runs.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, keys, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["policy"], r["condition"]), []).append(r)
+    base = {p: mean_ci([r["success_rate"] for r in rs])[0] for (p, c), rs in groups.items() if c == "world_file"}
+    summary = []
+    for (policy, cond), rs in groups.items():
+        s, h, n = mean_ci([r["success_rate"] for r in rs])
+        row = dict(policy=policy, condition=cond, seeds=n, success=s, success_ci=h,
+                   contacts=sum(r["contacts_total"] for r in rs), episodes=sum(r["episodes"] for r in rs))  # fmt: skip
+        for k in ("steps_per_second", "discarded_unseen_total", "steps_with_lost_tracks", "mean_track_age",
+                  "interventions_per_episode", "mean_length"):  # fmt: skip
+            vals = [r[k] for r in rs if r.get(k) is not None]
+            row[k] = sum(vals) / len(vals) if vals else None
+        row["vs_world_file"] = s / base["world_file"] if base.get("world_file") else None
+        summary.append(row)
+    with open(docs / "results.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, list(summary[0]))
+        w.writeheader()
+        w.writerows(summary)
+    cmd = "python src/moverl_gym/tools/transfer_study.py " + " ".join(sys.argv[1:])
+    lines = [
+        "# A policy trained on the world file, deployed on the cell as a real robot sees it",
+        "",
+        f"Command: `{cmd}` (started {started}, {wall / 60:.0f} min on this 2-core machine; figures of speed vary with "
+        "its load).",
+        "",
+        f"PPO (paper settings) trained on {ENV} with the world file in lockstep, {args.steps:,} steps per seed; "
+        f"evaluated deterministically over {args.episodes} episodes per seed and condition ({args.iso_episodes} in "
+        "cell_iso). Conditions: "
+        + "; ".join(f"**{c}**: {d}" for c, (d, _) in CONDITIONS.items())
+        + f". The policy trained directly in the sensed mode ({args.sensed_steps:,} steps, seed {args.seeds[0]}, "
+        "30 Hz cameras, lockstep) is the row `sensed30`. Success: mean ± 95 % t-interval over seeds; contacts: ground "
+        "truth, summed over all episodes; discarded unseen, steps with a lost track: summed per seed, mean over seeds; "
+        "track age: the mean age (s) of the tracked poses in the observation.",
+        "",
+        "| policy | condition | seeds | success (%) | vs world file | contacts | steps/s | discarded unseen | "
+        "steps with a lost track | track age (s) | interventions / episode | steps / episode |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in summary:
+        lines.append(
+            f"| {r['policy']} | {r['condition']} | {r['seeds']} | {fmt(r['success'], r['success_ci'], 100)} | "
+            f"{fmt(r['vs_world_file'], None, 100, 0) + ' %' if r['vs_world_file'] is not None else '-'} | "
+            f"**{r['contacts']}** | {fmt(r['steps_per_second'], None)} | {fmt(r['discarded_unseen_total'], None)} | "
+            f"{fmt(r['steps_with_lost_tracks'], None)} | {fmt(r['mean_track_age'], None, 1, 3)} | "
+            f"{fmt(r['interventions_per_episode'], None, 1, 2)} | {fmt(r['mean_length'], None)} |"
+        )
+    lines += ["", "Per evaluation: [runs.csv](runs.csv); the evaluations' JSON files are in the run folder "
+              f"(`{args.out}`)."]  # fmt: skip
+    (docs / "results.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--steps", type=int, default=40_000, help="training steps per world-file run (paper: 40,000)")
+    p.add_argument("--sensed-steps", type=int, default=10_000, help="training steps of the sensed run (0: none)")
+    p.add_argument("--episodes", type=int, default=100, help="evaluation episodes per seed and condition")
+    p.add_argument("--iso-episodes", type=int, default=30, help="evaluation episodes per seed in cell_iso")
+    p.add_argument("--jobs", type=int, default=2, help="trainings and lockstep evaluations at once (real time: one)")
+    p.add_argument("--out", type=Path, default=REPO / "runs" / "transfer")
+    p.add_argument("--docs", type=Path, default=REPO / "docs" / "transfer")
+    p.add_argument("--quick", action="store_true", help="the pipeline only: 1 seed, 300 steps, 2 episodes, no ISO")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.seeds, args.steps, args.sensed_steps, args.episodes = args.seeds[:1], 300, 100, 2
+    conditions = {c: v for c, v in CONDITIONS.items() if not (args.quick and c == "cell_iso")}
+    started, t0 = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), time.monotonic()
+    out = args.out.resolve()
+    logs = out / "logs"
+    per_step = 0.5  # s: a generous bound of a step's wall time (the slowest, sensed at 30 Hz, takes ~0.1-0.15 s)
+
+    # 1. training
+    jobs = []
+    for seed in args.seeds:
+        if not (run_folder(out / "world_file", seed) / "model.zip").exists():
+            jobs.append((train_cmd(out / "world_file", seed, args.steps, []), logs / f"train_world_file_s{seed}.log",
+                         120 + args.steps * per_step / 5))  # fmt: skip
+    if args.sensed_steps and not (run_folder(out / "sensed30", args.seeds[0]) / "model.zip").exists():
+        extra = ["--obstacles", "sensed", "--launch", "camera_rate=30"]
+        jobs.append((train_cmd(out / "sensed30", args.seeds[0], args.sensed_steps, extra),
+                     logs / f"train_sensed30_s{args.seeds[0]}.log", 300 + args.sensed_steps * per_step))  # fmt: skip
+    print(f"training: {len(jobs)} runs", flush=True)
+    with ThreadPoolExecutor(args.jobs) as pool:
+        for f in [pool.submit(run, *j) for j in jobs]:
+            f.result()
+
+    # 2. evaluations: lockstep ones in parallel, real-time ones one at a time (they need the cores on time)
+    evals = []  # (policy, condition, seed, run folder, json)
+    for seed in args.seeds:
+        for cond in conditions:
+            evals.append(("world_file", cond, seed, run_folder(out / "world_file", seed)))
+    if args.sensed_steps:
+        evals.append(("sensed30", "cell", args.seeds[0], run_folder(out / "sensed30", args.seeds[0])))
+
+    def eval_job(policy, cond, seed, folder):
+        js = out / "evals" / f"{policy}_{cond}_s{seed}.json"
+        episodes = args.iso_episodes if cond == "cell_iso" else args.episodes
+        cmd = [sys.executable, str(SCRIPTS / "evaluate.py"), str(folder), "--episodes", str(episodes),
+               "--deterministic", "--out", str(js), *conditions[cond][1]]  # fmt: skip
+        return js, (cmd, logs / f"eval_{policy}_{cond}_s{seed}.log", 300 + episodes * 100 * per_step)
+
+    (out / "evals").mkdir(parents=True, exist_ok=True)
+    todo = [(e, *eval_job(*e)) for e in evals]
+    lock = [j for e, js, j in todo if not js.exists() and e[1] == "world_file"]
+    real = [j for e, js, j in todo if not js.exists() and e[1] != "world_file"]
+    print(f"evaluations: {len(lock)} in lockstep, {len(real)} in real time", flush=True)
+    with ThreadPoolExecutor(args.jobs) as pool:
+        for f in [pool.submit(run, *j) for j in lock]:
+            f.result()
+    for j in real:
+        run(*j)
+
+    # 3. report
+    rows = []
+    for (policy, cond, seed, _), js, _ in todo:
+        r = json.loads(js.read_text())
+        rows.append(dict(policy=policy, condition=cond, seed=seed, json=str(js), **{k: r.get(k) for k in METRICS},
+                         episodes=r["episodes"]))  # fmt: skip
+    report(rows, args.docs, args, started, time.monotonic() - t0)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The transfer experiment of issue 25: a policy trained on the world file, deployed on the cell as a real robot sees it.
+"""The transfer experiment of issue 25: a policy trained on the world file, deployed on the cell as a real robot sees
+it.
 
     python src/moverl_gym/tools/transfer_study.py --seeds 0 1 2                 # ~1 h on 2 cores
     python src/moverl_gym/tools/transfer_study.py --quick --out /tmp/transfer   # the pipeline in ~2 min (CI)

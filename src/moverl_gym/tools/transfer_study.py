@@ -88,7 +88,7 @@ def fmt(m, h, scale=1.0, digits=1):
     return f"{m * scale:.{digits}f} ± {h * scale:.{digits}f}"
 
 
-def report(rows: list[dict], docs: Path, args, started: str, wall: float) -> None:
+def report(rows: list[dict], training: list, docs: Path, args, started: str, wall: float) -> None:
     docs.mkdir(parents=True, exist_ok=True)
     keys = ["policy", "condition", "seed", *METRICS, "episodes", "json"]
     with open(docs / "runs.csv", "w", newline="") as f:
@@ -141,6 +141,15 @@ def report(rows: list[dict], docs: Path, args, started: str, wall: float) -> Non
             f"**{r['contacts']}** | {fmt(r['steps_per_second'], None)} | {fmt(r['discarded_unseen_total'], None)} | "
             f"{fmt(r['steps_with_lost_tracks'], None)} | {fmt(r['mean_track_age'], None, 1, 3)} | "
             f"{fmt(r['interventions_per_episode'], None, 1, 2)} | {fmt(r['mean_length'], None)} |"
+        )
+    lines += ["", "Training (train.py's summary.json: success over the last 200 training episodes, ground-truth "
+              "contacts during training, wall time):", "",
+              "| policy | seed | steps | success, last 200 episodes (%) | contacts | wall time (min) | steps/s |",
+              "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for policy, seed, t in training:
+        lines.append(
+            f"| {policy} | {seed} | {t['steps']:,} | {100 * t['success_rate_last']:.0f} | **{t['contacts']}** | "
+            f"{t['wall_time'] / 60:.1f} | {t['steps_per_second']:.1f} |"
         )
     lines += ["", "Per evaluation: [runs.csv](runs.csv); the evaluations' JSON files are in the run folder "
               f"(`{args.out}`)."]  # fmt: skip
@@ -215,7 +224,15 @@ def main(argv=None) -> int:
         r = json.loads(js.read_text())
         rows.append(dict(policy=policy, condition=cond, seed=seed, json=str(js), **{k: r.get(k) for k in METRICS},
                          episodes=r["episodes"]))  # fmt: skip
-    report(rows, args.docs, args, started, time.monotonic() - t0)
+    training = []
+    for policy, seeds, steps in (
+        ("world_file", args.seeds, args.steps),
+        ("sensed30", args.seeds[:1], args.sensed_steps),
+    ):
+        for seed in seeds if steps else []:
+            t = json.loads((run_folder(out / policy, seed) / "summary.json").read_text())
+            training.append((policy, seed, dict(t, steps=steps)))
+    report(rows, training, args.docs, args, started, time.monotonic() - t0)
     return 0
 
 

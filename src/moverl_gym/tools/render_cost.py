@@ -1,12 +1,14 @@
 #!/usr/bin/env python3
-"""What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer (what the simulator uses)
-and by PyBullet's batched ray test over the same pixel rays, on one thread and on all, in this process (no ROS).
+"""What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer with the robot drawn as its
+visual meshes and as its collision shapes (config/sim.yaml robot_visuals: what the simulator's cameras see), and by
+PyBullet's batched ray test over the same pixel rays (collision shapes), on one thread and on all, in this process (no
+ROS).
 
     python src/moverl_gym/tools/render_cost.py --world human --renders 10
 
 The robot stands at its home configuration. Prints, per camera, CPU ms (this process, all threads) and wall ms per
-image, and how far the ray test's depths are from TinyRenderer's (z-depth, metres; pixels without a return count as
-the far plane in both). A baseline for a faster depth camera (issue 25).
+image, and how far the other methods' depths are from TinyRenderer's with the visual meshes (z-depth, metres; pixels
+without a return count as the far plane in both). A baseline for a faster depth camera (issue 25).
 """
 
 from __future__ import annotations
@@ -70,11 +72,21 @@ def main(argv=None) -> int:
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
-    sim = Simulator(
-        resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings()
-    )
+    sims = {
+        looks: Simulator(
+            resolve_uri(rc["urdf"]),
+            rc["joints"],
+            rc["base_link"],
+            rc.get("fixed_joint_positions"),
+            world,
+            **{**sim_settings(), "robot_visuals": looks},
+        )
+        for looks in ("visual", "collision")
+    }
+    sim = sims["visual"]
     try:
-        sim.reset_robot(rc["home"])
+        for s in sims.values():
+            s.reset_robot(rc["home"])
         cid = sim.client_id
         print(f"{world.source}, robot {rc['name']} at home, {args.renders} images per camera and method")
         head = f"{'camera':8s} {'pixels':>9s} {'method':28s} {'CPU ms':>8s} {'wall ms':>8s}"
@@ -83,13 +95,22 @@ def main(argv=None) -> int:
             cam = Camera(spec)
             cpu, wall, depth = timed(lambda: cam.render_depth(cid), args.renders)
             size = f"{cam.width}x{cam.height}"
-            print(f"{cam.id:8s} {size:>9s} {'TinyRenderer (getCameraImage)':28s} {cpu:8.1f} {wall:8.1f}")
+            print(f"{cam.id:8s} {size:>9s} {'TinyRenderer, visual meshes':28s} {cpu:8.1f} {wall:8.1f}")
+            cpu, wall, hulls = timed(lambda: cam.render_depth(sims["collision"].client_id), args.renders)
+            dz = np.abs(hulls - depth)
+            label = "TinyRenderer, collision shapes"
+            print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
+            # Where the hulls change the image: nearer (they hide more than the arm) or farther (the camera would see
+            # past the arm's surface), by more than a millimetre.
+            nearer, farther = np.mean(hulls < depth - 1e-3), np.mean(hulls > depth + 1e-3)
+            print(f"{'':8s} {'':>9s}   pixels nearer {100 * nearer:.2f} %, farther {100 * farther:.2f} %")
             for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
                 cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
                 dz = np.abs(rays - depth)
                 print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
     finally:
-        sim.close()
+        for s in sims.values():
+            s.close()
     return 0
 
 

@@ -96,3 +96,44 @@ def test_robot_description_script(tmp_path):
     bad.write_text("not xml at all <")
     r = _run_script(str(bad))
     assert r.returncode == 1 and "not valid XML" in r.stderr
+
+
+def test_collision_as_visual_draws_the_collision_shapes(tmp_path):
+    """config/sim.yaml robot_visuals: collision: every link with collision shapes is drawn as them (the depth cameras
+    see the hulls the scene checks), a link without keeps its visuals, nothing else of the URDF changes."""
+    from moverl_sim.urdf import collision_as_visual
+
+    text = robot_description(PANDA_URI)
+    extra = '<link name="marker"><visual><geometry><sphere radius="0.01"/></geometry></visual></link>'
+    out = ET.fromstring(collision_as_visual(text.replace("</robot>", extra + "</robot>")))
+    before = ET.fromstring(text)
+    for link in out.findall("link"):
+        old = before.find(f"link[@name='{link.get('name')}']")
+        if link.get("name") == "marker":
+            assert link.find("visual/geometry/sphere") is not None
+            continue
+        drawn = [ET.tostring(v.find("geometry")) for v in link.findall("visual")]
+        assert drawn == [ET.tostring(c.find("geometry")) for c in old.findall("collision")] or not drawn
+        assert [ET.tostring(c) for c in link.findall("collision")] == [ET.tostring(c) for c in old.findall("collision")]
+        assert link.find("visual/material") is None
+    assert [j.attrib for j in out.iter("joint")] == [j.attrib for j in before.iter("joint")]
+
+
+def test_simulator_draws_what_robot_visuals_says(panda_urdf):
+    """The simulator's PyBullet robot shows collision meshes only with robot_visuals collision, its visual meshes with
+    visual; a wrong value is refused naming both."""
+    import pybullet
+    from conftest import make_sim
+
+    for looks in ("collision", "visual"):
+        sim = make_sim(panda_urdf, None, robot_visuals=looks)
+        try:
+            files = {d[4].decode() for d in pybullet.getVisualShapeData(sim.robot, physicsClientId=sim.client_id)}
+            if looks == "collision":
+                assert all("/collision/" in f for f in files), files
+            else:
+                assert any("/visual/" in f for f in files), files
+        finally:
+            sim.close()
+    with pytest.raises(ValueError, match="robot_visuals must be 'visual' or 'collision'"):
+        make_sim(panda_urdf, None, robot_visuals="hulls")

@@ -103,7 +103,7 @@ class SceneView:
                 robot.get("fixed_joint_positions") or {},
                 world,
                 gui=False,
-                **sim_settings(),
+                **{**sim_settings(), "robot_visuals": "visual"},  # a picture for people: the robot as it looks
             )
         p = self.sim._p
         for oid, (body, link) in self.sim._object_links.items():

@@ -3,6 +3,7 @@
 ROS-free except for the optional ``rospkg`` lookup of ``package://`` URIs.
 """
 
+import copy
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -200,6 +201,28 @@ def rewrite_mesh_paths(text, base_dir=None, source="robot description", check_ex
         if check_exists and not os.path.isfile(path):
             raise UrdfError("%s: mesh %r resolves to %s, which does not exist" % (source, fname, path))
         mesh.set("filename", path)
+    return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def collision_as_visual(text, base_dir=None, source="robot description"):
+    """URDF text whose links look like their collision shapes: each link's <visual> elements are replaced by its
+    <collision> elements' origins and geometries (no material), so that a renderer draws the collision shapes (the
+    simulator's depth cameras: a link's convex hull has a few hundred triangles where its visual mesh may have tens of
+    thousands). A link without a <collision> keeps its visuals (a camera must not see through it). Mesh paths come out
+    absolute (rewrite_mesh_paths), so the text can be written anywhere."""
+    root = _parse_urdf(rewrite_mesh_paths(text, base_dir, source), source)
+    for link in root.findall("link"):
+        collisions = link.findall("collision")
+        if not collisions:
+            continue
+        for visual in link.findall("visual"):
+            link.remove(visual)
+        for collision in collisions:
+            visual = ET.SubElement(link, "visual")
+            for tag in ("origin", "geometry"):
+                element = collision.find(tag)
+                if element is not None:
+                    visual.append(copy.deepcopy(element))
     return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 

@@ -31,7 +31,11 @@ def walk(mode, steps):
     env = gym.make(ENV_ID, launch_args={"obstacle_poses": "tracker", "mode": mode})
     try:
         u = env.unwrapped
-        assert u.observation_space == gym.make(ENV_ID, backend="bullet", shield=False).observation_space
+        reference = gym.make(ENV_ID, backend="bullet", shield=False)  # the world file's observation, no ROS
+        try:
+            assert u.observation_space == reference.observation_space  # a world-file policy loads unchanged
+        finally:
+            reference.close()
         world = load_world(str(moverl_gym.paths.world_file("human")))
         ids = u._tracked.ids
         assert ids == ("human_torso", "human_head", "human_left_arm", "human_right_arm")

@@ -118,21 +118,12 @@ class Tool:
 
     def __init__(self, robot: str):
         from moverl_gym.paths import robot_config_file
-        from moverl_sim.core import Simulator
         from moverl_sim.robot_config import load_robot_config
-        from moverl_sim.settings import sim_settings
-        from moverl_sim.urdf import resolve_uri
+        from moverl_sim.settings import simulator_for
         from moverl_sim.world import World
 
         rc = load_robot_config(robot_config_file(robot))
-        self.sim = Simulator(
-            resolve_uri(rc["urdf"]),
-            rc["joints"],
-            rc["base_link"],
-            rc.get("fixed_joint_positions"),
-            World(name="empty"),
-            **sim_settings(),
-        )
+        self.sim = simulator_for(rc, World(name="empty"))
         p, robot = self.sim._p, self.sim.robot
         index = {p.getJointInfo(robot, j)[12].decode(): j for j in range(p.getNumJoints(robot))}
         self.ee = index[rc["ee_link"]]

@@ -6,8 +6,8 @@ octomap/self_filter_padding of the robot's collision shapes, within octomap/stat
 (config/planning_scene.yaml). Whatever else lies in those zones is not seen: they are the map's blind zone, and they
 must be as thin as the cameras allow (README, "A person seen only by cameras"). This tool measures what the cameras
 need: it renders every camera of the worlds with PyBullet's segmentation mask, in random collision-free
-configurations of the robot, and measures the distance of every point on the robot (on a static object) from that
-body's collision shapes in PyBullet (the planning scene's shapes contain PyBullet's: test_geometry_parity.py, so the
+configurations of the robot drawn as its visual meshes (as a real camera sees it), and measures the distance of every
+point on the robot (on a static object) from that body's collision shapes in PyBullet (the planning scene's shapes contain PyBullet's: test_geometry_parity.py, so the
 distance to the scene's shapes is at most this). Points inside a shape count 0.
 
     python src/moverl_gym/tools/blind_zone.py [--robot panda | my_arm.yaml] [--worlds table human case]
@@ -27,10 +27,8 @@ import pybullet
 
 from moverl_gym.paths import robot_config_file, world_file
 from moverl_sim.camera import Camera
-from moverl_sim.core import Simulator
 from moverl_sim.robot_config import load_robot_config
-from moverl_sim.settings import sim_settings
-from moverl_sim.urdf import resolve_uri
+from moverl_sim.settings import simulator_for
 from moverl_sim.world import load_world
 
 PROBE_RADIUS = 1e-4  # m: the probe sphere that stands for a point
@@ -51,9 +49,9 @@ def _distances(p, probe, body, points):
 def measure(robot: str, world_name: str, n: int, seed: int) -> dict:
     rc = load_robot_config(robot if robot.endswith(".yaml") else robot_config_file(robot))
     world = load_world(world_file(world_name))
-    sim = Simulator(
-        resolve_uri(rc["urdf"]), rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings()
-    )
+    # The robot as a real camera sees it, its visual meshes (the simulator's cameras draw its collision shapes:
+    # config/sim.yaml robot_visuals), so that the distance measured is the visual surface's from the shapes.
+    sim = simulator_for(rc, world, robot_visuals="visual")
     p = sim._p
     probe = p.createMultiBody(0, p.createCollisionShape(pybullet.GEOM_SPHERE, radius=PROBE_RADIUS), -1, [9, 9, 9])
     cams = [Camera(c) for c in world.cameras]

@@ -346,20 +346,11 @@ def robot_config_path(robot: str, robot_config: str | None) -> Path:
 
 
 def make_simulator(config_path, world_path: str):
-    from moverl_sim.core import Simulator
-    from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import resolve_uri
+    from moverl_sim.settings import simulator_for
     from moverl_sim.world import load_world
 
     rc = load_robot_config(config_path)
-    return Simulator(
-        resolve_uri(rc["urdf"]),
-        rc["joints"],
-        rc["base_link"],
-        rc.get("fixed_joint_positions"),
-        load_world(world_path),
-        **sim_settings(),
-    )
+    return simulator_for(rc, load_world(world_path))
 
 
 SENSED = "octomap"  # the scene's name for the sensed map in colliding pairs

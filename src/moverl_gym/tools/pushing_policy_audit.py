@@ -124,21 +124,12 @@ def worker(
     from moverl_gym.env import MoveRLReachEnv
     from moverl_gym.paths import config_file, world_file
     from moverl_gym.task import TaskConfig
-    from moverl_sim.core import Simulator
-    from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import resolve_uri
+    from moverl_sim.settings import simulator_for
     from moverl_sim.world import load_world
 
     rc = load_robot_config(robot_config)
     rng = np.random.default_rng(seed)
-    sim = Simulator(
-        resolve_uri(rc["urdf"]),
-        rc["joints"],
-        rc["base_link"],
-        rc.get("fixed_joint_positions"),
-        load_world(str(world_file(world))),
-        **sim_settings(),
-    )
+    sim = simulator_for(rc, load_world(str(world_file(world))))
     try:
 
         def contacts(q):

@@ -62,27 +62,15 @@ def main(argv=None) -> int:
 
     from moverl_gym.paths import robot_config_file, world_file
     from moverl_sim.camera import Camera
-    from moverl_sim.core import Simulator
     from moverl_sim.robot_config import load_robot_config
-    from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import resolve_uri
+    from moverl_sim.settings import simulator_for
     from moverl_sim.world import load_world
 
     world = load_world(world_file(args.world))
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
-    sims = {
-        looks: Simulator(
-            resolve_uri(rc["urdf"]),
-            rc["joints"],
-            rc["base_link"],
-            rc.get("fixed_joint_positions"),
-            world,
-            **{**sim_settings(), "robot_visuals": looks},
-        )
-        for looks in ("visual", "collision")
-    }
+    sims = {looks: simulator_for(rc, world, robot_visuals=looks) for looks in ("visual", "collision")}
     sim = sims["visual"]
     try:
         for s in sims.values():

@@ -26,3 +26,21 @@ def sim_settings(path: str | None = None) -> dict:
         "moving_speed": float(cfg["moving_speed"]),
         "robot_visuals": str(cfg["robot_visuals"]),
     }
+
+
+def simulator_for(robot_config: dict, world, **overrides):
+    """A Simulator of a robot config's robot (moverl_sim.robot_config: its URDF resolved as the node resolves it, its
+    joints, base and fixed joints) in `world`, with config/sim.yaml's settings, `overrides` replacing some (e.g.
+    robot_visuals="visual"): the one way the tools, tests and pictures build the simulator the node runs."""
+    from .core import Simulator
+    from .urdf import resolve_uri
+
+    rc = robot_config
+    return Simulator(
+        resolve_uri(rc["urdf"]),
+        rc["joints"],
+        rc["base_link"],
+        rc.get("fixed_joint_positions"),
+        world,
+        **{**sim_settings(), **overrides},
+    )

@@ -8,7 +8,8 @@ must be as thin as the cameras allow (README, "A person seen only by cameras"). 
 need: it renders every camera of the worlds with PyBullet's segmentation mask, in random collision-free
 configurations of the robot drawn as its visual meshes (as a real camera sees it), and measures the distance of every
 point on the robot (on a static object) from that body's collision shapes in PyBullet (the planning scene's shapes
-contain PyBullet's: test_geometry_parity.py, so the distance to the scene's shapes is at most this). Points inside a shape count 0.
+contain PyBullet's: test_geometry_parity.py, so the distance to the scene's shapes is at most this). Points inside a
+shape count 0.
 
     python src/moverl_gym/tools/blind_zone.py [--robot panda | my_arm.yaml] [--worlds table human case]
         [-n 20] [--seed 0]

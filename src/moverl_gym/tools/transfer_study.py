@@ -2,7 +2,7 @@
 """The transfer experiment of issue 25: a policy trained on the world file, deployed on the cell as a real robot sees
 it.
 
-    python src/moverl_gym/tools/transfer_study.py --seeds 0 1 2                 # ~1 h on 2 cores
+    python src/moverl_gym/tools/transfer_study.py --seeds 0 1 2                 # ~1.5 h on 2 cores
     python src/moverl_gym/tools/transfer_study.py --quick --out /tmp/transfer   # the pipeline in ~2 min (CI)
 
 1. Train PPO (paper settings, config/hyperparams/ppo.yml) on MoveRL/PandaReachHuman-v0 with the world file, in lockstep
@@ -35,6 +35,8 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+import yaml
 
 REPO = Path(__file__).resolve().parents[3]
 SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
@@ -161,7 +163,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--steps", type=int, default=40_000, help="training steps per world-file run (paper: 40,000)")
-    p.add_argument("--sensed-steps", type=int, default=10_000, help="training steps of the sensed run (0: none)")
+    p.add_argument(
+        "--sensed-steps", type=int, default=40_000, help="training steps of the sensed run (0: none; paper: 40,000)"
+    )
     p.add_argument("--episodes", type=int, default=100, help="evaluation episodes per seed and condition")
     p.add_argument("--iso-episodes", type=int, default=30, help="evaluation episodes per seed in cell_iso")
     p.add_argument("--jobs", type=int, default=2, help="trainings and lockstep evaluations at once (real time: one)")
@@ -177,7 +181,17 @@ def main(argv=None) -> int:
     logs = out / "logs"
     per_step = 0.5  # s: a generous bound of a step's wall time (the slowest, sensed at 30 Hz, takes ~0.1-0.15 s)
 
-    # 1. training
+    # 1. training (a finished run is kept; one trained for another number of steps is refused, not mixed in)
+    for policy, seeds, steps in (
+        ("world_file", args.seeds, args.steps),
+        ("sensed30", args.seeds[:1], args.sensed_steps),
+    ):
+        for seed in seeds if steps else []:
+            config = run_folder(out / policy, seed) / "config.yaml"
+            if config.exists() and (run_folder(out / policy, seed) / "model.zip").exists():
+                trained = yaml.safe_load(config.read_text())["n_timesteps"]
+                if trained != steps:
+                    p.error(f"{config.parent} was trained for {trained} steps, not {steps}: move it away or pass that")
     jobs = []
     for seed in args.seeds:
         if not (run_folder(out / "world_file", seed) / "model.zip").exists():

@@ -153,8 +153,10 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
             f"| {policy} | {seed} | {t['steps']:,} | {100 * t['success_rate_last']:.0f} | **{t['contacts']}** | "
             f"{t['wall_time'] / 60:.1f} | {t['steps_per_second']:.1f} |"
         )
-    lines += ["", "Per evaluation: [runs.csv](runs.csv); the evaluations' JSON files are in the run folder "
-              f"(`{args.out}`)."]  # fmt: skip
+    folder = args.out.resolve()
+    folder = folder.relative_to(REPO) if folder.is_relative_to(REPO) else folder
+    lines += ["", f"Per evaluation: [runs.csv](runs.csv); the evaluations' JSON files and the runs are in `{folder}` "
+              "(not in the repository)."]  # fmt: skip
     (docs / "results.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
@@ -236,7 +238,8 @@ def main(argv=None) -> int:
     rows = []
     for (policy, cond, seed, _), js, _ in todo:
         r = json.loads(js.read_text())
-        rows.append(dict(policy=policy, condition=cond, seed=seed, json=str(js), **{k: r.get(k) for k in METRICS},
+        shown = js.relative_to(REPO) if js.is_relative_to(REPO) else js
+        rows.append(dict(policy=policy, condition=cond, seed=seed, json=str(shown), **{k: r.get(k) for k in METRICS},
                          episodes=r["episodes"]))  # fmt: skip
     training = []
     for policy, seeds, steps in (

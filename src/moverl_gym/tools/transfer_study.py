@@ -6,8 +6,9 @@ it.
     python src/moverl_gym/tools/transfer_study.py --quick --out /tmp/transfer   # the pipeline in ~2 min (CI)
 
 1. Train PPO (paper settings, config/hyperparams/ppo.yml) on MoveRL/PandaReachHuman-v0 with the world file, in lockstep
-   (train.py), one run per seed; and, once (the first seed), PPO directly in the sensed mode with 30 Hz cameras
-   (--obstacles sensed --launch camera_rate=30, lockstep), with a budget of its own (--sensed-steps).
+   (train.py, with its default recovery: a failed graph is relaunched and the failure reported), one run per seed;
+   and, once (the first seed), PPO directly in the sensed mode with 30 Hz cameras (--obstacles sensed --launch
+   camera_rate=30, lockstep), with a budget of its own (--sensed-steps).
 2. Evaluate every final policy deterministically (evaluate.py, --episodes each, a graph of its own per evaluation):
    * world_file: as trained (lockstep, the world file's shapes and script);
    * cell: the shield with the cameras' map (obstacles:=sensed, every camera at 30 Hz), the observation from the
@@ -27,6 +28,7 @@ when and where it ran.
 from __future__ import annotations
 
 import argparse
+import collections
 import csv
 import json
 import os
@@ -67,7 +69,7 @@ def run(cmd: list[str], log: Path, timeout: float) -> None:
 
 def train_cmd(out: Path, seed: int, steps: int, extra: list[str]) -> list[str]:
     return [sys.executable, str(SCRIPTS / "train.py"), "--env", ENV, "--algo", "ppo", "--seed", str(seed), "-n",
-            str(steps), "--log-folder", str(out), "--no-progress", "--recover", "off", *extra]  # fmt: skip
+            str(steps), "--log-folder", str(out), "--no-progress", *extra]  # fmt: skip
 
 
 def run_folder(out: Path, seed: int) -> Path:
@@ -146,12 +148,17 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
         )
     lines += ["", "Training (train.py's summary.json: success over the last 200 training episodes, ground-truth "
               "contacts during training, wall time):", "",
-              "| policy | seed | steps | success, last 200 episodes (%) | contacts | wall time (min) | steps/s |",
-              "|---|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+              "| policy | seed | steps | success, last 200 episodes (%) | contacts | wall time (min) | steps/s | "
+              "graph failures (relaunched) |",
+              "|---|---:|---:|---:|---:|---:|---:|---|"]  # fmt: skip
     for policy, seed, t in training:
+        counts = collections.Counter(str(f)[:200] for f in t["failures"])
+        failures = "; ".join(f"{n} x {what}" if n > 1 else what for what, n in counts.items())
         lines.append(
             f"| {policy} | {seed} | {t['steps']:,} | {100 * t['success_rate_last']:.0f} | **{t['contacts']}** | "
-            f"{t['wall_time'] / 60:.1f} | {t['steps_per_second']:.1f} |"
+            f"{t['wall_time'] / 60:.1f} | {t['steps_per_second']:.1f} | {t['graph_failures']}"
+            + (f": {failures}" if failures else "")
+            + " |"
         )
     folder = args.out.resolve()
     folder = folder.relative_to(REPO) if folder.is_relative_to(REPO) else folder

@@ -11,8 +11,9 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
       shield executes the move, without contact (the box is still far: the map only knows where things were
       when last seen, so the sensed mode is for static or slow obstacles);
   (d) the map filtered the robot's own points: 300 random env steps in 10-step episodes (30 resets, renders
-      racing with the joint states) go through, each reset sampling a collision-free start near home from the
-      scene, and afterwards home and every episode start are still free in the map (a robot left behind as an
+      racing with the joint states; each reset's state stamped after the state before it) go through, each reset
+      sampling a collision-free start near home from the scene, and afterwards home and every episode start are
+      still free in the map (a robot left behind as an
       obstacle would block them). Not asserted for every configuration visited: a visited pose can touch cells
       that were unknown (hidden by the robot itself) at the time and were seen later, a legitimate verdict.
   (e) lockstep renders keep simulated time (test_camera_schedule): after a reset every camera renders at the reset's
@@ -218,8 +219,12 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             for _ in range(ENV_STEPS):
                 _, _, term, trunc, info = env.step(env.action_space.sample())
                 if term or trunc:
+                    before = env.unwrapped._stamp
                     env.reset()
                     starts.append(env.unwrapped.q[:7].tolist())
+                    # The teleport's state (and the reset's clouds) stamped after the old state, never with it: the
+                    # scene could filter a reset's cloud with the old configuration alone (lockstep.reset_robot).
+                    self.assertGreater(env.unwrapped._stamp, before)
             self.current = env.unwrapped.q[:7].tolist()
         finally:
             env.close()

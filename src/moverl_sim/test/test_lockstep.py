@@ -204,6 +204,23 @@ def test_reset_teleports_and_restarts_the_motions(panda_urdf, human_world):
         s.close()
 
 
+def test_a_settled_reset_is_stamped_after_the_old_state(panda_urdf, human_world):
+    """settle_substeps (the node's lockstep reset while cameras render): the robot teleported, then that many
+    substeps pass with it held, so that its new state cannot share a stamp with its old one (a planning scene would
+    filter the reset's clouds with the old configuration only); a refused reset lets no time pass."""
+    s = make_sim(panda_urdf, human_world, physics_hz=HZ)
+    try:
+        s.hold(100)
+        target = (np.array(HOME) + 0.1).tolist()
+        lockstep.reset_robot(s, target, restart=False, settle_substeps=1)
+        assert s.joint_positions() == pytest.approx(target, abs=1e-12)
+        assert s.sim_time == 101 / HZ and s.motion_epoch == 0.0  # one substep later, the walk going on
+        lockstep.reset_robot(s, HOME, restart=False)
+        assert s.sim_time == 101 / HZ  # none without it
+    finally:
+        s.close()
+
+
 def test_a_reset_into_an_obstacle_is_unreachable_and_puts_the_robot_back(panda_urdf, table_world):
     s = make_sim(panda_urdf, table_world, physics_hz=HZ)
     try:

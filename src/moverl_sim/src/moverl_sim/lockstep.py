@@ -110,7 +110,7 @@ def run_motion(sim, motion, schedule=None, on_due=None):
     return sim.finish(motion), out
 
 
-def reset_robot(sim, positions, clearance_time=0.0, restart=True):
+def reset_robot(sim, positions, clearance_time=0.0, restart=True, settle_substeps=0):
     """~reset_robot: teleport the robot to positions (no contacts counted) and, with `restart`, restart the obstacles'
     motions (motion time 0 = now). Without it (the sensed modes: the scene knows moving things only from the cameras,
     and a person does not teleport back to the start of its walk under their eyes) the motions go on.
@@ -119,6 +119,12 @@ def reset_robot(sim, positions, clearance_time=0.0, restart=True):
     nor where a moving one will touch it within `clearance_time` (s of its motion, sim.yaml reset_clearance_time): a
     real robot never appears in a person's way, it gets there through moves the shield checked.
     Such a target is refused like a planned reset's unreachable target, the robot put back where it was.
+
+    After a teleport, `settle_substeps` physics substeps pass with the robot held, so that the state and the camera
+    renders published after the reset carry a stamp later than the last one before it (the node: 1 in lockstep when
+    cameras render). Without it, the robot's old and new configurations share one stamp, and a planning scene that
+    filters a reset's cloud before the new state has reached it (two topics, no order between them) takes the robot
+    at its new place for an obstacle: a ghost of the arm around its own links, which then blocks every configuration.
 
     Raises:
         ValueError: the target is not a valid configuration (Simulator.reset_robot's message); nothing changed.
@@ -146,3 +152,4 @@ def reset_robot(sim, positions, clearance_time=0.0, restart=True):
             f"a moving obstacle will touch the target within reset_clearance_time ({clearance_time} s of its motion) "
             f"({pairs})"
         )
+    sim.hold(settle_substeps)

@@ -1,10 +1,19 @@
 /**
  * \file map_benchmark.cpp
- * \brief Cost of integrating one depth-camera cloud into the sensed map (OccupancyMap), without ROS or a simulator:
- *        the cameras of a world file render a synthetic scene by ray casting (the table top of worlds/table.yaml,
- *        the floor, and a standing person as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8,
- *        walking along y as worlds/human.yaml's torso does). Cells and bounds as the scene node sets them for the
- * Panda. Usage: map_benchmark [world.yaml] [clouds]   (default: worlds/human.yaml, 60 clouds, cameras in turn)
+ * \brief Cost of integrating one depth-camera cloud into the sensed map, the live pipeline without ROS: the scene
+ *        node's CloudIntegrator (points into the map frame, self filter, static filter, the map's update), once with
+ *        ray casting and once by projection (octomap/integration), on the same clouds, and how the two maps differ.
+ *
+ * Clouds: recorded by the simulator's cameras (`--recording DIR`, from src/moverl_gym/tools/record_clouds.py: the
+ * images the sim node publishes, with the robot's configuration and the world's static objects), or synthetic: the
+ * cameras of a world file render by ray casting the table top of worlds/table.yaml, the floor, and a standing person
+ * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
+ * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda.
+ *
+ * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--check]
+ *   (synthetic: default worlds/human.yaml, 60 clouds, cameras in turn, --size overrides the cameras' images)
+ *   --check: exit 1 when either integration sees free a cell whose centre lies inside the synthetic person (a cell
+ *   holding part of an obstacle; the static table's cells are the fixture filter's to clear, and are not counted).
  */
 #include <yaml-cpp/yaml.h>
 
@@ -12,10 +21,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <sstream>
 
+#include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
 #include "moverl_planning_scene/tunables.h"
@@ -26,12 +37,26 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 struct Camera {
+  std::string id;
   Eigen::Vector3d origin, target;
   int width = 0, height = 0;
   double fov = 0.0, far = 0.0, period = 0.0;
 };
 
-double seconds(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+/// One cloud as a camera publishes it: organized, optical frame (z forward, x right, y down), and where from.
+struct Cloud {
+  std::string camera;
+  int width = 0, height = 0;
+  std::vector<float> xyz;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< optical frame in the base frame
+  std::vector<double> joints;
+  double person_y = std::numeric_limits<double>::quiet_NaN();  ///< synthetic scene: where the person stood
+};
+
+/// Synthetic scene: is p inside the person (the walking cylinder) standing at person_y?
+bool insidePerson(const Eigen::Vector3d& p, double person_y) {
+  return p.z() >= 0.14 && p.z() <= 0.72 && std::hypot(p.x() - 0.8, p.y() - person_y) < 0.165;
+}
 
 /// Distance along the unit ray o + s d to the synthetic scene (far when nothing is hit).
 double castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double person_y, double far) {
@@ -56,25 +81,104 @@ double castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double person
       if (s > 0.0 && s < best && z >= 0.14 && z <= 0.72) best = s;
     }
   }
+  // The torso's top (a closed solid: the cameras above must not see into it).
+  if (std::fabs(d.z()) > 1e-12) {
+    const double s = (0.72 - o.z()) / d.z();
+    const Eigen::Vector3d p = o + s * d;
+    if (s > 0.0 && s < best && std::hypot(p.x() - cx, p.y() - cy) <= r) best = s;
+  }
   return best;
 }
 
-std::vector<Eigen::Vector3d> render(const Camera& c, double person_y) {
+/// The optical frame of a camera at c.origin looking at c.target (x right, y down, z forward).
+Eigen::Isometry3d opticalPose(const Camera& c) {
   const Eigen::Vector3d fwd = (c.target - c.origin).normalized();
-  const Eigen::Vector3d right = fwd.cross(Eigen::Vector3d::UnitZ()).normalized(), up = right.cross(fwd);
+  const Eigen::Vector3d right = fwd.cross(Eigen::Vector3d::UnitZ()).normalized(), down = fwd.cross(right);
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear().col(0) = right;
+  pose.linear().col(1) = down;
+  pose.linear().col(2) = fwd;
+  pose.translation() = c.origin;
+  return pose;
+}
+
+Cloud render(const Camera& c, double person_y, const std::vector<double>& joints) {
+  Cloud out;
+  out.camera = c.id;
+  out.width = c.width;
+  out.height = c.height;
+  out.pose = opticalPose(c);
+  out.joints = joints;
+  out.person_y = person_y;
+  const Eigen::Matrix3d r = out.pose.linear();
   const double f = 0.5 * c.height / std::tan(0.5 * c.fov * M_PI / 180.0);  // vertical field of view (PyBullet's)
-  std::vector<Eigen::Vector3d> pts;
-  pts.reserve(static_cast<std::size_t>(c.width) * c.height);
+  out.xyz.reserve(3 * static_cast<std::size_t>(c.width) * c.height);
   for (int v = 0; v < c.height; ++v) {
     for (int u = 0; u < c.width; ++u) {
-      const Eigen::Vector3d d =
-          (fwd * f + right * (u + 0.5 - 0.5 * c.width) - up * (v + 0.5 - 0.5 * c.height)).normalized();
+      const Eigen::Vector3d ray((u + 0.5 - 0.5 * c.width) / f, (v + 0.5 - 0.5 * c.height) / f, 1.0);
+      const Eigen::Vector3d d = (r * ray).normalized();
       // A depth camera reports depth along its axis: a far-plane pixel lies on the far plane, not on a sphere.
-      const double s = castRay(c.origin, d, person_y, c.far / d.dot(fwd));
-      pts.push_back(c.origin + s * d);
+      const double s = castRay(c.origin, d, person_y, c.far * ray.norm());
+      const Eigen::Vector3d p = ray * (s / ray.norm());
+      for (int i = 0; i < 3; ++i) out.xyz.push_back(static_cast<float>(p[i]));
     }
   }
-  return pts;
+  return out;
+}
+
+Eigen::Vector3d vec3(const YAML::Node& n) {
+  return Eigen::Vector3d(n[0].as<double>(), n[1].as<double>(), n[2].as<double>());
+}
+Eigen::Isometry3d pose(const YAML::Node& xyz, const YAML::Node& quat) {
+  Eigen::Isometry3d p = Eigen::Isometry3d::Identity();
+  p.linear() =
+      Eigen::Quaterniond(quat[3].as<double>(), quat[0].as<double>(), quat[1].as<double>(), quat[2].as<double>())
+          .normalized()
+          .toRotationMatrix();
+  p.translation() = vec3(xyz);
+  return p;
+}
+
+/// A recording of record_clouds.py: its clouds and static objects. Throws with the file's name on a bad one.
+std::vector<Cloud> loadRecording(const std::string& dir, std::vector<mps::WorldObject>* objects) {
+  const YAML::Node root = YAML::LoadFile(dir + "/recording.yaml");
+  for (const auto& o : root["static_objects"]) {
+    mps::WorldObject w;
+    w.id = o["id"].as<std::string>();
+    const std::string type = o["type"].as<std::string>();
+    if (type == "box") {
+      w.type = mps::ShapeType::kBox;
+    } else if (type == "sphere") {
+      w.type = mps::ShapeType::kSphere;
+    } else if (type == "cylinder") {
+      w.type = mps::ShapeType::kCylinder;
+    } else if (type == "cone") {
+      w.type = mps::ShapeType::kCone;
+    } else {
+      throw std::runtime_error("static object '" + w.id + "': type '" + type + "' (box, sphere, cylinder, cone)");
+    }
+    w.dimensions = o["dimensions"].as<std::vector<double>>();
+    w.pose = pose(o["xyz"], o["quat"]);
+    objects->push_back(w);
+  }
+  std::vector<Cloud> clouds;
+  for (const auto& c : root["clouds"]) {
+    Cloud cloud;
+    cloud.camera = c["camera"].as<std::string>();
+    cloud.width = c["width"].as<int>();
+    cloud.height = c["height"].as<int>();
+    cloud.pose = pose(c["xyz"], c["quat"]);
+    cloud.joints = c["joints"].as<std::vector<double>>();
+    const std::string file = dir + "/" + c["file"].as<std::string>();
+    std::ifstream in(file, std::ios::binary);
+    cloud.xyz.resize(3 * static_cast<std::size_t>(cloud.width) * cloud.height);
+    in.read(reinterpret_cast<char*>(cloud.xyz.data()), static_cast<std::streamsize>(cloud.xyz.size() * 4));
+    if (!in || in.peek() != EOF)
+      throw std::runtime_error(file + ": not " + std::to_string(cloud.xyz.size()) + " floats");
+    clouds.push_back(std::move(cloud));
+  }
+  if (clouds.empty()) throw std::runtime_error(dir + "/recording.yaml lists no clouds");
+  return clouds;
 }
 
 void report(const char* what, std::vector<double> t) {
@@ -82,39 +186,48 @@ void report(const char* what, std::vector<double> t) {
   std::sort(t.begin(), t.end());
   double sum = 0.0;
   for (double v : t) sum += v;
-  std::printf("%-34s n=%4zu  mean %8.2f ms  p50 %8.2f ms  max %8.2f ms\n", what, t.size(), 1e3 * sum / t.size(),
+  std::printf("  %-32s n=%4zu  mean %8.2f ms  p50 %8.2f ms  max %8.2f ms\n", what, t.size(), 1e3 * sum / t.size(),
               1e3 * t[t.size() / 2], 1e3 * t.back());
+}
+
+int usage(const char* why) {
+  std::fprintf(stderr,
+               "error: %s\nusage: map_benchmark [world.yaml with cameras:] [clouds > 0] [--size WxH] "
+               "[--recording DIR] [--check]\n",
+               why);
+  return 2;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string world = argc > 1 && argv[1][0] != '\0' ? argv[1] : MOVERL_CONFIG_DIR "/../worlds/human.yaml";
-  const int clouds = argc > 2 ? std::atoi(argv[2]) : 60;
-  std::vector<Camera> cams;
-  try {
-    for (const auto& c : YAML::LoadFile(world)["cameras"]) {
-      Camera cam;
-      auto vec = [&](const char* k) {
-        return Eigen::Vector3d(c[k][0].as<double>(), c[k][1].as<double>(), c[k][2].as<double>());
-      };
-      cam.origin = vec("xyz");
-      cam.target = vec("target");
-      cam.width = c["width"].as<int>();
-      cam.height = c["height"].as<int>();
-      cam.fov = c["fov"].as<double>();
-      cam.far = c["far"].as<double>();
-      cam.period = 1.0 / c["rate"].as<double>();
-      cams.push_back(cam);
+  std::string world = MOVERL_CONFIG_DIR "/../worlds/human.yaml", recording;
+  int clouds_wanted = 60, width = 0, height = 0;
+  bool check = false;
+  std::vector<std::string> positional;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--check") {
+      check = true;
+    } else if (a == "--size" || a == "--recording") {
+      if (i + 1 >= argc) return usage((a + " needs a value").c_str());
+      const std::string v = argv[++i];
+      if (a == "--recording") {
+        recording = v;
+      } else if (std::sscanf(v.c_str(), "%dx%d", &width, &height) != 2 || width < 2 || height < 2) {
+        return usage("--size takes WxH, both >= 2 (e.g. 640x480)");
+      }
+    } else if (a.rfind("--", 0) == 0) {
+      return usage(("unknown option " + a + " (--size, --recording, --check)").c_str());
+    } else {
+      positional.push_back(a);
     }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s: %s\n", world.c_str(), e.what());
-    return 1;
   }
-  if (cams.empty() || clouds <= 0) {
-    std::fprintf(stderr, "usage: map_benchmark [world.yaml with cameras:] [clouds > 0]\n");
-    return 1;
-  }
+  if (positional.size() > 2) return usage("at most two positional arguments");
+  if (!positional.empty() && !positional[0].empty()) world = positional[0];
+  if (positional.size() > 1) clouds_wanted = std::atoi(positional[1].c_str());
+  if (clouds_wanted <= 0) return usage("clouds must be > 0");
+
   std::string error, uri;
   mps::PlanningSceneOptions o;
   const auto tunables = mps::YamlTunables::fromFile(MOVERL_CONFIG_DIR "/planning_scene.yaml", &error);
@@ -122,65 +235,182 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;
   }
-  mps::readSceneTunables(*tunables, &o);
+  std::vector<Cloud> clouds;
+  std::vector<mps::WorldObject> objects;
+  std::string source;
+  try {
+    mps::readSceneTunables(*tunables, &o);
+    if (!recording.empty()) {
+      clouds = loadRecording(recording, &objects);
+      source = "recording " + recording;
+    } else {
+      std::vector<Camera> cams;
+      for (const auto& c : YAML::LoadFile(world)["cameras"]) {
+        Camera cam;
+        cam.id = c["id"].as<std::string>();
+        cam.origin = vec3(c["xyz"]);
+        cam.target = vec3(c["target"]);
+        cam.width = width > 0 ? width : c["width"].as<int>();
+        cam.height = height > 0 ? height : c["height"].as<int>();
+        cam.fov = c["fov"].as<double>();
+        cam.far = c["far"].as<double>();
+        cam.period = 1.0 / c["rate"].as<double>();
+        cams.push_back(cam);
+      }
+      if (cams.empty()) return usage((world + " lists no cameras").c_str());
+      const std::vector<double> home = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
+      double sim_time = 0.0;
+      for (int k = 0; k < clouds_wanted; ++k) {
+        const Camera& c = cams[static_cast<std::size_t>(k) % cams.size()];
+        if (k % cams.size() == 0 && k > 0) sim_time += c.period;
+        clouds.push_back(render(c, 0.15 * std::sin(2 * M_PI * sim_time / 6.0), home));
+      }
+      mps::WorldObject table;  // the synthetic scene's table top, as worlds/human.yaml's
+      table.id = "table";
+      table.dimensions = {1.5, 0.8, 0.03};
+      table.pose.translation() = Eigen::Vector3d(0.35, 0.0, -0.015);
+      objects.push_back(table);
+      source = "synthetic scene, cameras of " + world;
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
+    return 1;
+  }
   const std::string urdf_file = MOVERL_PANDA_URDF;
   o.robot.mesh_base_dir = urdf_file.substr(0, urdf_file.rfind('/'));
   std::ifstream urdf_in(urdf_file);
   std::stringstream urdf;
   urdf << urdf_in.rdbuf();
   auto scene = mps::PlanningScene::create(urdf.str(), o, &error);
-  if (!scene) {
+  if (!scene || !scene->setWorld(objects, &error)) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;
   }
   mps::OccupancyMapOptions mo;
-  mps::readOccupancyMapTunables(*tunables, &mo);
-  // As OctomapMonitor::init sets them.
-  const double reach = scene->checker().reachRadius() + scene->checker().options().padding + 2 * mo.resolution;
-  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
-  auto map = mps::OccupancyMap::create(mo, &error);
-  if (!map) {
-    std::fprintf(stderr, "error: %s\n", error.c_str());
+  mps::CloudIntegratorOptions io;
+  try {
+    mps::readOccupancyMapTunables(*tunables, &mo);
+    io.self_filter_padding = tunables->require<double>("octomap/self_filter_padding");
+    io.static_filter_padding = tunables->require<double>("octomap/static_filter_padding");
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
   }
-  std::printf("%zu cameras of %s, %d x %d px; map resolution %.3f m within +-%.2f m\n", cams.size(), world.c_str(),
-              cams[0].width, cams[0].height, mo.resolution, reach);
-  const std::vector<double> home = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
-  std::vector<double> t_mask, t_compute, t_apply, t_first;
-  std::vector<std::uint8_t> mask;
-  mps::MapUpdate u;
-  std::size_t free_cells = 0, updated = 0;
-  double sim_time = 0.0;
-  for (int k = 0; k < clouds; ++k) {
-    const Camera& c = cams[static_cast<std::size_t>(k) % cams.size()];
-    if (k % cams.size() == 0 && k > 0) sim_time += c.period;
-    const double person_y = 0.15 * std::sin(2 * M_PI * sim_time / 6.0);
-    const auto pts = render(c, person_y);
-    auto t = Clock::now();
-    scene->checker().robotPointMask(home.data(), pts, 0.03, &mask);
-    const double dm = seconds(t);
-    t = Clock::now();
-    map->computeUpdate(pts, mask, c.origin, &u);
-    const double dc = seconds(t);
-    t = Clock::now();
-    map->apply(u);
-    const double da = seconds(t);
-    if (k < static_cast<int>(cams.size())) {
-      t_first.push_back(dm + dc + da);
-      continue;  // the first view of each camera fills the map from unknown: reported apart
+  io.filter_static = true;  // obstacles: sensed (the world's static objects are known)
+  // As OctomapMonitor::init sets them (without the predictive margin's slack).
+  const double reach = scene->checker().reachRadius() + scene->checker().options().padding + 2 * mo.resolution;
+  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  struct Run {
+    mps::Integration integration;
+    std::unique_ptr<mps::OccupancyMap> map;
+    std::unique_ptr<mps::CloudIntegrator> integrator;
+    std::vector<double> t_points, t_self, t_static, t_update, t_apply, t_total;
+    std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0;
+  };
+  Run runs[2];
+  runs[0].integration = mps::Integration::kRayCasting;
+  runs[1].integration = mps::Integration::kProjective;
+  for (Run& r : runs) {
+    r.map = mps::OccupancyMap::create(mo, &error);
+    if (!r.map) {
+      std::fprintf(stderr, "error: %s\n", error.c_str());
+      return 1;
     }
-    t_mask.push_back(dm);
-    t_compute.push_back(dc);
-    t_apply.push_back(da);
-    free_cells += u.stats.free_cells;
-    updated += u.stats.changed_cells;
+    io.integration = r.integration;
+    r.integrator = std::make_unique<mps::CloudIntegrator>(r.map.get(), &scene->checker(), nullptr, io);
   }
-  report("first view of each camera (total)", t_first);
-  report("self filter (robot at home)", t_mask);
-  report("computeUpdate (ray casting)", t_compute);
-  report("apply (tree update)", t_apply);
-  const std::size_t n = t_compute.empty() ? 1 : t_compute.size();
-  std::printf("per later cloud: %zu cells seen free, %zu tree cells changed; %zu occupied leaves at the end\n",
-              free_cells / n, updated / n, map->occupiedLeafCount());
+  std::printf("%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static)\n",
+              source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach);
+  std::vector<std::string> first_seen;
+  std::size_t ray_only_person = 0, ray_only_max = 0, ray_only_clouds = 0, proj_only_sum = 0, proj_only_max = 0,
+              compared = 0;
+  mps::MapUpdate u;
+  std::vector<Eigen::Vector3d> centers;
+  for (const Cloud& c : clouds) {
+    const bool first = std::find(first_seen.begin(), first_seen.end(), c.camera) == first_seen.end();
+    if (first) first_seen.push_back(c.camera);
+    for (Run& r : runs) {
+      mps::CloudTiming t;
+      std::string why;
+      const auto used =
+          r.integrator->compute(reinterpret_cast<const std::uint8_t*>(c.xyz.data()), c.width, c.height, 12,
+                                12 * static_cast<std::size_t>(c.width), c.pose, {c.joints}, &u, &t, &why);
+      if (used != r.integration) {
+        ++r.fallbacks;
+        std::fprintf(stderr, "%s: cloud of %s fell back to ray casting: %s\n", mps::integrationName(r.integration),
+                     c.camera.c_str(), why.c_str());
+      }
+      // A cell whose centre lies inside the person holds part of the person: seeing it free is a miss of the map.
+      if (!std::isnan(c.person_y)) {
+        for (std::uint64_t key : u.misses) r.freed_inside += insidePerson(r.map->cellCentre(key), c.person_y) ? 1 : 0;
+      }
+      const auto t0 = Clock::now();
+      r.map->apply(u);
+      const double apply = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (first) continue;  // the first view of each camera fills the map from unknown: left out
+      r.t_points.push_back(t.points);
+      r.t_self.push_back(t.self_filter);
+      r.t_static.push_back(t.static_filter);
+      r.t_update.push_back(t.update);
+      r.t_apply.push_back(apply);
+      r.t_total.push_back(t.total() + apply);
+      r.free_cells += u.stats.free_cells;
+      r.changed += u.stats.changed_cells;
+    }
+    // The occupied cells of the two maps: the ray-cast map's that the projective map lacks (the rule: none), and the
+    // projective map's extra ones (cells it clears later, or not).
+    std::size_t ray_only = 0, proj_only = 0;
+    runs[0].map->occupiedLeaves(&centers, nullptr);
+    for (const auto& p : centers) {
+      if (runs[1].map->occupied(p)) continue;
+      ++ray_only;
+      if (!std::isnan(c.person_y) && insidePerson(p, c.person_y)) ++ray_only_person;
+    }
+    runs[1].map->occupiedLeaves(&centers, nullptr);
+    for (const auto& p : centers) proj_only += runs[0].map->occupied(p) ? 0 : 1;
+    ++compared;
+    ray_only_max = std::max(ray_only_max, ray_only);
+    ray_only_clouds += ray_only > 0 ? 1 : 0;
+    proj_only_sum += proj_only;
+    proj_only_max = std::max(proj_only_max, proj_only);
+  }
+  const std::size_t points = clouds[0].xyz.size() / 3;
+  double mean_total[2] = {0.0, 0.0};
+  for (int k = 0; k < 2; ++k) {
+    Run& r = runs[k];
+    std::printf("%s (later clouds; each camera's first view fills the map from unknown and is left out):\n",
+                mps::integrationName(r.integration));
+    report("points into the map frame", r.t_points);
+    report("self filter", r.t_self);
+    report("static filter", r.t_static);
+    report(r.integration == mps::Integration::kProjective ? "pinhole fit + update" : "update (ray casting)",
+           r.t_update);
+    report("apply", r.t_apply);
+    report("total", r.t_total);
+    const std::size_t n = std::max<std::size_t>(1, r.t_total.size());
+    for (double v : r.t_total) mean_total[k] += v / n;
+    std::printf(
+        "  per cloud: %zu cells seen free, %zu cells changed; %zu occupied cells at the end; %.2f million "
+        "points/s; %zu fallbacks to ray casting\n",
+        r.free_cells / n, r.changed / n, r.map->occupiedLeafCount(),
+        mean_total[k] > 0 ? points / mean_total[k] / 1e6 : 0.0, r.fallbacks);
+    if (recording.empty()) {
+      std::printf("  cells seen free with their centre inside the person (all clouds): %zu\n", r.freed_inside);
+    }
+  }
+  std::printf("projective / ray casting, mean total per cloud: %.3f (%.2f ms vs %.2f ms)\n",
+              mean_total[1] / mean_total[0], 1e3 * mean_total[1], 1e3 * mean_total[0]);
+  std::printf(
+      "occupied cells after each of %zu clouds: ray-cast map's missing from the projective map: max %zu (in %zu "
+      "clouds); projective map's extra: mean %.1f, max %zu\n",
+      compared, ray_only_max, ray_only_clouds, static_cast<double>(proj_only_sum) / compared, proj_only_max);
+  if (recording.empty()) {
+    std::printf("  of the ray-cast map's missing cells, with their centre inside the person (all clouds): %zu\n",
+                ray_only_person);
+  }
+  if (check && (runs[0].freed_inside > 0 || runs[1].freed_inside > 0)) {
+    std::printf("CHECK FAILED: cells inside the person were seen free\n");
+    return 1;
+  }
   return 0;
 }

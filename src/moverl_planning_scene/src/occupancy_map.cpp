@@ -106,6 +106,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->block_dirty_.assign(static_cast<std::size_t>(blocks), 0);
   m->super_count_.assign(static_cast<std::size_t>(supers), 0);
+  m->super_dirty_.assign(static_cast<std::size_t>(supers), 0);
   m->seen_block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->seen_super_count_.assign(static_cast<std::size_t>(supers), 0);
   m->log_hit_ = logodds(o.prob_hit);
@@ -132,9 +133,9 @@ std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
   return (i * size_[1] + j) * size_[2] + k;
 }
 
-void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
-                                 const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
-                                 MapUpdate* out) {
+void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
+                                   const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
+                                   MapUpdate* out) {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();
@@ -199,6 +200,13 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     ++hit_cells;
     if (!(value_[c] == clamp_max_)) out->hits.push_back(static_cast<std::uint64_t>(c));  // a hit changes it
   }
+  out->stats.hit_cells = hit_cells;
+}
+
+void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
+                                 const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
+                                 MapUpdate* out) {
+  collectEndCells(points, robot_mask, origin, out);
   // 3. Beams from the origin to the centroid of each end cell's points (octomap's discretized insertion casts to the
   //    cell's centre: with a sparse cloud of a static scene the same centres are hit every view, and a cell that no
   //    centre's beam crosses is never seen free again once a person left it, although a point's own line of sight
@@ -313,7 +321,199 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       t_max[axis] += t_delta[axis];
     }
   }
-  out->stats.hit_cells = hit_cells;
+  out->stats.free_cells = free_cells;
+  out->stats.changed_cells = out->hits.size() + out->misses.size();
+}
+
+void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& points,
+                                           const std::vector<std::uint8_t>& robot_mask, const std::vector<float>& depth,
+                                           const PinholeCamera& camera, const Eigen::Isometry3d& sensor_pose,
+                                           MapUpdate* out) {
+  const int w = camera.width, h = camera.height;
+  if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(camera.fx > 0) || !(camera.fy > 0)) {
+    // A caller's error: nothing is seen free (the hits still count).
+    collectEndCells(points, robot_mask, sensor_pose.translation(), out);
+    for (std::int64_t c : order_) end_[c] = 0;
+    out->stats.changed_cells = out->hits.size();
+    return;
+  }
+  // 1-2. End cells and hits, as computeUpdate's.
+  collectEndCells(points, robot_mask, sensor_pose.translation(), out);
+  std::size_t free_cells = 0;
+  auto see = [&](std::int64_t k) {
+    setBit(&seen_, k);
+    ++free_cells;
+    if (!testBit(clamped_, k)) out->misses.push_back(static_cast<std::uint64_t>(k));
+  };
+  // A cell where only fixture points end was seen down to the fixture's surface: seen free (computeUpdate's rule).
+  for (std::int64_t c : order_) {
+    if ((end_[c] & ~kPresent) == kFixture && !testBit(seen_, c)) see(c);
+    end_[c] = 0;  // reset for the next cloud
+  }
+  // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
+  //    max_range (a beam is integrated up to max_range, and a no-return at the far plane clears up to it); 0 for a
+  //    pixel without a return (nothing along it is known).
+  const std::size_t pixels = depth.size();
+  free_depth_.resize(pixels);
+  for (int v = 0; v < h; ++v) {
+    const double ry = (v - camera.cy) / camera.fy;
+    for (int u = 0; u < w; ++u) {
+      const double rx = (u - camera.cx) / camera.fx;
+      const float z = depth[static_cast<std::size_t>(v) * w + u];
+      const double reach = options_.max_range / std::sqrt(rx * rx + ry * ry + 1.0);
+      free_depth_[static_cast<std::size_t>(v) * w + u] =
+          std::isfinite(z) && z > 0.0f ? static_cast<float>(std::min<double>(z, reach)) : 0.0f;
+    }
+  }
+  // Pyramids of the smallest and largest of those depths over tiles of 2^L x 2^L pixels (level 0: the pixels).
+  auto build = [&](std::vector<std::vector<float>>* pyramid, bool smallest) {
+    pyramid->resize(1);
+    (*pyramid)[0] = free_depth_;
+    int lw = w, lh = h;
+    while (lw > 1 || lh > 1) {
+      const int nw = (lw + 1) / 2, nh = (lh + 1) / 2;
+      const std::vector<float>& f = pyramid->back();
+      std::vector<float> n(static_cast<std::size_t>(nw) * nh);
+      for (int y = 0; y < nh; ++y) {
+        for (int x = 0; x < nw; ++x) {
+          float m = f[static_cast<std::size_t>(2 * y) * lw + 2 * x];
+          for (int dy = 0; dy < 2; ++dy) {
+            for (int dx = 0; dx < 2; ++dx) {
+              const int yy = std::min(2 * y + dy, lh - 1), xx = std::min(2 * x + dx, lw - 1);
+              const float q = f[static_cast<std::size_t>(yy) * lw + xx];
+              m = smallest ? std::min(m, q) : std::max(m, q);
+            }
+          }
+          n[static_cast<std::size_t>(y) * nw + x] = m;
+        }
+      }
+      pyramid->push_back(std::move(n));
+      lw = nw;
+      lh = nh;
+    }
+  };
+  build(&min_depth_, true);
+  build(&max_depth_, false);
+  // The smallest (largest) free depth over the pixels [u0, u1] x [v0, v1], from at most 16 tiles of the coarsest level
+  // that needs no more: over a superset of the rectangle (smaller, larger: conservative both ways).
+  auto over = [&](const std::vector<std::vector<float>>& pyramid, bool smallest, int u0, int u1, int v0, int v1) {
+    int level = 0;
+    while (((u1 >> level) - (u0 >> level) + 1) * ((v1 >> level) - (v0 >> level) + 1) > 16) ++level;
+    const int lw = ((w - 1) >> level) + 1;
+    const std::vector<float>& f = pyramid[static_cast<std::size_t>(level)];
+    float m = f[static_cast<std::size_t>(v0 >> level) * lw + (u0 >> level)];
+    for (int y = v0 >> level; y <= v1 >> level; ++y) {
+      for (int x = u0 >> level; x <= u1 >> level; ++x) {
+        const float q = f[static_cast<std::size_t>(y) * lw + x];
+        m = smallest ? std::min(m, q) : std::max(m, q);
+      }
+    }
+    return m;
+  };
+  // A box of the grid as the camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
+  // rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels,
+  // 1 nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
+  const Eigen::Matrix3d rt = sensor_pose.linear().transpose();
+  const Eigen::Vector3d tr = sensor_pose.translation();
+  const double res = options_.resolution;
+  const Eigen::Vector3d axis[3] = {rt.col(0) * res, rt.col(1) * res, rt.col(2) * res};  // one cell along x, y, z
+  struct Footprint {
+    int state = 1;
+    double zmin = 0.0, zmax = 0.0;
+    int u0 = 0, u1 = -1, v0 = 0, v1 = -1;
+  };
+  constexpr double kNear = 1e-6;
+  auto footprint = [&](const std::int64_t* a, const std::int64_t* b, Footprint* f) {
+    // Cells [a, b] (inclusive): the box from a's low corner to b's high corner, in the optical frame.
+    const Eigen::Vector3d lo((a[0] + offset_[0]) * res, (a[1] + offset_[1]) * res, (a[2] + offset_[2]) * res);
+    const Eigen::Vector3d s0 = rt * (lo - tr);
+    Eigen::Vector3d e[3];
+    for (int i = 0; i < 3; ++i) e[i] = axis[i] * static_cast<double>(b[i] - a[i] + 1);
+    f->zmin = f->zmax = s0.z();
+    for (int i = 0; i < 3; ++i) (e[i].z() < 0 ? f->zmin : f->zmax) += e[i].z();
+    if (f->zmax <= kNear) {
+      f->state = 1;
+      return;
+    }
+    if (f->zmin <= kNear) {
+      f->state = 2;
+      return;
+    }
+    double umin = std::numeric_limits<double>::infinity(), umax = -umin, vmin = umin, vmax = -umin;
+    for (int c = 0; c < 8; ++c) {
+      const Eigen::Vector3d p = s0 + ((c & 1) ? e[0] : Eigen::Vector3d::Zero()) +
+                                ((c & 2) ? e[1] : Eigen::Vector3d::Zero()) + ((c & 4) ? e[2] : Eigen::Vector3d::Zero());
+      const double u = camera.fx * p.x() / p.z() + camera.cx, v = camera.fy * p.y() / p.z() + camera.cy;
+      umin = std::min(umin, u);
+      umax = std::max(umax, u);
+      vmin = std::min(vmin, v);
+      vmax = std::max(vmax, v);
+    }
+    f->u0 = static_cast<int>(std::max(0.0, std::ceil(umin)));
+    f->u1 = static_cast<int>(std::min(w - 1.0, std::floor(umax)));
+    f->v0 = static_cast<int>(std::max(0.0, std::ceil(vmin)));
+    f->v1 = static_cast<int>(std::min(h - 1.0, std::floor(vmax)));
+    f->state = f->u0 > f->u1 || f->v0 > f->v1 ? 1 : 0;
+  };
+  // A box wholly behind what every pixel that may see it saw holds nothing this cloud sees free.
+  auto hidden = [&](const Footprint& f) {
+    return f.state == 1 || (f.state == 0 && f.zmin > over(max_depth_, false, f.u0, f.u1, f.v0, f.v1));
+  };
+  const double r2 = 0.25 * res * res;  // the squared radius of a cell's inscribed sphere
+  // How far a cell reaches in depth beyond its centre: half the sum of its edges' depth components.
+  const double half_depth = 0.5 * (std::fabs(axis[0].z()) + std::fabs(axis[1].z()) + std::fabs(axis[2].z()));
+  std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3], at[3];
+  Footprint f;
+  for (s[0] = 0; s[0] < supers_[0]; ++s[0]) {
+    for (s[1] = 0; s[1] < supers_[1]; ++s[1]) {
+      for (s[2] = 0; s[2] < supers_[2]; ++s[2]) {
+        if (super_dirty_[(s[0] * supers_[1] + s[1]) * supers_[2] + s[2]] == 0) continue;  // all clamped free
+        for (int i = 0; i < 3; ++i) {
+          sa[i] = s[i] << kSuperShift;
+          sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
+        }
+        footprint(sa, sb, &f);
+        if (hidden(f)) continue;
+        for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
+          for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
+            for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
+              if (block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] == 0) continue;
+              for (int i = 0; i < 3; ++i) {
+                ba[i] = bl[i] << kBlockShift;
+                bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
+              }
+              footprint(ba, bb, &f);
+              if (hidden(f)) continue;
+              for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
+                for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
+                  for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2]) {
+                    const std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+                    if (testBit(hit_, k) || testBit(seen_, k) || testBit(clamped_, k)) continue;
+                    // Seen free: one pixel's ray crosses the cell for certain (the ray of the pixel nearest the
+                    // centre's projection passes within the cell's inscribed sphere: a cell between the rays of a
+                    // sparse image is not seen) and sees past all of it, and so does every pixel that may see the
+                    // cell. The first test is the cheap one (most cells that get here lie behind a surface).
+                    const Eigen::Vector3d c = rt * (centre(at[0], at[1], at[2]) - tr);
+                    if (!(c.z() > half_depth)) continue;
+                    const double zmax = c.z() + half_depth;
+                    const int u = static_cast<int>(std::lround(camera.fx * c.x() / c.z() + camera.cx));
+                    const int v = static_cast<int>(std::lround(camera.fy * c.y() / c.z() + camera.cy));
+                    if (u < 0 || u >= w || v < 0 || v >= h) continue;
+                    if (free_depth_[static_cast<std::size_t>(v) * w + u] < zmax) continue;
+                    const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                    if (c.cross(ray).squaredNorm() > r2 * ray.squaredNorm()) continue;
+                    footprint(at, at, &f);
+                    if (f.state != 0 || over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax) continue;
+                    see(k);
+                  }
+                }
+              }
+            }
+          }
+        }
+      }
+    }
+  }
   out->stats.free_cells = free_cells;
   out->stats.changed_cells = out->hits.size() + out->misses.size();
 }
@@ -336,9 +536,10 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   if (now == testBit(occupied_, c) && was_dirty == dirty) return;
   const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
   const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
-  block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
-  if (now == testBit(occupied_, c)) return;
   const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
+  super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
+  if (now == testBit(occupied_, c)) return;
   if (now) {
     setBit(&occupied_, c);
     ++block_count_[b];
@@ -415,6 +616,15 @@ void OccupancyMap::fillUnobserved(bool on) {
         std::int64_t n = 1;
         for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << kBlockShift) - (at[i] << kBlockShift);
         block_dirty_[(at[0] * blocks_[1] + at[1]) * blocks_[2] + at[2]] = static_cast<std::uint8_t>(n);
+      }
+    }
+  }
+  for (at[0] = 0; at[0] < supers_[0]; ++at[0]) {
+    for (at[1] = 0; at[1] < supers_[1]; ++at[1]) {
+      for (at[2] = 0; at[2] < supers_[2]; ++at[2]) {
+        std::int64_t n = 1;
+        for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << kSuperShift) - (at[i] << kSuperShift);
+        super_dirty_[(at[0] * supers_[1] + at[1]) * supers_[2] + at[2]] = static_cast<std::uint16_t>(n);
       }
     }
   }

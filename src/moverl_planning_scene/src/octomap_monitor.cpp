@@ -87,6 +87,7 @@ bool OctomapMonitor::init(std::string* error) {
   OccupancyMapOptions mo;
   std::string cloud_topic, joint_topic;
   int queue = 0, startup_clouds = 0;
+  std::string integration;
   double startup_timeout = 0.0;
   try {
     readOccupancyMapTunables(RosTunables(pnh_, kYaml), &mo);
@@ -106,6 +107,7 @@ bool OctomapMonitor::init(std::string* error) {
     plan_horizon_ = requiredParam<double>(pnh_, "octomap/plan_horizon", kYaml);
     max_age_ = requiredParam<double>(pnh_, "octomap/max_age", kYaml);
     stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
+    integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
   } catch (const std::exception& e) {
     *error = e.what();
     return false;
@@ -121,6 +123,7 @@ bool OctomapMonitor::init(std::string* error) {
       return false;
     }
   }
+  if (!parseIntegration(integration, &integration_, error)) return false;
   if (!(max_age_ > 0.0)) {  // inf: no age limit
     *error = "octomap/max_age must be > 0 (.inf: no limit)";
     return false;
@@ -138,6 +141,12 @@ bool OctomapMonitor::init(std::string* error) {
   mo.unknown_occupied = unknown_occupied_;
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
+  CloudIntegratorOptions io;
+  io.self_filter_padding = self_filter_padding_;
+  io.static_filter_padding = static_filter_padding_;
+  io.filter_static = filter_static_;
+  io.integration = integration_;
+  cloud_integrator_ = std::make_unique<CloudIntegrator>(map_.get(), &scene_->checker(), scene_mutex_, io);
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     scene_->checker().setOccupancy(map_.get());
@@ -307,34 +316,27 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.linear() = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).toRotationMatrix();
   pose.translation() = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
-  points_.clear();
-  points_.reserve(static_cast<std::size_t>(msg->width) * msg->height);
-  sensor_msgs::PointCloud2ConstIterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z");
-  for (; x != x.end(); ++x, ++y, ++z) {
-    if (std::isfinite(*x) && std::isfinite(*y) && std::isfinite(*z)) {  // NaN marks no return in some drivers
-      points_.push_back(pose * Eigen::Vector3d(*x, *y, *z));
-    }
+  // cloudLayoutError accepted x, y, z as float32 fields; the integrator reads them as three consecutive floats.
+  std::uint32_t x_offset = 0, y_offset = 0, z_offset = 0;
+  for (const auto& f : msg->fields) {
+    if (f.name == "x") x_offset = f.offset;
+    if (f.name == "y") y_offset = f.offset;
+    if (f.name == "z") z_offset = f.offset;
   }
-  for (std::size_t c = 0; c < configurations_.size(); ++c) {
-    scene_->checker().robotPointMask(configurations_[c].data(), points_, self_filter_padding_,
-                                     c == 0 ? &mask_ : &mask_more_);
-    if (c > 0) {
-      for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
-    }
+  if (y_offset != x_offset + 4 || z_offset != x_offset + 8) {
+    drop("cloud from '" + msg->header.frame_id + "' dropped: fields x, y, z are not consecutive floats");
+    return;
   }
-  if (filter_static_) {
-    // Points on the scene's static objects (known exactly: no predictive margin) are the fixture: the space before
-    // them is seen free, down to the fixture's surface (static_filter_padding: the cameras' error).
-    {
-      std::lock_guard<std::mutex> lock(*scene_mutex_);
-      scene_->checker().staticObjectPointMask(points_, static_filter_padding_, &mask_more_);
-    }
-    if (mask_.size() != mask_more_.size()) mask_.assign(points_.size(), kPointObstacle);
-    for (std::size_t k = 0; k < mask_.size(); ++k) {
-      if (mask_[k] == kPointObstacle && mask_more_[k] != 0) mask_[k] = kPointOnFixture;
-    }
+  std::string why;
+  const Integration used = cloud_integrator_->compute(msg->data.data() + x_offset, static_cast<int>(msg->width),
+                                                      static_cast<int>(msg->height), msg->point_step, msg->row_step,
+                                                      pose, configurations_, &update_, nullptr, &why);
+  if (used != integration_ && ray_cast_frames_.insert(msg->header.frame_id).second) {
+    ROS_WARN(
+        "%s: clouds from '%s' are integrated by ray casting (octomap/integration %s needs an organized cloud in "
+        "an optical frame that fits a pinhole camera: %s)",
+        pnh_.getNamespace().c_str(), msg->header.frame_id.c_str(), integrationName(integration_), why.c_str());
   }
-  map_->computeUpdate(points_, mask_, pose.translation(), &update_);
   if (map_->unknownOccupied()) addKnownFree();
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);

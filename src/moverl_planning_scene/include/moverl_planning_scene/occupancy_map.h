@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "moverl_planning_scene/pinhole_camera.h"
 #include "moverl_planning_scene/unset.h"
 
 namespace moverl_planning_scene {
@@ -109,6 +110,15 @@ class OccupancyMap {
   ///        (kPointObstacle, kPointOnRobot, kPointOnFixture).
   void computeUpdate(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                      const Eigen::Vector3d& origin, MapUpdate* out);
+  /// \brief As computeUpdate, for an organized cloud that fits a pinhole camera (fitPinhole): the hits as
+  ///        computeUpdate's (points and robot_mask alike: map frame, any of the image's points), free space by
+  ///        projection instead of ray casting (see the file comment). depth: camera.width * camera.height z-depths in
+  ///        the optical frame, row-major (non-finite or <= 0: no return); sensor_pose: the optical frame in the map
+  ///        frame. Costs the cells that are not yet clamped free in view, not the beams: a grid cell is projected into
+  ///        the image instead of every pixel's beam being walked through the grid.
+  void computeUpdateProjective(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
+                               const std::vector<float>& depth, const PinholeCamera& camera,
+                               const Eigen::Isometry3d& sensor_pose, MapUpdate* out);
   /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as cell ids from
   ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
   ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
@@ -154,6 +164,11 @@ class OccupancyMap {
   ///        to `visit`. True as soon as `visit` returns true (stop), false when the traversal ends.
   bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
                      CellClass which = CellClass::kAll) const;
+  /// \brief The centre of the cell with id `key` (MapUpdate's ids), map frame.
+  Eigen::Vector3d cellCentre(std::uint64_t key) const {
+    const auto c = static_cast<std::int64_t>(key);
+    return centre(c / (size_[1] * size_[2]), (c / size_[2]) % size_[1], c % size_[2]);
+  }
   /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
   double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
   const OccupancyMapOptions& options() const { return options_; }
@@ -173,6 +188,10 @@ class OccupancyMap {
   }
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
+  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, end_) and its hits (hit_,
+  ///        out->hits); clears the seen_ marks and out.
+  void collectEndCells(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
+                       const Eigen::Vector3d& origin, MapUpdate* out);
   /// Set cell c's value, keeping the occupied bit and the block counts.
   void setValue(std::int64_t c, float v);
   /// Every unobserved cell at the prior (on) or unknown (off).
@@ -196,7 +215,10 @@ class OccupancyMap {
   std::vector<std::uint64_t> clamped_;      ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
   // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.
   std::vector<std::uint8_t> block_count_;
-  std::vector<std::uint8_t> block_dirty_;  ///< per block: cells not at clamp_min (unknown ones included)
+  std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)
+  std::vector<std::uint16_t> super_dirty_;  ///< per superblock: the same
+  std::vector<float> free_depth_;           ///< computeUpdateProjective's scratch: each pixel's free depth
+  std::vector<std::vector<float>> min_depth_, max_depth_;  ///< its pyramids of those depths
   std::vector<std::uint16_t> super_count_;
   // The same counts for the cells seen occupied only (observed and at or above the threshold: CellClass::kSeen).
   std::vector<std::uint8_t> seen_block_count_;

@@ -14,6 +14,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -27,6 +28,7 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
+#include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/joint_state_history.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
@@ -104,8 +106,10 @@ class OctomapMonitor {
   ros::ServiceServer clear_srv_;
   std::vector<std::string> joints_;
   JointStateHistory history_{400};
-  std::vector<Eigen::Vector3d> points_;
-  std::vector<std::uint8_t> mask_, mask_more_;
+  std::unique_ptr<CloudIntegrator> cloud_integrator_;
+  Integration integration_ = Integration::kProjective;  // octomap/integration
+  std::set<std::string> ray_cast_frames_;  // cameras whose clouds fell back to ray casting (warned once each)
+  std::vector<std::uint8_t> mask_more_;
   std::vector<std::vector<double>> configurations_;
   MapUpdate update_;
   double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;

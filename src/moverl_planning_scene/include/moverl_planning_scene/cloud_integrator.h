@@ -1,0 +1,80 @@
+/**
+ * \file cloud_integrator.h
+ * \brief One depth-camera cloud into the occupancy map, as the scene node does it, ROS-free (the node and
+ *        map_benchmark share it): the points into the map frame, the robot's points marked (self filter, every
+ *        configuration the robot may have been in), the static objects' points marked (obstacles: sensed), then the
+ *        map's update, by projection when the cloud is a pinhole image, else by ray casting.
+ */
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "moverl_planning_scene/fcl_collision_checker.h"
+#include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/pinhole_camera.h"
+#include "moverl_planning_scene/unset.h"
+
+namespace moverl_planning_scene {
+
+/// \brief How free space is found (config/planning_scene.yaml octomap/integration).
+enum class Integration {
+  kProjective,  ///< an organized cloud that fits a pinhole camera: grid cells projected into the image
+  kRayCasting,  ///< every end cell's beam walked through the grid (any cloud)
+};
+/// \brief "projective" / "ray_casting" -> the enum. False with *error naming the valid choices.
+bool parseIntegration(const std::string& name, Integration* out, std::string* error);
+const char* integrationName(Integration integration);
+
+/// \brief Pixels a cloud's points may stray from a pinhole image's rays and still be projected (fitPinhole's
+///        tolerance). A driver's organized cloud from a rectified depth image lies on them up to float rounding.
+constexpr double kPinholeTolerancePx = 0.05;
+
+struct CloudIntegratorOptions {
+  double self_filter_padding = kUnset;    ///< octomap/self_filter_padding
+  double static_filter_padding = kUnset;  ///< octomap/static_filter_padding
+  bool filter_static = false;             ///< mark the static objects' points (obstacles: sensed)
+  Integration integration = Integration::kProjective;
+};
+
+/// \brief Where one cloud's time went (s, wall clock of the calling thread).
+struct CloudTiming {
+  double points = 0.0;         ///< into the map frame
+  double self_filter = 0.0;    ///< robotPointMask over the configurations
+  double static_filter = 0.0;  ///< staticObjectPointMask
+  double update = 0.0;         ///< the pinhole fit and the map's update (computeUpdate or computeUpdateProjective)
+  double total() const { return points + self_filter + static_filter + update; }
+};
+
+class CloudIntegrator {
+ public:
+  /// \param world_mutex held while reading the checker's world (static filter); nullptr: none needed
+  CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* checker, std::mutex* world_mutex,
+                  const CloudIntegratorOptions& options);
+
+  /// \brief The update of one cloud (apply it to the map under the readers' lock). xyz: width * height points, x y z
+  ///        float each, `point_step` bytes apart, rows `row_step` bytes apart (a PointCloud2's layout), in the sensor
+  ///        frame; non-finite: no return. sensor_pose: the sensor frame in the map frame. configurations: where the
+  ///        robot may have been when the cloud was taken (at least one). Returns the integration used: projective
+  ///        falls back to ray casting when the cloud is not a pinhole image (*why, if given, says why; "" otherwise).
+  Integration compute(const std::uint8_t* xyz, int width, int height, std::size_t point_step, std::size_t row_step,
+                      const Eigen::Isometry3d& sensor_pose, const std::vector<std::vector<double>>& configurations,
+                      MapUpdate* update, CloudTiming* timing = nullptr, std::string* why = nullptr);
+  /// \brief The intrinsics the last projective update used.
+  const PinholeCamera& camera() const { return camera_; }
+
+ private:
+  OccupancyMap* map_;
+  const FclCollisionChecker* checker_;
+  std::mutex* world_mutex_;
+  CloudIntegratorOptions options_;
+  PinholeCamera camera_;
+  std::vector<float> sensor_xyz_, depth_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<std::uint8_t> mask_, mask_more_;
+};
+
+}  // namespace moverl_planning_scene

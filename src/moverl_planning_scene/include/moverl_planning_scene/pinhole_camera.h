@@ -1,0 +1,35 @@
+/**
+ * \file pinhole_camera.h
+ * \brief The pinhole model of an organized depth-camera cloud, read from the cloud itself. ROS-free.
+ *
+ * A depth camera's driver (depth_image_proc's point_cloud_xyz, the simulator's cameras) publishes an organized cloud
+ * (one point per pixel, row-major) in the camera's optical frame (REP 103: z forward, x right, y down). Every point of
+ * pixel (u, v) lies on that pixel's ray, ((u - cx) / fx, (v - cy) / fy, 1) z, so the intrinsics can be fitted from the
+ * points (a least-squares line per image axis) and the fit checked: a cloud whose points stray from the fitted rays by
+ * more than a tolerance (a distorted or rectified-elsewhere image, a cloud in another frame, an unorganized cloud) is
+ * not a pinhole image, and the occupancy map integrates it by ray casting instead (OccupancyMap::computeUpdate). No
+ * CameraInfo topic is needed: the cloud carries its own geometry, and a cloud that does not is refused by the fit,
+ * never integrated with a wrong projection.
+ */
+#pragma once
+
+#include <string>
+
+namespace moverl_planning_scene {
+
+/// \brief Intrinsics in pixel indices: pixel (u, v), u the column and v the row from 0, samples the ray
+///        ((u - cx) / fx, (v - cy) / fy, 1) of the optical frame.
+struct PinholeCamera {
+  int width = 0;
+  int height = 0;
+  double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
+};
+
+/// \brief Fits the pinhole model of an organized cloud: xyz holds width * height points (x, y, z, row-major, optical
+///        frame; non-finite or z <= 0: no return, skipped). Every `stride`-th row and column take part (1: all).
+///        False with *why when too few points fall on distinct rows and columns, or when a point lies farther than
+///        `tolerance` pixels from its pixel's fitted ray (*residual: the largest distance, pixels).
+bool fitPinhole(const float* xyz, int width, int height, int stride, double tolerance, PinholeCamera* out,
+                double* residual, std::string* why);
+
+}  // namespace moverl_planning_scene

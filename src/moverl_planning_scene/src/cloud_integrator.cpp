@@ -1,0 +1,108 @@
+#include "moverl_planning_scene/cloud_integrator.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+
+namespace moverl_planning_scene {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point* t) {
+  const Clock::time_point now = Clock::now();
+  const double s = std::chrono::duration<double>(now - *t).count();
+  *t = now;
+  return s;
+}
+
+}  // namespace
+
+bool parseIntegration(const std::string& name, Integration* out, std::string* error) {
+  for (Integration i : {Integration::kProjective, Integration::kRayCasting}) {
+    if (name == integrationName(i)) {
+      *out = i;
+      return true;
+    }
+  }
+  if (error != nullptr) *error = "octomap/integration '" + name + "' unknown: one of projective, ray_casting";
+  return false;
+}
+
+const char* integrationName(Integration integration) {
+  return integration == Integration::kProjective ? "projective" : "ray_casting";
+}
+
+CloudIntegrator::CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* checker, std::mutex* world_mutex,
+                                 const CloudIntegratorOptions& options)
+    : map_(map), checker_(checker), world_mutex_(world_mutex), options_(options) {}
+
+Integration CloudIntegrator::compute(const std::uint8_t* xyz, int width, int height, std::size_t point_step,
+                                     std::size_t row_step, const Eigen::Isometry3d& sensor_pose,
+                                     const std::vector<std::vector<double>>& configurations, MapUpdate* update,
+                                     CloudTiming* timing, std::string* why) {
+  CloudTiming t;
+  Clock::time_point at = Clock::now();
+  if (why != nullptr) why->clear();
+  // The points in the sensor frame (contiguous x y z, one per pixel: the pinhole fit and the depth image), and the
+  // ones with a return in the map frame.
+  const std::size_t n = static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
+  sensor_xyz_.resize(3 * n);
+  points_.clear();
+  points_.reserve(n);
+  for (int v = 0; v < height; ++v) {
+    const std::uint8_t* row = xyz + static_cast<std::size_t>(v) * row_step;
+    for (int u = 0; u < width; ++u) {
+      float* s = &sensor_xyz_[3 * (static_cast<std::size_t>(v) * width + u)];
+      std::memcpy(s, row + static_cast<std::size_t>(u) * point_step, 3 * sizeof(float));
+      if (std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2])) {  // NaN marks no return in some drivers
+        points_.push_back(sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]));
+      }
+    }
+  }
+  t.points = since(&at);
+  mask_.assign(points_.size(), kPointObstacle);
+  for (std::size_t c = 0; c < configurations.size(); ++c) {
+    checker_->robotPointMask(configurations[c].data(), points_, options_.self_filter_padding,
+                             c == 0 ? &mask_ : &mask_more_);
+    if (c > 0) {
+      for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
+    }
+  }
+  t.self_filter = since(&at);
+  if (options_.filter_static) {
+    // Points on the scene's static objects (known exactly: no predictive margin) are the fixture: the space before
+    // them is seen free, down to the fixture's surface (static_filter_padding: the cameras' error).
+    {
+      std::unique_lock<std::mutex> lock;
+      if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);
+      checker_->staticObjectPointMask(points_, options_.static_filter_padding, &mask_more_);
+    }
+    for (std::size_t k = 0; k < mask_.size(); ++k) {
+      if (mask_[k] == kPointObstacle && mask_more_[k] != 0) mask_[k] = kPointOnFixture;
+    }
+  }
+  t.static_filter = since(&at);
+  Integration used = Integration::kRayCasting;
+  if (options_.integration == Integration::kProjective) {
+    std::string reason;
+    double residual = 0.0;
+    // A strided subset fits the model (and checks it): about 20,000 points whatever the image's size.
+    const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(n) / 20000.0)));
+    if (height < 2) {
+      reason = "an unorganized cloud (height 1)";
+    } else if (fitPinhole(sensor_xyz_.data(), width, height, stride, kPinholeTolerancePx, &camera_, &residual,
+                          &reason)) {
+      depth_.resize(n);
+      for (std::size_t k = 0; k < n; ++k) depth_[k] = sensor_xyz_[3 * k + 2];  // non-finite stays: no return
+      map_->computeUpdateProjective(points_, mask_, depth_, camera_, sensor_pose, update);
+      used = Integration::kProjective;
+    }
+    if (used != Integration::kProjective && why != nullptr) *why = reason;
+  }
+  if (used == Integration::kRayCasting) map_->computeUpdate(points_, mask_, sensor_pose.translation(), update);
+  t.update = since(&at);
+  if (timing != nullptr) *timing = t;
+  return used;
+}
+
+}  // namespace moverl_planning_scene

@@ -1,0 +1,272 @@
+/**
+ * \file test_projective.cpp
+ * \brief The pinhole fit of organized clouds and the map's projective integration (octomap/integration: projective),
+ *        without a roscore: what it sees free, what it does not, and where it falls back to ray casting.
+ */
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "moverl_planning_scene/cloud_integrator.h"
+#include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/pinhole_camera.h"
+#include "panda_support.h"
+
+namespace mps = moverl_planning_scene;
+
+namespace {
+
+const mps::PinholeCamera kCamera{80, 60, 50.0, 52.0, 39.5, 29.5};
+
+/// An optical frame at `origin` looking along +x of the map (optical z = map x, optical x = map -y, y = map -z).
+Eigen::Isometry3d lookingAlongX(const Eigen::Vector3d& origin) {
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear().col(0) = -Eigen::Vector3d::UnitY();
+  pose.linear().col(1) = -Eigen::Vector3d::UnitZ();
+  pose.linear().col(2) = Eigen::Vector3d::UnitX();
+  pose.translation() = origin;
+  return pose;
+}
+
+/// An organized cloud (optical frame, x y z per pixel) whose pixel (u, v) sees depth depth(u, v).
+template <class Depth>
+std::vector<float> image(const mps::PinholeCamera& c, Depth depth) {
+  std::vector<float> xyz;
+  for (int v = 0; v < c.height; ++v) {
+    for (int u = 0; u < c.width; ++u) {
+      const double z = depth(u, v);
+      xyz.push_back(static_cast<float>((u - c.cx) / c.fx * z));
+      xyz.push_back(static_cast<float>((v - c.cy) / c.fy * z));
+      xyz.push_back(static_cast<float>(z));
+    }
+  }
+  return xyz;
+}
+
+/// Depth of the ray of pixel (u, v) to a sphere (optical frame) or to a far wall at depth `wall`.
+double sphereOrWall(const mps::PinholeCamera& c, int u, int v, const Eigen::Vector3d& centre, double radius,
+                    double wall) {
+  const Eigen::Vector3d d((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
+  const double a = d.squaredNorm(), b = -2.0 * d.dot(centre), k = centre.squaredNorm() - radius * radius;
+  const double disc = b * b - 4 * a * k;
+  if (disc < 0) return wall;
+  const double s = (-b - std::sqrt(disc)) / (2 * a);  // the depth (d has z = 1)
+  return s > 0 && s < wall ? s : wall;
+}
+
+std::unique_ptr<mps::OccupancyMap> makeMap() {
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  o.resolution = 0.02;
+  o.max_range = 3.0;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+  std::string error;
+  auto m = mps::OccupancyMap::create(o, &error);
+  EXPECT_TRUE(m) << error;
+  return m;
+}
+
+/// The map-frame points of an organized optical-frame cloud (the ones with a return).
+std::vector<Eigen::Vector3d> mapPoints(const std::vector<float>& xyz, const Eigen::Isometry3d& pose) {
+  std::vector<Eigen::Vector3d> pts;
+  for (std::size_t k = 0; k + 2 < xyz.size(); k += 3) {
+    if (std::isfinite(xyz[k]) && std::isfinite(xyz[k + 1]) && std::isfinite(xyz[k + 2])) {
+      pts.push_back(pose * Eigen::Vector3d(xyz[k], xyz[k + 1], xyz[k + 2]));
+    }
+  }
+  return pts;
+}
+
+std::vector<float> depths(const std::vector<float>& xyz) {
+  std::vector<float> z;
+  for (std::size_t k = 2; k < xyz.size(); k += 3) z.push_back(xyz[k]);
+  return z;
+}
+
+}  // namespace
+
+TEST(Pinhole, FitsAnOrganizedCloudAndItsHoles) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> z(0.3, 3.0);
+  auto xyz = image(kCamera, [&](int, int) { return z(rng); });
+  for (std::size_t k = 0; k < xyz.size(); k += 21) xyz[k] = std::numeric_limits<float>::quiet_NaN();  // no returns
+  mps::PinholeCamera fit;
+  double residual = 0.0;
+  std::string why;
+  ASSERT_TRUE(mps::fitPinhole(xyz.data(), kCamera.width, kCamera.height, 1, 0.05, &fit, &residual, &why)) << why;
+  EXPECT_NEAR(fit.fx, kCamera.fx, 1e-3);
+  EXPECT_NEAR(fit.fy, kCamera.fy, 1e-3);
+  EXPECT_NEAR(fit.cx, kCamera.cx, 1e-3);
+  EXPECT_NEAR(fit.cy, kCamera.cy, 1e-3);
+  EXPECT_LT(residual, 1e-3);
+  EXPECT_TRUE(mps::fitPinhole(xyz.data(), kCamera.width, kCamera.height, 3, 0.05, &fit, &residual, &why)) << why;
+}
+
+TEST(Pinhole, RefusesWhatIsNotAPinholeImage) {
+  mps::PinholeCamera fit;
+  double residual = 0.0;
+  std::string why;
+  // Radial distortion of 0.3 px at the corners: not rectified.
+  auto distorted = image(kCamera, [](int, int) { return 1.0; });
+  for (std::size_t k = 0; k < distorted.size(); k += 3) {
+    const double r2 = (distorted[k] * distorted[k] + distorted[k + 1] * distorted[k + 1]);
+    distorted[k] *= static_cast<float>(1.0 + 0.02 * r2);
+    distorted[k + 1] *= static_cast<float>(1.0 + 0.02 * r2);
+  }
+  EXPECT_FALSE(mps::fitPinhole(distorted.data(), kCamera.width, kCamera.height, 1, 0.05, &fit, &residual, &why));
+  EXPECT_NE(why.find("px"), std::string::npos) << why;
+  // A cloud in a frame whose z is not the view direction (a camera_link frame, x forward).
+  auto turned = image(kCamera, [](int, int) { return 1.0; });
+  for (std::size_t k = 0; k < turned.size(); k += 3) std::swap(turned[k], turned[k + 2]);
+  EXPECT_FALSE(mps::fitPinhole(turned.data(), kCamera.width, kCamera.height, 1, 0.05, &fit, &residual, &why));
+  // An unorganized cloud, and one without returns.
+  EXPECT_FALSE(mps::fitPinhole(turned.data(), 4800, 1, 1, 0.05, &fit, &residual, &why));
+  std::vector<float> none(3 * 80 * 60, std::numeric_limits<float>::quiet_NaN());
+  EXPECT_FALSE(mps::fitPinhole(none.data(), 80, 60, 1, 0.05, &fit, &residual, &why));
+  EXPECT_NE(why.find("too few"), std::string::npos) << why;
+}
+
+TEST(Projective, SeesFreeWhatLiesBeforeAWallAndNothingBehindIt) {
+  auto map = makeMap();
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const auto xyz = image(kCamera, [](int, int) { return 1.5; });  // a wall at x = 1.5
+  mps::MapUpdate u;
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), kCamera, pose, &u);
+  map->apply(u);
+  EXPECT_GT(u.stats.hit_cells, 0u);
+  EXPECT_TRUE(map->occupied(Eigen::Vector3d(1.51, 0.0, 0.0)));  // the wall's cell
+  for (double x : {0.3, 0.7, 1.1, 1.45}) {
+    EXPECT_TRUE(map->observed(Eigen::Vector3d(x, 0.01, 0.01))) << x;
+    EXPECT_FALSE(map->occupied(Eigen::Vector3d(x, 0.01, 0.01))) << x;
+  }
+  EXPECT_FALSE(map->observed(Eigen::Vector3d(1.7, 0.01, 0.01)));  // behind the wall: unknown
+  EXPECT_FALSE(map->observed(Eigen::Vector3d(0.5, 0.9, 0.01)));   // outside the view (half angle ~38 deg)
+}
+
+TEST(Projective, PixelsWithoutAReturnSeeNothingFree) {
+  auto map = makeMap();
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  // The left half of the image has no return (NaN): nothing along it is known.
+  auto xyz = image(kCamera, [](int u, int) { return u < 40 ? std::numeric_limits<double>::quiet_NaN() : 1.5; });
+  mps::MapUpdate u;
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), kCamera, pose, &u);
+  map->apply(u);
+  EXPECT_FALSE(map->observed(Eigen::Vector3d(1.0, 0.3, 0.01)));  // optical x < 0: map +y, the NaN half
+  EXPECT_TRUE(map->observed(Eigen::Vector3d(1.0, -0.3, 0.01)));
+}
+
+TEST(Projective, BeamsBeyondMaxRangeClearUpToIt) {
+  auto map = makeMap();
+  const mps::PinholeCamera narrow{160, 120, 400.0, 400.0, 79.5, 59.5};  // 0.25 cm per pixel at 1 m
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-1.0, 0.0, 0.0));
+  const auto xyz = image(narrow, [](int, int) { return 10.0; });  // a far plane beyond max_range (3 m)
+  mps::MapUpdate u;
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), narrow, pose, &u);
+  map->apply(u);
+  EXPECT_EQ(u.stats.hit_cells, 0u);
+  EXPECT_TRUE(map->observed(Eigen::Vector3d(1.7, 0.01, 0.01)));   // 2.7 m away
+  EXPECT_FALSE(map->observed(Eigen::Vector3d(2.1, 0.01, 0.01)));  // 3.1 m away: beyond max_range
+}
+
+/// Cells whose centre lies inside the ball that one integration sees free, a ball in front of a wall seen from 15
+/// places by `camera` (the count over all views).
+std::size_t freedInsideBall(const mps::PinholeCamera& camera, bool projective) {
+  auto map = makeMap();
+  const Eigen::Vector3d ball(1.2, 0.05, -0.03);
+  const double radius = 0.15;
+  std::size_t freed_inside = 0, free_cells = 0;
+  for (double y : {-0.4, -0.2, 0.0, 0.2, 0.4}) {
+    for (double z : {-0.3, 0.0, 0.3}) {
+      const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, y, z));
+      const Eigen::Vector3d c = pose.inverse() * ball;
+      const auto xyz = image(camera, [&](int u, int v) { return sphereOrWall(camera, u, v, c, radius, 2.2); });
+      mps::MapUpdate u;
+      if (projective) {
+        map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), camera, pose, &u);
+      } else {
+        map->computeUpdate(mapPoints(xyz, pose), {}, pose.translation(), &u);
+      }
+      for (std::uint64_t key : u.misses) freed_inside += (map->cellCentre(key) - ball).norm() < radius ? 1 : 0;
+      free_cells += u.stats.free_cells;
+      map->apply(u);
+    }
+  }
+  EXPECT_GT(free_cells, 10000u);
+  EXPECT_TRUE(map->occupied(ball + Eigen::Vector3d(-radius + 0.005, 0.0, 0.0)));  // the front of the ball
+  return freed_inside;
+}
+
+TEST(Projective, SeesFreeLessOfAnObstacleThanRayCasting) {
+  // A cell is seen free when the rays that cross it pass it; with pixels as wide as cells a ray may cross a cell's
+  // corner beside the ball whose centre lies inside it (neither method can tell; ray casting's beams to the end
+  // cells' centroids also graze cells no pixel's ray crosses). With pixels a quarter of a cell wide at the ball,
+  // the projective rule sees none of the ball free; at any size it sees less of it free than ray casting.
+  const mps::PinholeCamera coarse = kCamera;                       // 2.4 cm per pixel at the ball
+  const mps::PinholeCamera fine{320, 240, 240.0, 240.0, 159.5, 119.5};  // 0.5 cm per pixel at the ball
+  const std::size_t coarse_projective = freedInsideBall(coarse, true), coarse_rays = freedInsideBall(coarse, false);
+  EXPECT_LT(coarse_projective, coarse_rays);
+  EXPECT_EQ(freedInsideBall(fine, true), 0u);
+  EXPECT_GT(freedInsideBall(fine, false), 0u);
+}
+
+TEST(Projective, AVacatedCellClearsWithinAsManyViewsAsRayCasting) {
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const mps::PinholeCamera fine{320, 240, 240.0, 240.0, 159.5, 119.5};
+  const Eigen::Vector3d ball(1.0, 0.0, 0.0);
+  const Eigen::Vector3d c = pose.inverse() * ball;
+  const auto with = image(fine, [&](int u, int v) { return sphereOrWall(fine, u, v, c, 0.1, 2.0); });
+  const auto without = image(fine, [](int, int) { return 2.0; });
+  const Eigen::Vector3d front = ball - Eigen::Vector3d(0.095, 0.0, 0.0);
+  auto views = [&](bool projective) {
+    auto map = makeMap();
+    mps::MapUpdate u;
+    map->computeUpdateProjective(mapPoints(with, pose), {}, depths(with), fine, pose, &u);
+    map->apply(u);
+    EXPECT_TRUE(map->occupied(front));
+    for (int n = 1; n <= 20; ++n) {
+      if (projective) {
+        map->computeUpdateProjective(mapPoints(without, pose), {}, depths(without), fine, pose, &u);
+      } else {
+        map->computeUpdate(mapPoints(without, pose), {}, pose.translation(), &u);
+      }
+      map->apply(u);
+      if (!map->occupied(front)) return n;
+    }
+    return 1000;
+  };
+  const int projective = views(true), rays = views(false);
+  EXPECT_LT(rays, 20);
+  EXPECT_LE(projective, rays);
+}
+
+TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
+  const std::string urdf = MOVERL_PANDA_URDF;
+  std::string error;
+  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf), mps::panda::options(urdf), &error);
+  ASSERT_TRUE(scene) << error;
+  auto map = makeMap();
+  mps::CloudIntegratorOptions io;
+  io.self_filter_padding = 0.01;
+  io.static_filter_padding = 0.003;
+  mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
+  const auto xyz = image(kCamera, [](int, int) { return 2.0; });
+  const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
+  mps::MapUpdate u;
+  std::string why;
+  EXPECT_EQ(integrator.compute(reinterpret_cast<const std::uint8_t*>(xyz.data()), kCamera.width, kCamera.height, 12,
+                               12 * kCamera.width, pose, home, &u, nullptr, &why),
+            mps::Integration::kProjective);
+  EXPECT_EQ(why, "");
+  EXPECT_NEAR(integrator.camera().fx, kCamera.fx, 1e-3);
+  const int n = kCamera.width * kCamera.height;
+  EXPECT_EQ(integrator.compute(reinterpret_cast<const std::uint8_t*>(xyz.data()), n, 1, 12, 12 * n, pose, home, &u,
+                               nullptr, &why),
+            mps::Integration::kRayCasting);
+  EXPECT_NE(why.find("unorganized"), std::string::npos) << why;
+  EXPECT_GT(u.stats.free_cells, 0u);
+  mps::Integration parsed;
+  EXPECT_FALSE(mps::parseIntegration("voxblox", &parsed, &error));
+  EXPECT_NE(error.find("projective, ray_casting"), std::string::npos) << error;
+}

@@ -484,21 +484,26 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               }
               footprint(ba, bb, &f);
               if (hidden(f)) continue;
+              // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
+              const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
               for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
                 for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
-                  for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2]) {
-                    const std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+                  const std::int64_t row = (at[0] * size_[1] + at[1]) * size_[2];
+                  Eigen::Vector3d c =
+                      c0 + static_cast<double>(at[0] - ba[0]) * axis[0] + static_cast<double>(at[1] - ba[1]) * axis[1];
+                  for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
+                    const std::int64_t k = row + at[2];
                     if (testBit(hit_, k) || testBit(seen_, k) || testBit(clamped_, k)) continue;
                     // Seen free: one pixel's ray crosses the cell for certain (the ray of the pixel nearest the
                     // centre's projection passes within the cell's inscribed sphere: a cell between the rays of a
                     // sparse image is not seen) and sees past all of it, and so does every pixel that may see the
                     // cell. The first test is the cheap one (most cells that get here lie behind a surface).
-                    const Eigen::Vector3d c = rt * (centre(at[0], at[1], at[2]) - tr);
                     if (!(c.z() > half_depth)) continue;
-                    const double zmax = c.z() + half_depth;
-                    const int u = static_cast<int>(std::lround(camera.fx * c.x() / c.z() + camera.cx));
-                    const int v = static_cast<int>(std::lround(camera.fy * c.y() / c.z() + camera.cy));
-                    if (u < 0 || u >= w || v < 0 || v >= h) continue;
+                    const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
+                    const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
+                    const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
+                    if (!(uf >= 0.0 && uf < w && vf >= 0.0 && vf < h)) continue;
+                    const int u = static_cast<int>(uf), v = static_cast<int>(vf);  // the nearest pixel
                     if (free_depth_[static_cast<std::size_t>(v) * w + u] < zmax) continue;
                     const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
                     if (c.cross(ray).squaredNorm() > r2 * ray.squaredNorm()) continue;

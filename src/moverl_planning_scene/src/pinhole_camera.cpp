@@ -17,7 +17,9 @@ bool fitPinhole(const float* xyz, int width, int height, int stride, double tole
   stride = std::max(1, stride);
   // Least squares per axis: x / z = a u + b (a = 1 / fx, b = -cx / fx); likewise y / z against v.
   double n = 0, su = 0, suu = 0, sx = 0, sux = 0, sv = 0, svv = 0, sy = 0, svy = 0;
-  auto ok = [](const float* p) { return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]) && p[2] > 0; };
+  auto ok = [](const float* p) {
+    return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]) && p[2] > 0;
+  };
   for (int v = 0; v < height; v += stride) {
     for (int u = 0; u < width; u += stride) {
       const float* p = xyz + 3 * (static_cast<long>(v) * width + u);
@@ -38,7 +40,8 @@ bool fitPinhole(const float* xyz, int width, int height, int stride, double tole
   if (n < 3 || du <= 0 || dv <= 0) return fail("too few points with a return on distinct rows and columns");
   const double ax = (n * sux - su * sx) / du, bx = (sx - ax * su) / n;
   const double ay = (n * svy - sv * sy) / dv, by = (sy - ay * sv) / n;
-  if (!(ax > 0) || !(ay > 0)) return fail("points do not lie on a pinhole image's rays in an optical frame (z forward)");
+  if (!(ax > 0) || !(ay > 0))
+    return fail("points do not lie on a pinhole image's rays in an optical frame (z forward)");
   PinholeCamera c;
   c.width = width;
   c.height = height;

@@ -202,7 +202,7 @@ TEST(Projective, SeesFreeLessOfAnObstacleThanRayCasting) {
   // corner beside the ball whose centre lies inside it (neither method can tell; ray casting's beams to the end
   // cells' centroids also graze cells no pixel's ray crosses). With pixels a quarter of a cell wide at the ball,
   // the projective rule sees none of the ball free; at any size it sees less of it free than ray casting.
-  const mps::PinholeCamera coarse = kCamera;                       // 2.4 cm per pixel at the ball
+  const mps::PinholeCamera coarse = kCamera;                            // 2.4 cm per pixel at the ball
   const mps::PinholeCamera fine{320, 240, 240.0, 240.0, 159.5, 119.5};  // 0.5 cm per pixel at the ball
   const std::size_t coarse_projective = freedInsideBall(coarse, true), coarse_rays = freedInsideBall(coarse, false);
   EXPECT_LT(coarse_projective, coarse_rays);

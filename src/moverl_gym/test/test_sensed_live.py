@@ -266,7 +266,10 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             switch(True)
             self.wait_for_clouds(2)  # the cells inside the robot are turned free with each cloud
             self.assertGreater(self.status.unobserved_cells, 1000, "the map has no unseen cells")
-            self.assertEqual(self.check_state(positions=HOME).outcome, VALID, "home is blocked by its own cells")
+            home = self.check_state(positions=HOME)
+            self.assertEqual(
+                home.outcome, VALID, "home is blocked by its own cells: %s %s" % (home.message, home.pairs)
+            )
             switch(False)
             free = verdicts()  # the map as of now, with unknown cells free ...
             switch(True)

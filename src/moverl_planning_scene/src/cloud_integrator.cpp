@@ -49,13 +49,17 @@ Integration CloudIntegrator::compute(const std::uint8_t* xyz, int width, int hei
   sensor_xyz_.resize(3 * n);
   points_.clear();
   points_.reserve(n);
+  pixel_of_.clear();
+  pixel_of_.reserve(n);
   for (int v = 0; v < height; ++v) {
     const std::uint8_t* row = xyz + static_cast<std::size_t>(v) * row_step;
     for (int u = 0; u < width; ++u) {
-      float* s = &sensor_xyz_[3 * (static_cast<std::size_t>(v) * width + u)];
+      const std::size_t pixel = static_cast<std::size_t>(v) * width + u;
+      float* s = &sensor_xyz_[3 * pixel];
       std::memcpy(s, row + static_cast<std::size_t>(u) * point_step, 3 * sizeof(float));
       if (std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2])) {  // NaN marks no return in some drivers
         points_.push_back(sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]));
+        pixel_of_.push_back(static_cast<std::uint32_t>(pixel));
       }
     }
   }
@@ -94,7 +98,9 @@ Integration CloudIntegrator::compute(const std::uint8_t* xyz, int width, int hei
                           &reason)) {
       depth_.resize(n);
       for (std::size_t k = 0; k < n; ++k) depth_[k] = sensor_xyz_[3 * k + 2];  // non-finite stays: no return
-      map_->computeUpdateProjective(points_, mask_, depth_, camera_, sensor_pose, update);
+      pixel_mask_.assign(n, kPointObstacle);
+      for (std::size_t k = 0; k < points_.size(); ++k) pixel_mask_[pixel_of_[k]] = mask_[k];
+      map_->computeUpdateProjective(points_, mask_, depth_, pixel_mask_, camera_, sensor_pose, update);
       used = Integration::kProjective;
     }
     if (used != Integration::kProjective && why != nullptr) *why = reason;

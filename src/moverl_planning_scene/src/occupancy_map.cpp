@@ -327,8 +327,8 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
 
 void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& points,
                                            const std::vector<std::uint8_t>& robot_mask, const std::vector<float>& depth,
-                                           const PinholeCamera& camera, const Eigen::Isometry3d& sensor_pose,
-                                           MapUpdate* out) {
+                                           const std::vector<std::uint8_t>& pixel_mask, const PinholeCamera& camera,
+                                           const Eigen::Isometry3d& sensor_pose, MapUpdate* out) {
   const int w = camera.width, h = camera.height;
   if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(camera.fx > 0) || !(camera.fy > 0)) {
     // A caller's error: nothing is seen free (the hits still count).
@@ -353,22 +353,28 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
   //    max_range (a beam is integrated up to max_range, and a no-return at the far plane clears up to it); 0 for a
   //    pixel without a return (nothing along it is known).
+  //    A pixel on the robot (pixel_mask) hides nothing from the all-pixels test of a cell it passes beside: as a beam
+  //    of ray casting that passes a cell beside the robot sees it free, whatever the robot hides of it (the robot's
+  //    blind zone; the cell's own pixel must still see past it). past_depth_ holds those depths (the min pyramid).
   const std::size_t pixels = depth.size();
+  const bool masked_pixels = pixel_mask.size() == pixels;
   free_depth_.resize(pixels);
+  past_depth_.resize(pixels);
   for (int v = 0; v < h; ++v) {
     const double ry = (v - camera.cy) / camera.fy;
     for (int u = 0; u < w; ++u) {
       const double rx = (u - camera.cx) / camera.fx;
-      const float z = depth[static_cast<std::size_t>(v) * w + u];
-      const double reach = options_.max_range / std::sqrt(rx * rx + ry * ry + 1.0);
-      free_depth_[static_cast<std::size_t>(v) * w + u] =
-          std::isfinite(z) && z > 0.0f ? static_cast<float>(std::min<double>(z, reach)) : 0.0f;
+      const std::size_t k = static_cast<std::size_t>(v) * w + u;
+      const float z = depth[k];
+      const auto reach = static_cast<float>(options_.max_range / std::sqrt(rx * rx + ry * ry + 1.0));
+      free_depth_[k] = std::isfinite(z) && z > 0.0f ? std::min(z, reach) : 0.0f;
+      past_depth_[k] = masked_pixels && pixel_mask[k] == kPointOnRobot ? reach : free_depth_[k];
     }
   }
   // Pyramids of the smallest and largest of those depths over tiles of 2^L x 2^L pixels (level 0: the pixels).
-  auto build = [&](std::vector<std::vector<float>>* pyramid, bool smallest) {
+  auto build = [&](std::vector<std::vector<float>>* pyramid, const std::vector<float>& base, bool smallest) {
     pyramid->resize(1);
-    (*pyramid)[0] = free_depth_;
+    (*pyramid)[0] = base;
     int lw = w, lh = h;
     while (lw > 1 || lh > 1) {
       const int nw = (lw + 1) / 2, nh = (lh + 1) / 2;
@@ -392,8 +398,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       lh = nh;
     }
   };
-  build(&min_depth_, true);
-  build(&max_depth_, false);
+  build(&min_depth_, past_depth_, true);
+  build(&max_depth_, free_depth_, false);
   // The smallest (largest) free depth over the pixels [u0, u1] x [v0, v1], from at most 16 tiles of the coarsest level
   // that needs no more: over a superset of the rectangle (smaller, larger: conservative both ways).
   auto over = [&](const std::vector<std::vector<float>>& pyramid, bool smallest, int u0, int u1, int v0, int v1) {
@@ -502,13 +508,46 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                     const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
                     const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
                     const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
-                    if (!(uf >= 0.0 && uf < w && vf >= 0.0 && vf < h)) continue;
-                    const int u = static_cast<int>(uf), v = static_cast<int>(vf);  // the nearest pixel
-                    if (free_depth_[static_cast<std::size_t>(v) * w + u] < zmax) continue;
-                    const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
-                    if (c.cross(ray).squaredNorm() > r2 * ray.squaredNorm()) continue;
+                    bool crossed = false;  // a pixel's ray crosses the cell and sees past it
+                    if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
+                      // The pixel nearest the centre's projection: when its ray surely crosses the cell (it passes
+                      // within the inscribed sphere), a surface it sees short of the far side settles the cell.
+                      const int u = static_cast<int>(uf), v = static_cast<int>(vf);
+                      const std::size_t p = static_cast<std::size_t>(v) * w + u;
+                      const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                      if (c.cross(ray).squaredNorm() <= r2 * ray.squaredNorm()) {
+                        if (past_depth_[p] < zmax) continue;
+                        crossed = free_depth_[p] >= zmax;
+                      }
+                    }
                     footprint(at, at, &f);
                     if (f.state != 0 || over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax) continue;
+                    if (!crossed) {
+                      // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
+                      // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
+                      const Eigen::Vector3d s0 = c - 0.5 * (axis[0] + axis[1] + axis[2]);
+                      const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
+                      for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
+                        for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
+                          if (free_depth_[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
+                          const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                          double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
+                          for (int i = 0; i < 3 && t0 <= t1; ++i) {
+                            const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
+                            if (std::fabs(dd) < 1e-15) {
+                              if (o[i] > 0.0 || o[i] < -e) t1 = -1.0;  // parallel, outside the slab
+                              continue;
+                            }
+                            double ta = o[i] / dd, tb = (o[i] + e) / dd;
+                            if (ta > tb) std::swap(ta, tb);
+                            t0 = std::max(t0, ta);
+                            t1 = std::min(t1, tb);
+                          }
+                          crossed = t0 <= t1;
+                        }
+                      }
+                      if (!crossed) continue;
+                    }
                     see(k);
                   }
                 }

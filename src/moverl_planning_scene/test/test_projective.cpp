@@ -132,7 +132,7 @@ TEST(Projective, SeesFreeWhatLiesBeforeAWallAndNothingBehindIt) {
   const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
   const auto xyz = image(kCamera, [](int, int) { return 1.5; });  // a wall at x = 1.5
   mps::MapUpdate u;
-  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), kCamera, pose, &u);
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), {}, kCamera, pose, &u);
   map->apply(u);
   EXPECT_GT(u.stats.hit_cells, 0u);
   EXPECT_TRUE(map->occupied(Eigen::Vector3d(1.51, 0.0, 0.0)));  // the wall's cell
@@ -150,7 +150,7 @@ TEST(Projective, PixelsWithoutAReturnSeeNothingFree) {
   // The left half of the image has no return (NaN): nothing along it is known.
   auto xyz = image(kCamera, [](int u, int) { return u < 40 ? std::numeric_limits<double>::quiet_NaN() : 1.5; });
   mps::MapUpdate u;
-  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), kCamera, pose, &u);
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), {}, kCamera, pose, &u);
   map->apply(u);
   EXPECT_FALSE(map->observed(Eigen::Vector3d(1.0, 0.3, 0.01)));  // optical x < 0: map +y, the NaN half
   EXPECT_TRUE(map->observed(Eigen::Vector3d(1.0, -0.3, 0.01)));
@@ -162,7 +162,7 @@ TEST(Projective, BeamsBeyondMaxRangeClearUpToIt) {
   const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-1.0, 0.0, 0.0));
   const auto xyz = image(narrow, [](int, int) { return 10.0; });  // a far plane beyond max_range (3 m)
   mps::MapUpdate u;
-  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), narrow, pose, &u);
+  map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), {}, narrow, pose, &u);
   map->apply(u);
   EXPECT_EQ(u.stats.hit_cells, 0u);
   EXPECT_TRUE(map->observed(Eigen::Vector3d(1.7, 0.01, 0.01)));   // 2.7 m away
@@ -183,7 +183,7 @@ std::size_t freedInsideBall(const mps::PinholeCamera& camera, bool projective) {
       const auto xyz = image(camera, [&](int u, int v) { return sphereOrWall(camera, u, v, c, radius, 2.2); });
       mps::MapUpdate u;
       if (projective) {
-        map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), camera, pose, &u);
+        map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), {}, camera, pose, &u);
       } else {
         map->computeUpdate(mapPoints(xyz, pose), {}, pose.translation(), &u);
       }
@@ -221,12 +221,12 @@ TEST(Projective, AVacatedCellClearsWithinAsManyViewsAsRayCasting) {
   auto views = [&](bool projective) {
     auto map = makeMap();
     mps::MapUpdate u;
-    map->computeUpdateProjective(mapPoints(with, pose), {}, depths(with), fine, pose, &u);
+    map->computeUpdateProjective(mapPoints(with, pose), {}, depths(with), {}, fine, pose, &u);
     map->apply(u);
     EXPECT_TRUE(map->occupied(front));
     for (int n = 1; n <= 20; ++n) {
       if (projective) {
-        map->computeUpdateProjective(mapPoints(without, pose), {}, depths(without), fine, pose, &u);
+        map->computeUpdateProjective(mapPoints(without, pose), {}, depths(without), {}, fine, pose, &u);
       } else {
         map->computeUpdate(mapPoints(without, pose), {}, pose.translation(), &u);
       }

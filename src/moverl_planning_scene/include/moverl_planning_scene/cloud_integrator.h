@@ -74,7 +74,8 @@ class CloudIntegrator {
   PinholeCamera camera_;
   std::vector<float> sensor_xyz_, depth_;
   std::vector<Eigen::Vector3d> points_;
-  std::vector<std::uint8_t> mask_, mask_more_;
+  std::vector<std::uint32_t> pixel_of_;  ///< the pixel of each of points_
+  std::vector<std::uint8_t> mask_, mask_more_, pixel_mask_;
 };
 
 }  // namespace moverl_planning_scene

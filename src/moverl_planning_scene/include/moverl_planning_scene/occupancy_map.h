@@ -113,12 +113,13 @@ class OccupancyMap {
   /// \brief As computeUpdate, for an organized cloud that fits a pinhole camera (fitPinhole): the hits as
   ///        computeUpdate's (points and robot_mask alike: map frame, any of the image's points), free space by
   ///        projection instead of ray casting (see the file comment). depth: camera.width * camera.height z-depths in
-  ///        the optical frame, row-major (non-finite or <= 0: no return); sensor_pose: the optical frame in the map
-  ///        frame. Costs the cells that are not yet clamped free in view, not the beams: a grid cell is projected into
-  ///        the image instead of every pixel's beam being walked through the grid.
+  ///        the optical frame, row-major (non-finite or <= 0: no return); pixel_mask: empty, or what each pixel's point
+  ///        is (robot_mask's values per pixel: a robot pixel hides nothing beside it); sensor_pose: the optical frame
+  ///        in the map frame. Costs the cells that are not yet clamped free in view, not the beams: a grid cell is
+  ///        projected into the image instead of every pixel's beam being walked through the grid.
   void computeUpdateProjective(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
-                               const std::vector<float>& depth, const PinholeCamera& camera,
-                               const Eigen::Isometry3d& sensor_pose, MapUpdate* out);
+                               const std::vector<float>& depth, const std::vector<std::uint8_t>& pixel_mask,
+                               const PinholeCamera& camera, const Eigen::Isometry3d& sensor_pose, MapUpdate* out);
   /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as cell ids from
   ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
   ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
@@ -218,6 +219,7 @@ class OccupancyMap {
   std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)
   std::vector<std::uint16_t> super_dirty_;  ///< per superblock: the same
   std::vector<float> free_depth_;           ///< computeUpdateProjective's scratch: each pixel's free depth
+  std::vector<float> past_depth_;           ///< the same, robot pixels at their reach (they hide nothing beside)
   std::vector<std::vector<float>> min_depth_, max_depth_;  ///< its pyramids of those depths
   std::vector<std::uint16_t> super_count_;
   // The same counts for the cells seen occupied only (observed and at or above the threshold: CellClass::kSeen).

@@ -36,10 +36,10 @@ CloudIntegrator::CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* c
                                  const CloudIntegratorOptions& options)
     : map_(map), checker_(checker), world_mutex_(world_mutex), options_(options) {}
 
-Integration CloudIntegrator::compute(const std::uint8_t* xyz, int width, int height, std::size_t point_step,
-                                     std::size_t row_step, const Eigen::Isometry3d& sensor_pose,
+Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isometry3d& sensor_pose,
                                      const std::vector<std::vector<double>>& configurations, MapUpdate* update,
                                      CloudTiming* timing, std::string* why) {
+  const int width = cloud.width, height = cloud.height;
   CloudTiming t;
   Clock::time_point at = Clock::now();
   if (why != nullptr) why->clear();
@@ -52,11 +52,14 @@ Integration CloudIntegrator::compute(const std::uint8_t* xyz, int width, int hei
   pixel_of_.clear();
   pixel_of_.reserve(n);
   for (int v = 0; v < height; ++v) {
-    const std::uint8_t* row = xyz + static_cast<std::size_t>(v) * row_step;
+    const std::uint8_t* row = cloud.data + static_cast<std::size_t>(v) * cloud.row_step;
     for (int u = 0; u < width; ++u) {
       const std::size_t pixel = static_cast<std::size_t>(v) * width + u;
       float* s = &sensor_xyz_[3 * pixel];
-      std::memcpy(s, row + static_cast<std::size_t>(u) * point_step, 3 * sizeof(float));
+      const std::uint8_t* point = row + static_cast<std::size_t>(u) * cloud.point_step;
+      std::memcpy(s, point + cloud.x, sizeof(float));
+      std::memcpy(s + 1, point + cloud.y, sizeof(float));
+      std::memcpy(s + 2, point + cloud.z, sizeof(float));
       if (std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2])) {  // NaN marks no return in some drivers
         points_.push_back(sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]));
         pixel_of_.push_back(static_cast<std::uint32_t>(pixel));

@@ -353,9 +353,10 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
   //    max_range (a beam is integrated up to max_range, and a no-return at the far plane clears up to it); 0 for a
   //    pixel without a return (nothing along it is known).
-  //    A pixel on the robot (pixel_mask) hides nothing from the all-pixels test of a cell it passes beside: as a beam
-  //    of ray casting that passes a cell beside the robot sees it free, whatever the robot hides of it (the robot's
-  //    blind zone; the cell's own pixel must still see past it). past_depth_ holds those depths (the min pyramid).
+  //    A pixel on the robot (pixel_mask) does not stop a cell from being seen free by the other pixels (as a beam of
+  //    ray casting that passes a cell beside a link sees it free, whatever the link hides of it: the robot's blind
+  //    zone), but it never sees a cell free itself: a cell whose only crossing rays end on the robot stays as it was.
+  //    past_depth_ holds those depths (the min pyramid: robot pixels at their reach).
   const std::size_t pixels = depth.size();
   const bool masked_pixels = pixel_mask.size() == pixels;
   free_depth_.resize(pixels);
@@ -490,6 +491,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               }
               footprint(ba, bb, &f);
               if (hidden(f)) continue;
+              // A block wholly in front of what every pixel that may see it saw (robot pixels aside): each of its
+              // cells passes the rectangle test; a pixel crossing the cell and seeing past it is what is left.
+              const bool in_front = f.state == 0 && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) >= f.zmax;
               // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
               const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
               for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
@@ -500,10 +504,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
                     const std::int64_t k = row + at[2];
                     if (testBit(hit_, k) || testBit(seen_, k) || testBit(clamped_, k)) continue;
-                    // Seen free: one pixel's ray crosses the cell for certain (the ray of the pixel nearest the
-                    // centre's projection passes within the cell's inscribed sphere: a cell between the rays of a
-                    // sparse image is not seen) and sees past all of it, and so does every pixel that may see the
-                    // cell. The first test is the cheap one (most cells that get here lie behind a surface).
+                    // Seen free: some pixel's ray crosses the cell and sees past all of it (a cell between the rays
+                    // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
+                    // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
+                    // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
+                    // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
+                    // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
                     if (!(c.z() > half_depth)) continue;
                     const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
                     const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
@@ -520,8 +526,14 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                         crossed = free_depth_[p] >= zmax;
                       }
                     }
+                    if (crossed && in_front) {
+                      see(k);
+                      continue;
+                    }
                     footprint(at, at, &f);
-                    if (f.state != 0 || over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax) continue;
+                    if (f.state != 0 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax)) {
+                      continue;
+                    }
                     if (!crossed) {
                       // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
                       // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.

@@ -316,26 +316,32 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   pose.linear() = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).toRotationMatrix();
   pose.translation() = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
-  // cloudLayoutError accepted x, y, z as float32 fields; the integrator reads them as three consecutive floats.
-  std::uint32_t x_offset = 0, y_offset = 0, z_offset = 0;
+  CloudView view;  // cloudLayoutError accepted the layout: float32 x, y, z within each point, rows within the data
+  view.data = msg->data.data();
+  view.width = static_cast<int>(msg->width);
+  view.height = static_cast<int>(msg->height);
+  view.point_step = msg->point_step;
+  view.row_step = msg->row_step;
   for (const auto& f : msg->fields) {
-    if (f.name == "x") x_offset = f.offset;
-    if (f.name == "y") y_offset = f.offset;
-    if (f.name == "z") z_offset = f.offset;
-  }
-  if (y_offset != x_offset + 4 || z_offset != x_offset + 8) {
-    drop("cloud from '" + msg->header.frame_id + "' dropped: fields x, y, z are not consecutive floats");
-    return;
+    if (f.name == "x") view.x = f.offset;
+    if (f.name == "y") view.y = f.offset;
+    if (f.name == "z") view.z = f.offset;
   }
   std::string why;
-  const Integration used = cloud_integrator_->compute(msg->data.data() + x_offset, static_cast<int>(msg->width),
-                                                      static_cast<int>(msg->height), msg->point_step, msg->row_step,
-                                                      pose, configurations_, &update_, nullptr, &why);
-  if (used != integration_ && ray_cast_frames_.insert(msg->header.frame_id).second) {
-    ROS_WARN(
-        "%s: clouds from '%s' are integrated by ray casting (octomap/integration %s needs an organized cloud in "
-        "an optical frame that fits a pinhole camera: %s)",
-        pnh_.getNamespace().c_str(), msg->header.frame_id.c_str(), integrationName(integration_), why.c_str());
+  const Integration used = cloud_integrator_->compute(view, pose, configurations_, &update_, nullptr, &why);
+  // Say when a camera's clouds fall back to ray casting (and why), and when they are projected again.
+  const bool fell_back = used != integration_;
+  auto seen = fell_back_.find(msg->header.frame_id);
+  if (seen == fell_back_.end() ? fell_back : seen->second != fell_back) {
+    if (fell_back) {
+      ROS_WARN(
+          "%s: a cloud from '%s' is integrated by ray casting: octomap/integration %s needs an organized cloud "
+          "in the camera's optical frame that fits a pinhole camera (%s)",
+          pnh_.getNamespace().c_str(), msg->header.frame_id.c_str(), integrationName(integration_), why.c_str());
+    } else if (seen != fell_back_.end()) {
+      ROS_INFO("%s: clouds from '%s' are projected again", pnh_.getNamespace().c_str(), msg->header.frame_id.c_str());
+    }
+    fell_back_[msg->header.frame_id] = fell_back;
   }
   if (map_->unknownOccupied()) addKnownFree();
   {

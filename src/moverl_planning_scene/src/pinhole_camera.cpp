@@ -49,13 +49,16 @@ bool fitPinhole(const float* xyz, int width, int height, int stride, double tole
   c.fy = 1.0 / ay;
   c.cx = -bx * c.fx;
   c.cy = -by * c.fy;
+  // The check covers every point, not only the fitted subset (a camera's columns off their rays between the
+  // strides would go unseen): |fx x / z + cx - u| <= tolerance as |fx x + (cx - u) z| <= tolerance z, no division.
   double worst = 0.0;
-  for (int v = 0; v < height; v += stride) {
-    for (int u = 0; u < width; u += stride) {
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
       const float* p = xyz + 3 * (static_cast<long>(v) * width + u);
       if (!ok(p)) continue;
-      worst = std::max(worst, std::fabs(c.fx * p[0] / p[2] + c.cx - u));
-      worst = std::max(worst, std::fabs(c.fy * p[1] / p[2] + c.cy - v));
+      const double z = p[2];
+      const double eu = std::fabs(c.fx * p[0] + (c.cx - u) * z), ev = std::fabs(c.fy * p[1] + (c.cy - v) * z);
+      if (eu > tolerance * z || ev > tolerance * z) worst = std::max(worst, std::max(eu, ev) / z);
     }
   }
   if (residual != nullptr) *residual = worst;

@@ -240,6 +240,34 @@ TEST(Projective, AVacatedCellClearsWithinAsManyViewsAsRayCasting) {
   EXPECT_LE(projective, rays);
 }
 
+TEST(Projective, RobotPixelsHideNothingBesideThemAndSeeNothingFree) {
+  // A link (robot pixels, the self filter's) 0.999 m in front of the camera covers the image's left part, up to the
+  // pixel column 166; a wall 2 m away behind. The cell 1.00-1.02 m deep whose image reaches past the link's
+  // silhouette (columns 165-169) is crossed by rays that see the wall: seen free, as ray casting's beams beside a
+  // link see it; were those pixels an obstacle, it would not be. A cell straight behind the link is never seen free.
+  const mps::PinholeCamera fine{320, 240, 240.0, 240.0, 159.5, 119.5};
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const int edge = 167;  // the first column past the link
+  const auto xyz = image(fine, [&](int u, int) { return u < edge ? 0.999 : 2.0; });
+  std::vector<std::uint8_t> robot_pixels, robot_points;
+  for (int v = 0; v < fine.height; ++v) {
+    for (int u = 0; u < fine.width; ++u) robot_pixels.push_back(u < edge ? mps::kPointOnRobot : mps::kPointObstacle);
+  }
+  robot_points = robot_pixels;  // every pixel has a return: points and pixels in the same order
+  const Eigen::Vector3d beside(1.01, -0.03, 0.01), behind(1.01, 0.05, 0.01), link(0.995, 0.05, 0.01);
+  for (bool on_robot : {true, false}) {
+    auto map = makeMap();
+    mps::MapUpdate u;
+    const std::vector<std::uint8_t> none;
+    map->computeUpdateProjective(mapPoints(xyz, pose), on_robot ? robot_points : none, depths(xyz),
+                                 on_robot ? robot_pixels : none, fine, pose, &u);
+    map->apply(u);
+    EXPECT_EQ(map->observed(beside), on_robot) << on_robot;
+    EXPECT_FALSE(map->observed(behind)) << on_robot;
+    EXPECT_EQ(map->occupied(link), !on_robot) << on_robot;  // the link's own cells: hit as an obstacle only
+  }
+}
+
 TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   const std::string urdf = MOVERL_PANDA_URDF;
   std::string error;
@@ -247,6 +275,7 @@ TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   ASSERT_TRUE(scene) << error;
   auto map = makeMap();
   mps::CloudIntegratorOptions io;
+  io.integration = mps::Integration::kProjective;
   io.self_filter_padding = 0.01;
   io.static_filter_padding = 0.003;
   mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
@@ -255,15 +284,19 @@ TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
   mps::MapUpdate u;
   std::string why;
-  EXPECT_EQ(integrator.compute(reinterpret_cast<const std::uint8_t*>(xyz.data()), kCamera.width, kCamera.height, 12,
-                               12 * kCamera.width, pose, home, &u, nullptr, &why),
-            mps::Integration::kProjective);
+  mps::CloudView view;
+  view.data = reinterpret_cast<const std::uint8_t*>(xyz.data());
+  view.width = kCamera.width;
+  view.height = kCamera.height;
+  view.row_step = 12 * static_cast<std::size_t>(kCamera.width);
+  EXPECT_EQ(integrator.compute(view, pose, home, &u, nullptr, &why), mps::Integration::kProjective);
   EXPECT_EQ(why, "");
   EXPECT_NEAR(integrator.camera().fx, kCamera.fx, 1e-3);
   const int n = kCamera.width * kCamera.height;
-  EXPECT_EQ(integrator.compute(reinterpret_cast<const std::uint8_t*>(xyz.data()), n, 1, 12, 12 * n, pose, home, &u,
-                               nullptr, &why),
-            mps::Integration::kRayCasting);
+  view.width = n;
+  view.height = 1;
+  view.row_step = 12 * static_cast<std::size_t>(n);
+  EXPECT_EQ(integrator.compute(view, pose, home, &u, nullptr, &why), mps::Integration::kRayCasting);
   EXPECT_NE(why.find("unorganized"), std::string::npos) << why;
   EXPECT_GT(u.stats.free_cells, 0u);
   mps::Integration parsed;

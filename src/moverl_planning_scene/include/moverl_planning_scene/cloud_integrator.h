@@ -33,11 +33,20 @@ const char* integrationName(Integration integration);
 ///        tolerance). A driver's organized cloud from a rectified depth image lies on them up to float rounding.
 constexpr double kPinholeTolerancePx = 0.05;
 
+/// \brief A cloud's points as a PointCloud2 lays them out: float32 x, y, z at byte offsets within each point,
+///        points `point_step` bytes apart, rows `row_step` bytes apart (the caller checked that they fit in the data).
+struct CloudView {
+  const std::uint8_t* data = nullptr;
+  int width = 0, height = 0;
+  std::size_t point_step = 12, row_step = 0;
+  std::size_t x = 0, y = 4, z = 8;  ///< byte offsets of the fields
+};
+
 struct CloudIntegratorOptions {
-  double self_filter_padding = kUnset;    ///< octomap/self_filter_padding
-  double static_filter_padding = kUnset;  ///< octomap/static_filter_padding
-  bool filter_static = false;             ///< mark the static objects' points (obstacles: sensed)
-  Integration integration = Integration::kProjective;
+  double self_filter_padding = kUnset;                 ///< octomap/self_filter_padding
+  double static_filter_padding = kUnset;               ///< octomap/static_filter_padding
+  bool filter_static = false;                          ///< mark the static objects' points (obstacles: sensed)
+  Integration integration = Integration::kRayCasting;  ///< the node sets octomap/integration's
 };
 
 /// \brief Where one cloud's time went (s, wall clock of the calling thread).
@@ -55,14 +64,14 @@ class CloudIntegrator {
   CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* checker, std::mutex* world_mutex,
                   const CloudIntegratorOptions& options);
 
-  /// \brief The update of one cloud (apply it to the map under the readers' lock). xyz: width * height points, x y z
-  ///        float each, `point_step` bytes apart, rows `row_step` bytes apart (a PointCloud2's layout), in the sensor
-  ///        frame; non-finite: no return. sensor_pose: the sensor frame in the map frame. configurations: where the
-  ///        robot may have been when the cloud was taken (at least one). Returns the integration used: projective
-  ///        falls back to ray casting when the cloud is not a pinhole image (*why, if given, says why; "" otherwise).
-  Integration compute(const std::uint8_t* xyz, int width, int height, std::size_t point_step, std::size_t row_step,
-                      const Eigen::Isometry3d& sensor_pose, const std::vector<std::vector<double>>& configurations,
-                      MapUpdate* update, CloudTiming* timing = nullptr, std::string* why = nullptr);
+  /// \brief The update of one cloud (apply it to the map under the readers' lock). cloud: width * height points in
+  ///        the sensor frame (non-finite: no return). sensor_pose: the sensor frame in the map frame. configurations:
+  ///        where the robot may have been when the cloud was taken (at least one). Returns the integration used:
+  ///        projective falls back to ray casting when the cloud is not a pinhole image (*why, if given, says why; ""
+  ///        otherwise).
+  Integration compute(const CloudView& cloud, const Eigen::Isometry3d& sensor_pose,
+                      const std::vector<std::vector<double>>& configurations, MapUpdate* update,
+                      CloudTiming* timing = nullptr, std::string* why = nullptr);
   /// \brief The intrinsics the last projective update used.
   const PinholeCamera& camera() const { return camera_; }
 

@@ -14,7 +14,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -107,8 +106,8 @@ class OctomapMonitor {
   std::vector<std::string> joints_;
   JointStateHistory history_{400};
   std::unique_ptr<CloudIntegrator> cloud_integrator_;
-  Integration integration_ = Integration::kProjective;  // octomap/integration
-  std::set<std::string> ray_cast_frames_;  // cameras whose clouds fell back to ray casting (warned once each)
+  Integration integration_ = Integration::kRayCasting;  // octomap/integration (init reads it)
+  std::map<std::string, bool> fell_back_;               // per camera frame: its last cloud fell back to ray casting
   std::vector<std::uint8_t> mask_more_;
   std::vector<std::vector<double>> configurations_;
   MapUpdate update_;

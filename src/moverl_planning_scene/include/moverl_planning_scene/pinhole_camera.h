@@ -6,10 +6,11 @@
  * (one point per pixel, row-major) in the camera's optical frame (REP 103: z forward, x right, y down). Every point of
  * pixel (u, v) lies on that pixel's ray, ((u - cx) / fx, (v - cy) / fy, 1) z, so the intrinsics can be fitted from the
  * points (a least-squares line per image axis) and the fit checked: a cloud whose points stray from the fitted rays by
- * more than a tolerance (a distorted or rectified-elsewhere image, a cloud in another frame, an unorganized cloud) is
+ * more than a tolerance (a distorted image, a cloud in a frame turned from the optical one, an unorganized cloud) is
  * not a pinhole image, and the occupancy map integrates it by ray casting instead (OccupancyMap::computeUpdate). No
- * CameraInfo topic is needed: the cloud carries its own geometry, and a cloud that does not is refused by the fit,
- * never integrated with a wrong projection.
+ * CameraInfo topic is needed: the cloud carries its own geometry. One case the fit cannot tell: a cloud of a single
+ * flat wall facing the camera, in a frame shifted from the optical centre, fits other intrinsics exactly (ray casting
+ * would cast from the same wrong origin); the cloud's frame must be the camera's optical frame, as REP 103 says.
  */
 #pragma once
 
@@ -27,8 +28,9 @@ struct PinholeCamera {
 
 /// \brief Fits the pinhole model of an organized cloud: xyz holds width * height points (x, y, z, row-major, optical
 ///        frame; non-finite or z <= 0: no return, skipped). Every `stride`-th row and column take part (1: all).
-///        False with *why when too few points fall on distinct rows and columns, or when a point lies farther than
-///        `tolerance` pixels from its pixel's fitted ray (*residual: the largest distance, pixels).
+///        False with *why when too few points fall on distinct rows and columns, or when any point (all of them are
+///        checked) lies farther than `tolerance` pixels from its pixel's fitted ray (*residual: the largest distance
+///        over the threshold, pixels; 0 when none is).
 bool fitPinhole(const float* xyz, int width, int height, int stride, double tolerance, PinholeCamera* out,
                 double* residual, std::string* why);
 

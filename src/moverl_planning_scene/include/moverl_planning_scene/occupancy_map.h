@@ -15,6 +15,13 @@
  * clipped to `bounds` (the robot's reach and margin). Clearing: when an obstacle moves away, beams now pass through its
  * old cells and turn them free.
  *
+ * Projective update (computeUpdateProjective, for an organized cloud that fits a pinhole camera): the same hits, and
+ * instead of walking beams, each cell not yet clamped free (superblocks and blocks first, against min and max depth
+ * pyramids of the image) is seen free when some pixel's ray crosses it and sees past all of it, and every pixel whose
+ * ray may cross it (the bounding rectangle of its corners' projections), robot pixels aside, sees past all of it too.
+ * It never sees free a cell where a pixel that may cross it saw a surface short of the cell's far side; ray casting's
+ * beams to the end cells' centroids can graze such cells.
+ *
  * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
  * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
  * mapped box starts at a prior log-odds just above the occupancy threshold, which one miss turns free and one hit
@@ -84,7 +91,7 @@ struct MapUpdateStats {
   std::size_t fixture = 0;        ///< points on static world objects (free space up to them)
   std::size_t beyond_range = 0;   ///< points beyond max_range (free space only)
   std::size_t hit_cells = 0;      ///< distinct cells marked occupied
-  std::size_t free_cells = 0;     ///< distinct cells marked free
+  std::size_t free_cells = 0;     ///< distinct cells marked free (projective: those not yet clamped free only)
   std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
   std::size_t known_free = 0;     ///< unobserved cells turned free by addKnownFree (inside the robot, static objects)
 };

@@ -14,6 +14,7 @@
 
 #include <fcl/geometry/collision_geometry.h>
 #include <Eigen/Geometry>
+#include <array>
 
 #include "moverl_planning_scene/fcl_collision_checker.h"
 
@@ -25,6 +26,11 @@ struct FclCollisionChecker::Geom {
   std::string piece;                               // mesh piece name (OBJ object/group)
   Eigen::Vector3d dims = Eigen::Vector3d::Zero();  // primitives (CollisionShapeSpec::dims)
   std::vector<Eigen::Vector3d> vertices;           // meshes: the points whose hull is geom (shape frame)
+  // Convex hull meshes whose hull is exactly geom (no loose points): its triangles (indices into vertices) and their
+  // planes (unit outward normal, offset: n . x <= d inside), shape frame, for the exact point tests of linkPointMask.
+  // Empty otherwise (FCL answers).
+  std::vector<std::array<int, 3>> faces;
+  std::vector<Eigen::Vector4d> planes;
   std::shared_ptr<fcl::CollisionGeometry<double>> geom;
   Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  // shape in link frame
   Eigen::Vector3d center_local = Eigen::Vector3d::Zero();    // bounding sphere centre, link frame

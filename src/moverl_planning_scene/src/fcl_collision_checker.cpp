@@ -279,8 +279,110 @@ void FclCollisionChecker::robotBoundingBoxes(const double* q, double padding,
   }
 }
 
+namespace {
+
+/// Squared distance from p to the triangle (a, b, c) (Ericson, Real-Time Collision Detection, 5.1.5).
+double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                    const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return ap.squaredNorm();
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return bp.squaredNorm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return (ap - ab * (d1 / (d1 - d3))).squaredNorm();
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return cp.squaredNorm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return (ap - ac * (d2 / (d2 - d6))).squaredNorm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    return (bp - (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))).squaredNorm();
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  return (ap - ab * (vb * denom) - ac * (vc * denom)).squaredNorm();
+}
+
+}  // namespace
+
 void FclCollisionChecker::linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
                                         double padding, std::vector<std::uint8_t>* mask) const {
+  mask->assign(points.size(), 0);
+  std::vector<Eigen::Isometry3d> poses;
+  model_.computeLinkTransforms(q, &poses);
+  const double pad = std::max(padding, 1e-6), pad2 = pad * pad;
+  auto probe = std::make_shared<fcl::Sphered>(pad);
+  fcl::CollisionRequestd req(1, false);
+  // Each shape in the base frame: pose, bounding sphere (grown by pad) and, for an exact convex hull, its planes and
+  // vertices; the box around all the spheres rejects most of a cloud's points with six comparisons.
+  struct Shape {
+    const Geom* g;
+    Eigen::Isometry3d tf;
+    Eigen::Vector3d center;
+    double r2;
+    std::vector<Eigen::Vector4d> planes;
+    std::vector<Eigen::Vector3d> vertices;
+  };
+  std::vector<Shape> shapes;
+  Eigen::AlignedBox3d reach;
+  for (const Geom& g : geoms_) {
+    if (link >= 0 && g.link != link) continue;
+    Shape sh{&g, poses[g.link] * g.origin, poses[g.link] * g.center_local, 0.0, {}, {}};
+    const double r = g.radius + pad;
+    sh.r2 = r * r;
+    reach.extend(sh.center - Eigen::Vector3d::Constant(r));
+    reach.extend(sh.center + Eigen::Vector3d::Constant(r));
+    if (!g.planes.empty()) {
+      for (const Eigen::Vector4d& pl : g.planes) {
+        const Eigen::Vector3d n = sh.tf.linear() * pl.head<3>();
+        sh.planes.emplace_back(n.x(), n.y(), n.z(), pl[3] + n.dot(sh.tf.translation()));
+      }
+      for (const Eigen::Vector3d& v : g.vertices) sh.vertices.push_back(sh.tf * v);
+    }
+    shapes.push_back(std::move(sh));
+  }
+  // Within pad of a convex hull: inside every face's plane, or, outside, within pad of a face it lies in front of
+  // (the nearest point of a convex polytope to a point outside lies on such a face); farther than pad beyond any
+  // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes).
+  std::vector<int> front;
+  auto within = [&](const Shape& sh, const Eigen::Vector3d& p) {
+    if (sh.planes.empty()) {
+      Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
+      at.translation() = p;
+      fcl::CollisionResultd res;
+      fcl::collide(probe.get(), at, sh.g->geom.get(), sh.tf, req, res);
+      return res.isCollision();
+    }
+    front.clear();
+    for (std::size_t f = 0; f < sh.planes.size(); ++f) {
+      const double e = sh.planes[f].head<3>().dot(p) - sh.planes[f][3];
+      if (e > pad) return false;
+      if (e > 0.0) front.push_back(static_cast<int>(f));
+    }
+    for (int f : front) {
+      const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
+      if (pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]) <= pad2) {
+        return true;
+      }
+    }
+    return front.empty();
+  };
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    const Eigen::Vector3d& p = points[k];
+    if (!reach.contains(p)) continue;
+    for (const Shape& sh : shapes) {
+      if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p)) {
+        (*mask)[k] = 1;
+        break;
+      }
+    }
+  }
+}
+
+void FclCollisionChecker::linkPointMaskFcl(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
+                                           double padding, std::vector<std::uint8_t>* mask) const {
   mask->assign(points.size(), 0);
   std::vector<Eigen::Isometry3d> poses;
   model_.computeLinkTransforms(q, &poses);

@@ -167,6 +167,13 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
               const ConvexHull hull = computeConvexHull(piece.vertices);
               degenerate_hulls_ += hull.degenerate;
               base = hull.vertices;
+              if (!hull.degenerate && hull.face_vertices == hull.vertices.size()) {
+                pg.faces = hull.faces;
+                for (std::size_t f = 0; f < hull.faces.size(); ++f) {
+                  const Eigen::Vector3d& n = hull.normals[f];
+                  pg.planes.emplace_back(n.x(), n.y(), n.z(), n.dot(hull.vertices[hull.faces[f][0]]));
+                }
+              }
               padded = inflateHull(hull, sp);
               octo = inflateHull(hull, wp);
               pg.inflate = [hull](double pad) -> std::shared_ptr<fcl::CollisionGeometryd> {

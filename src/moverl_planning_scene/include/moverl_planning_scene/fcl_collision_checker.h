@@ -122,6 +122,10 @@ class FclCollisionChecker : public CollisionChecker {
   /// \brief As robotPointMask, for the collision shapes of one link only (link index; -1: every link).
   void linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
                      std::vector<std::uint8_t>* mask) const;
+  /// \brief As linkPointMask, by FCL's sphere test for every shape (linkPointMask answers convex hulls from their
+  ///        faces): the oracle its tests compare it with, slower.
+  void linkPointMaskFcl(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
+                        std::vector<std::uint8_t>* mask) const;
   /// \brief The collision geometries of a link (index in RobotModel::linkNames()): one per primitive, one per mesh
   ///        piece (mesh_loader.h).
   std::vector<LinkGeometry> linkGeometry(int link) const;

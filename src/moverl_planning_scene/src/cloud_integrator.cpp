@@ -110,8 +110,47 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   }
   if (used == Integration::kRayCasting) map_->computeUpdate(points_, mask_, sensor_pose.translation(), update);
   t.update = since(&at);
+  if (map_->unknownOccupied()) addKnownFree(configurations, update);
+  t.known_free = since(&at);
   if (timing != nullptr) *timing = t;
   return used;
+}
+
+void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update) {
+  // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free.
+  auto turn_free = [&](const auto& mask) {
+    free_keys_.clear();
+    for (const Eigen::AlignedBox3d& box : boxes_) {
+      map_->unobservedCells(box, &cell_centers_, &cell_keys_);
+      if (cell_centers_.empty()) continue;
+      mask(cell_centers_, &mask_more_);
+      for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
+        if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
+      }
+    }
+    map_->addKnownFree(free_keys_, update);
+  };
+  // A cell's centre within half its diagonal of a shape: the cell reaches into the shape. The robot: every cell that
+  // reaches into its padding (the start check inflates it by padding against the cells: an unseen cell there would
+  // block the robot where it stands); a static object: every cell that reaches into its filter zone.
+  const double half_diagonal = map_->cellHalfDiagonal();
+  const double robot_pad = checker_->options().padding + half_diagonal;
+  const double static_pad = options_.static_filter_padding + half_diagonal;
+  for (const auto& q : configurations) {
+    checker_->robotBoundingBoxes(q.data(), robot_pad, &boxes_);
+    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
+      checker_->robotPointMask(q.data(), pts, robot_pad, m);
+    });
+  }
+  if (options_.filter_static && static_known_free_) {
+    static_known_free_ = false;
+    std::unique_lock<std::mutex> lock;
+    if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);  // the world
+    checker_->staticObjectBoxes(static_pad, &boxes_);
+    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
+      checker_->staticObjectPointMask(pts, static_pad, m);
+    });
+  }
 }
 
 }  // namespace moverl_planning_scene

@@ -140,8 +140,9 @@ Eigen::Isometry3d pose(const YAML::Node& xyz, const YAML::Node& quat) {
 }
 
 /// A recording of record_clouds.py: its clouds and static objects. Throws with the file's name on a bad one.
-std::vector<Cloud> loadRecording(const std::string& dir, std::vector<mps::WorldObject>* objects) {
+std::vector<Cloud> loadRecording(const std::string& dir, std::vector<mps::WorldObject>* objects, std::string* world) {
   const YAML::Node root = YAML::LoadFile(dir + "/recording.yaml");
+  *world = root["world"].as<std::string>();
   for (const auto& o : root["static_objects"]) {
     mps::WorldObject w;
     w.id = o["id"].as<std::string>();
@@ -243,7 +244,7 @@ int main(int argc, char** argv) {
   try {
     mps::readSceneTunables(*tunables, &o);
     if (!recording.empty()) {
-      clouds = loadRecording(recording, &objects);
+      clouds = loadRecording(recording, &objects, &world);
       source = "recording " + recording;
     } else {
       std::vector<Camera> cams;
@@ -299,6 +300,14 @@ int main(int argc, char** argv) {
     return 1;
   }
   io.filter_static = true;  // obstacles: sensed (the world's static objects are known)
+  // The world's sensing: unknown_occupied (the world file's, default on, as moverl_sim.world reads it).
+  try {
+    const YAML::Node sensing = YAML::LoadFile(world)["sensing"];
+    mo.unknown_occupied = !(sensing && sensing["unknown_occupied"]) || sensing["unknown_occupied"].as<bool>();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "error: %s: %s\n", world.c_str(), e.what());
+    return 1;
+  }
   // As OctomapMonitor::init sets them (without the predictive margin's slack).
   const double reach = scene->checker().reachRadius() + scene->checker().options().padding + 2 * mo.resolution;
   mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
@@ -306,7 +315,7 @@ int main(int argc, char** argv) {
     mps::Integration integration;
     std::unique_ptr<mps::OccupancyMap> map;
     std::unique_ptr<mps::CloudIntegrator> integrator;
-    std::vector<double> t_points, t_self, t_static, t_update, t_apply, t_total;
+    std::vector<double> t_points, t_self, t_static, t_update, t_known_free, t_apply, t_total;
     std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0;
   };
   Run runs[2];
@@ -321,8 +330,9 @@ int main(int argc, char** argv) {
     io.integration = r.integration;
     r.integrator = std::make_unique<mps::CloudIntegrator>(r.map.get(), &scene->checker(), nullptr, io);
   }
-  std::printf("%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static)\n",
-              source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach);
+  std::printf("%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static%s)\n",
+              source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach,
+              mo.unknown_occupied ? ", known free: unknown_occupied" : "");
   std::vector<std::string> first_seen;
   std::size_t ray_only_person = 0, ray_only_max = 0, ray_only_clouds = 0, proj_only_sum = 0, proj_only_max = 0,
               compared = 0;
@@ -359,6 +369,7 @@ int main(int argc, char** argv) {
       r.t_self.push_back(t.self_filter);
       r.t_static.push_back(t.static_filter);
       r.t_update.push_back(t.update);
+      if (mo.unknown_occupied) r.t_known_free.push_back(t.known_free);
       r.t_apply.push_back(apply);
       r.t_total.push_back(t.total() + apply);
       r.free_cells += u.stats.free_cells;
@@ -395,6 +406,7 @@ int main(int argc, char** argv) {
     report("static filter", r.t_static);
     report(r.integration == mps::Integration::kProjective ? "pinhole fit + update" : "update (ray casting)",
            r.t_update);
+    report("known free (unknown_occupied)", r.t_known_free);
     report("apply", r.t_apply);
     report("total", r.t_total);
     const std::size_t n = std::max<std::size_t>(1, r.t_total.size());

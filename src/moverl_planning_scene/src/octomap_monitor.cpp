@@ -328,6 +328,7 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     if (f.name == "z") view.z = f.offset;
   }
   std::string why;
+  if (static_known_free_.exchange(false)) cloud_integrator_->staticObjectsChanged();
   const Integration used = cloud_integrator_->compute(view, pose, configurations_, &update_, nullptr, &why);
   // Say when a camera's clouds fall back to ray casting (and why), and when they are projected again.
   const bool fell_back = used != integration_;
@@ -343,7 +344,6 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     }
     fell_back_[msg->header.frame_id] = fell_back;
   }
-  if (map_->unknownOccupied()) addKnownFree();
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->apply(update_);
@@ -360,41 +360,6 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   last_cloud_frame_ = msg->header.frame_id;
   publishStatus(msg->header.stamp, msg->header.frame_id);
   publishMarkers();
-}
-
-void OctomapMonitor::addKnownFree() {
-  // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free.
-  auto turn_free = [&](const auto& mask) {
-    free_keys_.clear();
-    for (const Eigen::AlignedBox3d& box : boxes_) {
-      map_->unobservedCells(box, &cell_centers_, &cell_keys_);
-      if (cell_centers_.empty()) continue;
-      mask(cell_centers_, &mask_more_);
-      for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
-        if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
-      }
-    }
-    map_->addKnownFree(free_keys_, &update_);
-  };
-  // A cell's centre within half its diagonal of a shape: the cell reaches into the shape. The robot: every cell that
-  // reaches into its padding (the start check inflates it by padding against the cells: an unseen cell there would
-  // block the robot where it stands); a static object: every cell that reaches into its filter zone.
-  const double half_diagonal = 0.5 * std::sqrt(3.0) * map_->options().resolution;
-  const double robot_pad = scene_->checker().options().padding + half_diagonal;
-  const double static_pad = static_filter_padding_ + half_diagonal;
-  for (const auto& q : configurations_) {
-    scene_->checker().robotBoundingBoxes(q.data(), robot_pad, &boxes_);
-    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      scene_->checker().robotPointMask(q.data(), pts, robot_pad, m);
-    });
-  }
-  if (filter_static_ && static_known_free_.exchange(false)) {
-    std::lock_guard<std::mutex> lock(*scene_mutex_);  // the world
-    scene_->checker().staticObjectBoxes(static_pad, &boxes_);
-    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      scene_->checker().staticObjectPointMask(pts, static_pad, m);
-    });
-  }
 }
 
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,

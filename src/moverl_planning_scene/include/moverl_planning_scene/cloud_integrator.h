@@ -2,8 +2,10 @@
  * \file cloud_integrator.h
  * \brief One depth-camera cloud into the occupancy map, as the scene node does it, ROS-free (the node and
  *        map_benchmark share it): the points into the map frame, the robot's points marked (self filter, every
- *        configuration the robot may have been in), the static objects' points marked (obstacles: sensed), then the
- *        map's update, by projection when the cloud is a pinhole image, else by ray casting.
+ *        configuration the robot may have been in), the static objects' points marked (obstacles: sensed), the
+ *        map's update, by projection when the cloud is a pinhole image, else by ray casting, and, under
+ *        unknown_occupied, the unobserved cells no camera can see but that hold no obstacle turned free (inside the
+ *        robot in those configurations, within the padding it keeps; once per world, inside the static objects).
  */
 #pragma once
 
@@ -55,7 +57,8 @@ struct CloudTiming {
   double self_filter = 0.0;    ///< robotPointMask over the configurations
   double static_filter = 0.0;  ///< staticObjectPointMask
   double update = 0.0;         ///< the pinhole fit and the map's update (computeUpdate or computeUpdateProjective)
-  double total() const { return points + self_filter + static_filter + update; }
+  double known_free = 0.0;     ///< unknown_occupied: the unobserved cells inside the robot and static objects freed
+  double total() const { return points + self_filter + static_filter + update + known_free; }
 };
 
 class CloudIntegrator {
@@ -72,6 +75,9 @@ class CloudIntegrator {
   Integration compute(const CloudView& cloud, const Eigen::Isometry3d& sensor_pose,
                       const std::vector<std::vector<double>>& configurations, MapUpdate* update,
                       CloudTiming* timing = nullptr, std::string* why = nullptr);
+  /// \brief The static objects changed (a new world, a cleared map): the next cloud turns their unobserved cells
+  ///        free again (unknown_occupied). Call from the thread that calls compute.
+  void staticObjectsChanged() { static_known_free_ = true; }
   /// \brief The intrinsics the last projective update used.
   const PinholeCamera& camera() const { return camera_; }
 
@@ -85,6 +91,15 @@ class CloudIntegrator {
   std::vector<Eigen::Vector3d> points_;
   std::vector<std::uint32_t> pixel_of_;  ///< the pixel of each of points_
   std::vector<std::uint8_t> mask_, mask_more_, pixel_mask_;
+  /// Unknown-is-occupied: turns free in *update the unobserved cells that reach into the robot's padding (in the
+  /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it
+  /// stands) and, once per world, into a static object's filter zone. docs/sensing.md states the blind zone this
+  /// leaves.
+  void addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update);
+  bool static_known_free_ = true;           ///< the static objects' cells are to be turned free (next cloud)
+  std::vector<Eigen::AlignedBox3d> boxes_;  ///< addKnownFree's scratch
+  std::vector<Eigen::Vector3d> cell_centers_;
+  std::vector<std::uint64_t> cell_keys_, free_keys_;
 };
 
 }  // namespace moverl_planning_scene

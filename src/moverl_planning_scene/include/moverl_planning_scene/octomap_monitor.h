@@ -85,10 +85,6 @@ class OctomapMonitor {
   void drop(const std::string& why);
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
   void publishMarkers();
-  /// Unknown-is-occupied: turns free in update_ the unobserved cells that reach into the robot's padding (in the
-  /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it
-  /// stands) and, once per world, into a static object's filter zone. The README states the blind zone this leaves.
-  void addKnownFree();
 
   ros::NodeHandle nh_, pnh_;
   PlanningScene* scene_;
@@ -108,7 +104,6 @@ class OctomapMonitor {
   std::unique_ptr<CloudIntegrator> cloud_integrator_;
   Integration integration_ = Integration::kRayCasting;  // octomap/integration (init reads it)
   std::map<std::string, bool> fell_back_;               // per camera frame: its last cloud fell back to ray casting
-  std::vector<std::uint8_t> mask_more_;
   std::vector<std::vector<double>> configurations_;
   MapUpdate update_;
   double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;
@@ -120,10 +115,7 @@ class OctomapMonitor {
   // The sensed margin: octomap/speed_bound, latency, plan_horizon, max_age, stale_wait (config/planning_scene.yaml).
   std::atomic<double> speed_bound_{0.0};
   std::atomic<bool> unknown_occupied_{false};   // the world's sensing: unknown_occupied
-  std::atomic<bool> static_known_free_{false};  // the static objects' cells are to be turned free (next cloud)
-  std::vector<Eigen::AlignedBox3d> boxes_;      // addKnownFree's scratch
-  std::vector<Eigen::Vector3d> cell_centers_;
-  std::vector<std::uint64_t> cell_keys_, free_keys_;
+  std::atomic<bool> static_known_free_{false};  // the static objects changed: tell the integrator (next cloud)
   double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
   double max_margin_ = 0.0;  // the largest margin the mapped box covers (beyond the robot's padded reach)
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud

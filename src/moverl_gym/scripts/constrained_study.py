@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import shlex
 import shutil
 import subprocess
@@ -41,10 +40,10 @@ from pathlib import Path
 from moverl_gym import constrained_study as cs
 from moverl_gym import options
 from moverl_gym.study import env_id
+from moverl_gym.workers import THREADS, run_logged
 
 ROOT = Path(__file__).resolve().parents[3]
 #: One BLAS/torch thread per process: --jobs trainings plus their simulators share the cores.
-THREADS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: Evaluation episode i starts from reset(seed=EVAL_SEED + i): the same starts for every policy of a world.
 EVAL_SEED = 10_000
 
@@ -310,19 +309,7 @@ class Pool:
             t0 = time.perf_counter()
             with self.lock:
                 print(f"[{time.strftime('%H:%M:%S')}] start {name}", flush=True)
-            with open(log, "w") as f:
-                f.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
-                f.flush()
-                try:
-                    rc = subprocess.run(
-                        cmd,
-                        stdout=f,
-                        stderr=subprocess.STDOUT,
-                        timeout=self.args.timeout,
-                        env=dict(os.environ, PYTHONUNBUFFERED="1", **THREADS),
-                    ).returncode
-                except subprocess.TimeoutExpired:
-                    rc = "timeout"
+            rc = run_logged(cmd, log, self.args.timeout, THREADS)
             with self.lock:
                 dt = time.perf_counter() - t0
                 if rc == 0:

@@ -14,10 +14,8 @@ results.md / results.csv into --docs (default docs/study; with --quick: <out>).
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import shutil
-import subprocess
 import sys
 import threading
 import time
@@ -25,12 +23,12 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from moverl_gym import options, study
+from moverl_gym.workers import THREADS, run_logged
 
 ROOT = Path(__file__).resolve().parents[3]
 TRAIN = Path(__file__).resolve().parent / "train.py"
 #: One BLAS/torch thread per training: --jobs trainings plus their simulators share the cores; a 64x64 MLP gains
 #: nothing from more threads and oversubscription slows every process down.
-THREADS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -142,19 +140,7 @@ def run_all(args, argv) -> int:
         t0 = time.perf_counter()
         with lock:
             print(f"[{time.strftime('%H:%M:%S')}] start {name}", flush=True)
-        with open(log, "w") as f:
-            f.write("$ " + " ".join(shlex.quote(c) for c in cmd) + "\n")
-            f.flush()
-            try:
-                rc = subprocess.run(
-                    cmd,
-                    stdout=f,
-                    stderr=subprocess.STDOUT,
-                    timeout=args.timeout,
-                    env=dict(os.environ, PYTHONUNBUFFERED="1", **THREADS),
-                ).returncode
-            except subprocess.TimeoutExpired:
-                rc = "timeout"
+        rc = run_logged(cmd, log, args.timeout, THREADS)
         dt = time.perf_counter() - t0
         with lock:
             if rc == 0:

@@ -31,14 +31,15 @@ import argparse
 import collections
 import csv
 import json
-import os
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import yaml
+
+from moverl_gym.constrained_study import mean_ci
+from moverl_gym.workers import run_logged
 
 REPO = Path(__file__).resolve().parents[3]
 SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
@@ -56,14 +57,11 @@ METRICS = ("success_rate", "contacts_total", "steps_per_second", "discarded_unse
 
 
 def run(cmd: list[str], log: Path, timeout: float) -> None:
-    log.parent.mkdir(parents=True, exist_ok=True)
+    """One run of the study, its output in `log`; raises with the log's tail when it fails."""
     t0 = time.monotonic()
-    with open(log, "w") as f:
-        f.write(" ".join(cmd) + "\n")
-        f.flush()
-        proc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, timeout=timeout, env=os.environ)
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed (exit {proc.returncode}); see {log}:\n{log.read_text()[-2000:]}")
+    rc = run_logged(cmd, log, timeout)
+    if rc != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed (exit {rc}); see {log}:\n{log.read_text()[-2000:]}")
     print(f"  done in {time.monotonic() - t0:.0f} s: {log.stem}", flush=True)
 
 
@@ -74,12 +72,6 @@ def train_cmd(out: Path, seed: int, steps: int, extra: list[str]) -> list[str]:
 
 def run_folder(out: Path, seed: int) -> Path:
     return out / f"ppo_{ENV.split('/')[-1]}_on_s{seed}"
-
-
-def mean_ci(values):
-    from moverl_gym.constrained_study import mean_ci as ci
-
-    return ci(values)
 
 
 def fmt(m, h, scale=1.0, digits=1):

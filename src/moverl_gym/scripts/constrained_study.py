@@ -43,7 +43,6 @@ from moverl_gym.study import env_id
 from moverl_gym.workers import THREADS, run_logged
 
 ROOT = Path(__file__).resolve().parents[3]
-#: One BLAS/torch thread per process: --jobs trainings plus their simulators share the cores.
 #: Evaluation episode i starts from reset(seed=EVAL_SEED + i): the same starts for every policy of a world.
 EVAL_SEED = 10_000
 

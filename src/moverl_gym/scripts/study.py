@@ -27,8 +27,6 @@ from moverl_gym.workers import THREADS, run_logged
 
 ROOT = Path(__file__).resolve().parents[3]
 TRAIN = Path(__file__).resolve().parent / "train.py"
-#: One BLAS/torch thread per training: --jobs trainings plus their simulators share the cores; a 64x64 MLP gains
-#: nothing from more threads and oversubscription slows every process down.
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -367,15 +367,11 @@ TEST(FclConvex, SupportEqualsThePointSetsOnEveryPandaMesh) {
   EXPECT_GT(walked, 20) << "the hull shapes should use FCL's edge walk";
 }
 
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}
-
 // The self filter answers convex hulls from their faces (robotPointMask's fast path); FCL's sphere test is its oracle.
 // Over random Panda configurations and points around the arm, both say the same, except for points within 1e-6 m of
 // the padding's boundary (where the two numerical methods may round either way).
 TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
   std::string error;
   auto scene = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf), &error);
   ASSERT_NE(scene, nullptr) << error;
@@ -413,4 +409,9 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
     }
   }
   EXPECT_GT(inside, total / 20);  // the points do reach into the shapes
+}
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
 }

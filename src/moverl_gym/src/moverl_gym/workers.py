@@ -10,7 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-#: One thread per numerical library in a child run: runs side by side on the machine's cores, not on each other's.
+#: One BLAS/torch thread per child run: --jobs runs plus their simulators share the cores; a 64x64 MLP gains nothing
+#: from more threads, and oversubscription slows every process down.
 THREADS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 

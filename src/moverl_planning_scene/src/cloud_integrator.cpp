@@ -93,7 +93,7 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   if (options_.integration == Integration::kProjective) {
     std::string reason;
     double residual = 0.0;
-    // A strided subset fits the model (and checks it): about 20,000 points whatever the image's size.
+    // A strided subset fits the model (about 20,000 points whatever the image's size); fitPinhole checks every point.
     const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(n) / 20000.0)));
     if (height < 2) {
       reason = "an unorganized cloud (height 1)";

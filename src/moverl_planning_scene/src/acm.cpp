@@ -329,6 +329,27 @@ void FclCollisionChecker::rebuildPairLists() {
   for (std::size_t g = 0; g < geoms_.size(); ++g) {
     if (!model_.isStatic(geoms_[g].link)) world_geoms_.push_back(static_cast<int>(g));
   }
+  // How far a point of one link of each pair moves relative to the other per rad of each joint (checkPath's culling).
+  const std::size_t dof = model_.dof();
+  pair_joint_radius_.assign(self_pairs_.size(), std::vector<double>(dof, 0.0));
+  for (std::size_t p = 0; p < self_pairs_.size(); ++p) {
+    const int a = self_pairs_[p].first, b = self_pairs_[p].second;
+    for (std::size_t i = 0; i < dof; ++i) pair_joint_radius_[p][i] = linkMotionRadius(a, b, i);
+  }
+}
+
+double FclCollisionChecker::linkMotionRadius(int a, int b, std::size_t i) const {
+  const bool moves_a = a >= 0 && model_.jointMovesLink(i, a), moves_b = model_.jointMovesLink(i, b);
+  if (moves_a == moves_b) return 0.0;
+  double r = 0.0;
+  for (int g : link_geoms_[moves_a ? a : b]) r = std::max(r, geom_joint_radius_[g][i]);
+  return r;
+}
+
+double FclCollisionChecker::segmentMotionBound(const double* q0, const double* q1, int a, int b) const {
+  double m = 0.0;
+  for (std::size_t i = 0; i < model_.dof(); ++i) m += std::fabs(q1[i] - q0[i]) * linkMotionRadius(a, b, i);
+  return m;
 }
 
 AcmReason FclCollisionChecker::acmReason(const std::string& link_a, const std::string& link_b) const {

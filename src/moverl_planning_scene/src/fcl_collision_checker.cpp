@@ -6,6 +6,7 @@
 #include "moverl_planning_scene/fcl_collision_checker.h"
 
 #include "fcl_checker_internal.h"
+#include "moverl_planning_scene/fcl_convex.h"
 
 #include <unistd.h>
 #include <algorithm>
@@ -36,6 +37,34 @@ namespace moverl_planning_scene {
 namespace {
 
 constexpr std::size_t kMaxInteriorStates = 1000000;  // guard against absurd segments
+// checkPath culls from this many states on (below, the culling's own queries cost about what they save).
+constexpr std::size_t kCullFromStates = 4;
+// m: a culled pair's separation must exceed its motion by this much (far above the rounding of the dot products, far
+// below anything GJK tells apart).
+constexpr double kCullSlack = 1e-6;
+
+/// True when a plane separates shape a (at ta, bounding sphere (ca, ra)) from shape b by more than `motion`: the two
+/// cannot meet while their points move by at most `motion` relative to each other. Tries, cheapest first, the
+/// bounding spheres, the plane across the line between their centres, and the plane through GJK's nearest points.
+/// Every answer is certified by the shapes' own support values; GJK only proposes the plane.
+bool farApart(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& ta, const Eigen::Vector3d& ca, double ra,
+              const fcl::CollisionGeometryd& b, const Eigen::Isometry3d& tb, const Eigen::Vector3d& cb, double rb,
+              double motion) {
+  const Eigen::Vector3d d = cb - ca;
+  const double gap = d.norm();
+  if (gap - ra - rb > motion) return true;
+  // The separation along a unit n, b on its + side: min over b of n . x minus max over a of n . x.
+  auto separated = [&](const Eigen::Vector3d& n) { return -shapeSupport(b, tb, -n) - shapeSupport(a, ta, n) > motion; };
+  if (gap > 0.0 && separated(d / gap)) return true;
+  fcl::DistanceRequestd request(true);  // with the nearest points
+  fcl::DistanceResultd result;
+  const double distance =
+      fcl::distance(&a, fcl::Transform3d(ta.matrix()), &b, fcl::Transform3d(tb.matrix()), request, result);
+  if (!(distance > motion)) return false;  // (GJK's distance only proposes: the plane below is what is trusted)
+  const Eigen::Vector3d n = result.nearest_points[1] - result.nearest_points[0];
+  const double norm = n.norm();
+  return norm > 0.0 && separated(n / norm);
+}
 
 }  // namespace
 
@@ -103,16 +132,27 @@ bool FclCollisionChecker::linkPairCollides(int la, int lb, bool padded) {
 }
 
 void FclCollisionChecker::checkState(const double* q, const CollisionRequest& request, CollisionResult* result) {
+  checkStateImpl(q, request, result, false);
+}
+
+void FclCollisionChecker::checkStateImpl(const double* q, const CollisionRequest& request, CollisionResult* result,
+                                         bool culled) {
   result->clear();
   updateTransforms(q);
   const auto& names = model_.linkNames();
   if (request.check_self) {
+    std::size_t next = 0;  // self_active_'s index of the pair's first shape pair
     for (const auto& lp : self_pairs_) {
+      const std::vector<int>& gas = link_geoms_[lp.first];
+      const std::vector<int>& gbs = link_geoms_[lp.second];
+      const std::uint8_t* active = culled ? self_active_.data() + next : nullptr;
+      next += gas.size() * gbs.size();
       double depth = 0.0;
       bool hit = false;
-      for (int ga : link_geoms_[lp.first]) {
-        for (int gb : link_geoms_[lp.second]) {
-          if (geomPairCollides(geoms_[ga], geoms_[gb], request.compute_depth, &depth, /*padded=*/true)) {
+      for (std::size_t ia = 0; ia < gas.size(); ++ia) {
+        for (std::size_t ib = 0; ib < gbs.size(); ++ib) {
+          if (active != nullptr && active[ia * gbs.size() + ib] == 0) continue;
+          if (geomPairCollides(geoms_[gas[ia]], geoms_[gbs[ib]], request.compute_depth, &depth, /*padded=*/true)) {
             hit = true;
             if (!request.compute_depth) break;
           }
@@ -128,11 +168,15 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
     if (result->collision()) return;
   }
   if (!request.check_world) return;
-  for (const Obstacle& ob : world_) {
+  const std::size_t n_world = world_geoms_.size();
+  for (std::size_t o = 0; o < world_.size(); ++o) {
+    const Obstacle& ob = world_[o];
     const Eigen::Vector3d oc = ob.pose.translation();
+    const std::uint8_t* active = culled ? world_active_.data() + o * n_world : nullptr;
     int last_link = -1;
-    for (int gi : world_geoms_) {
-      const Geom& g = geoms_[gi];
+    for (std::size_t w = 0; w < n_world; ++w) {
+      if (active != nullptr && active[w] == 0) continue;
+      const Geom& g = geoms_[world_geoms_[w]];
       if (g.link == last_link) continue;  // this link already reported with this obstacle
       const double r = g.radius + ob.radius;
       if ((g.world_center - oc).squaredNorm() > r * r) continue;
@@ -159,6 +203,48 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
     result->pairs.push_back(ContactPair{names[g.link], kOctomapId, 0.0});
     last_link = g.link;
     if (result->pairs.size() >= request.max_pairs) return;
+  }
+}
+
+void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
+  // Every state of the segment lies within half of it from the midpoint, so a point of a shape moves from where it is
+  // at the midpoint by at most sum_i |q1_i - q0_i| / 2 * (its radius about joint i): pairs farther apart there than
+  // that can close (relative motion: self pairs; the shape's own: world pairs, whose obstacles hold still during a
+  // check) meet at none of the states and are left out.
+  const std::size_t dof = model_.dof();
+  half_dq_.resize(dof);
+  for (std::size_t i = 0; i < dof; ++i) {
+    q_scratch_[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+    half_dq_[i] = 0.5 * std::fabs(q1[i] - q0[i]);
+  }
+  updateTransforms(q_scratch_.data());
+  auto reach = [&](const std::vector<double>& radius) {
+    double m = kCullSlack;
+    for (std::size_t i = 0; i < dof; ++i) m += half_dq_[i] * radius[i];
+    return m;
+  };
+  self_active_.clear();
+  for (std::size_t p = 0; p < self_pairs_.size(); ++p) {
+    const double motion = reach(pair_joint_radius_[p]);
+    for (int ga : link_geoms_[self_pairs_[p].first]) {
+      for (int gb : link_geoms_[self_pairs_[p].second]) {
+        const Geom& a = geoms_[ga];
+        const Geom& b = geoms_[gb];
+        self_active_.push_back(!farApart(*a.padded, a.world_tf, a.world_center, a.padded_radius, *b.padded, b.world_tf,
+                                         b.world_center, b.padded_radius, motion));
+      }
+    }
+  }
+  const std::size_t n_world = world_geoms_.size();
+  world_active_.assign(world_.size() * n_world, 1);
+  for (std::size_t w = 0; w < n_world; ++w) {
+    const Geom& g = geoms_[world_geoms_[w]];
+    const double motion = reach(geom_joint_radius_[world_geoms_[w]]);
+    for (std::size_t o = 0; o < world_.size(); ++o) {
+      const Obstacle& ob = world_[o];
+      world_active_[o * n_world + w] = !farApart(*g.geom, g.world_tf, g.world_center, g.radius, *ob.geom, ob.pose,
+                                                 ob.pose.translation(), ob.radius, motion);
+    }
   }
 }
 
@@ -420,12 +506,15 @@ void FclCollisionChecker::checkPath(const double* q0, const double* q1, const Pa
   const std::size_t n = interiorStateCount(q0, q1);
   const double denom = static_cast<double>(n + 1);
   double last_valid = 0.0;
+  // Shape pairs that cannot meet anywhere on the segment are left out of its states (worth it from a few states on).
+  const bool culled = options_.cull_path_pairs && n + request.check_start + request.check_goal >= kCullFromStates;
+  if (culled) cullPairs(q0, q1);
   // Checks the state at t; returns true when it collides (and fills the result).
   auto check_at = [&](double t) {
     for (std::size_t i = 0; i < dof; ++i) q_scratch_[i] = q0[i] + t * (q1[i] - q0[i]);
     if (t == 1.0) std::memcpy(q_scratch_.data(), q1, dof * sizeof(double));
     ++result->checked_states;
-    checkState(q_scratch_.data(), request.state, &state_scratch_);
+    checkStateImpl(q_scratch_.data(), request.state, &state_scratch_, culled);
     if (!state_scratch_.collision()) return false;
     result->status = state_scratch_.status;
     result->pairs.swap(state_scratch_.pairs);

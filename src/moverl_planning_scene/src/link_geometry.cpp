@@ -249,6 +249,18 @@ bool FclCollisionChecker::loadGeometry(std::string* error) {
       joint_radius_[i] = std::max(joint_radius_[i], chain + g.center_local.norm() + g.radius);
     }
   }
+  // Per shape, the same bound for its padded points (checkPath's culling): m per rad of joint i, 0 when i does not
+  // move the shape.
+  geom_joint_radius_.assign(geoms_.size(), std::vector<double>(dof, 0.0));
+  for (std::size_t gi = 0; gi < geoms_.size(); ++gi) {
+    const Geom& g = geoms_[gi];
+    for (std::size_t i = 0; i < dof; ++i) {
+      const double chain = model_.chainOffsetBound(i, g.link);
+      if (chain < 0.0) continue;
+      geom_joint_radius_[gi][i] =
+          model_.isPrismatic(i) ? 1.0 : chain + g.center_local.norm() + std::max(g.radius, g.padded_radius);
+    }
+  }
   link_poses_.resize(n_links);
   q_scratch_.resize(dof);
   return true;

@@ -106,53 +106,82 @@ int main(int argc, char** argv) {
   std::printf("(%d of %d states near home free)\n", free_states, kStateSamples);
   report("checkState (table world, near home)", times);
 
-  times.clear();
-  std::vector<double> vtimes, ptimes;
-  std::uniform_int_distribution<int> sign(0, 1);
-  mps::MotionCheck mc;
-  mps::PathCheck pc;
-  std::size_t states = 0;
-  for (int k = 0; k < kPathSamples; ++k) {
-    const auto q0 = near_home();
-    auto q1 = q0;
-    for (std::size_t i = 0; i < q1.size(); ++i) {
-      q1[i] = std::min(std::max(q0[i] + (sign(rng) ? kStepRad : -kStepRad), scene->model().lowerLimits()[i]),
-                       scene->model().upperLimits()[i]);
-    }
-    scene->checkPath(q0, q1, &pc);
-    if (pc.outcome != mps::CheckOutcome::kValid) continue;
-    times.push_back(pc.check_time);
-    states += pc.checked_states;
-    const auto t = Clock::now();
-    scene->validateMotion(q0, q1, false, &mc);
-    vtimes.push_back(std::chrono::duration<double>(Clock::now() - t).count());
-    ptimes.push_back(mc.path_check_time);
+  // Path checks, with checkPath's pair culling (the default) and without (every shape pair at every state),
+  // interleaved on the same moves; their answers must agree.
+  mps::PlanningSceneOptions uncut = o;
+  uncut.checker.cull_path_pairs = false;
+  auto all_pairs = mps::PlanningScene::create(urdf.str(), uncut, &error);
+  if (!all_pairs) {
+    std::fprintf(stderr, "error: %s\n", error.c_str());
+    return 1;
   }
-  std::printf("(0.1 rad per joint moves: %.1f checked states on average)\n",
-              times.empty() ? 0.0 : static_cast<double>(states) / times.size());
-  report("checkPath, 0.1 rad/joint move (free)", times);
-  report("validateMotion path_check_time (same moves)", ptimes);
-  report("validateMotion total (same moves)", vtimes);
+  all_pairs->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
+  std::uniform_int_distribution<int> sign(0, 1);
+  for (const double step : {kStepRad, 0.5 * kStepRad}) {
+    std::vector<double> culled_times, all_times, vtimes, ptimes;
+    mps::MotionCheck mc;
+    mps::PathCheck pc, pa;
+    std::size_t states = 0, differ = 0;
+    for (int k = 0; k < kPathSamples; ++k) {
+      const auto q0 = near_home();
+      auto q1 = q0;
+      for (std::size_t i = 0; i < q1.size(); ++i) {
+        q1[i] = std::min(std::max(q0[i] + (sign(rng) ? step : -step), scene->model().lowerLimits()[i]),
+                         scene->model().upperLimits()[i]);
+      }
+      if (k % 2 == 0) {
+        scene->checkPath(q0, q1, &pc);
+        all_pairs->checkPath(q0, q1, &pa);
+      } else {
+        all_pairs->checkPath(q0, q1, &pa);
+        scene->checkPath(q0, q1, &pc);
+      }
+      differ += pc.outcome != pa.outcome || pc.checked_states != pa.checked_states;
+      if (pc.outcome != mps::CheckOutcome::kValid) continue;
+      culled_times.push_back(pc.check_time);
+      all_times.push_back(pa.check_time);
+      states += pc.checked_states;
+      const auto t = Clock::now();
+      scene->validateMotion(q0, q1, false, &mc);
+      vtimes.push_back(std::chrono::duration<double>(Clock::now() - t).count());
+      ptimes.push_back(mc.path_check_time);
+    }
+    std::printf(
+        "(%.2f rad per joint moves: %.1f checked states on average; answers that differ without culling: %zu)\n", step,
+        culled_times.empty() ? 0.0 : static_cast<double>(states) / culled_times.size(), differ);
+    char what[64];
+    std::snprintf(what, sizeof what, "checkPath, %.2f rad/joint move (free)", step);
+    report(what, culled_times);
+    std::snprintf(what, sizeof what, "  the same, every pair at every state");
+    report(what, all_times);
+    report("validateMotion path_check_time (same moves)", ptimes);
+    report("validateMotion total (same moves)", vtimes);
+  }
 
-  // Planning around a 5 mm wall.
-  scene->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015), box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)},
-                  &error);
+  // Planning around a 5 mm wall, with and without the culling (interleaved).
+  const std::vector<mps::WorldObject> walled = {box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015),
+                                                box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)};
+  scene->setWorld(walled, &error);
+  all_pairs->setWorld(walled, &error);
   std::vector<double> a = home, b = home;
   a[0] = -0.8;
   b[0] = 0.8;
-  times.clear();
+  std::vector<double> plan_culled, plan_all;
   int replanned = 0;
-  for (int k = 0; k < kPlanSamples; ++k) {
-    scene->validateMotion(a, b, true, &mc);
+  mps::MotionCheck mc;
+  for (int k = 0; k < 2 * kPlanSamples; ++k) {
+    mps::PlanningScene& s = k % 2 == 0 ? *scene : *all_pairs;
+    s.validateMotion(a, b, true, &mc);
     if (mc.outcome != mps::MotionOutcome::kPathCollision) {
       std::printf("unexpected outcome %d: %s\n", static_cast<int>(mc.outcome), mc.message.c_str());
       break;
     }
-    times.push_back(mc.planning_time);
+    (k % 2 == 0 ? plan_culled : plan_all).push_back(mc.planning_time);
     replanned += mc.replanned;
   }
-  std::printf("(wall: %d of %d replanned with %s, time limit %.2f s)\n", replanned, kPlanSamples,
+  std::printf("(wall: %d of %d replanned with %s, time limit %.2f s)\n", replanned, 2 * kPlanSamples,
               o.planner.planner.c_str(), o.planner.planning_time);
-  report("validateMotion planning_time (wall)", times);
+  report("validateMotion planning_time (wall)", plan_culled);
+  report("  the same, every pair at every state", plan_all);
   return 0;
 }

@@ -16,6 +16,13 @@
 #include <set>
 #include <sstream>
 
+#include <fcl/geometry/shape/box.h>
+#include <fcl/geometry/shape/capsule.h>
+#include <fcl/geometry/shape/cone.h>
+#include <fcl/geometry/shape/cylinder.h>
+#include <fcl/geometry/shape/halfspace.h>
+#include <fcl/geometry/shape/sphere.h>
+#include <fcl/narrowphase/collision.h>
 #include "moverl_planning_scene/convex_hull.h"
 #include "moverl_planning_scene/fcl_collision_checker.h"
 #include "moverl_planning_scene/fcl_convex.h"
@@ -409,6 +416,242 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
     }
   }
   EXPECT_GT(inside, total / 20);  // the points do reach into the shapes
+}
+
+// checkPath leaves out, for a whole segment, the shape pairs a plane at its midpoint separates by more than they can
+// move over half of it (FclCheckerOptions::cull_path_pairs). It must answer exactly as checking every pair at every
+// state: over random segments short and long that meet the world (every obstacle shape, turned, and a moving one
+// checked over a window of its motion), the robot itself, or nothing, with every kind of request.
+void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerOptions options,
+                                  const std::vector<double>& home, unsigned seed) {
+  std::string error;
+  options.cull_path_pairs = true;
+  auto culled = mps::FclCollisionChecker::create(model, options, &error);
+  ASSERT_NE(culled, nullptr) << error;
+  options.cull_path_pairs = false;
+  auto every = mps::FclCollisionChecker::create(model, options, &error);
+  ASSERT_NE(every, nullptr) << error;
+  auto shape = [](const std::string& id, mps::ShapeType type, std::vector<double> dims, const Vector3d& at,
+                  double turn) {
+    mps::WorldObject o;
+    o.id = id;
+    o.type = type;
+    o.dimensions = std::move(dims);
+    o.pose.translation() = at;
+    o.pose.linear() = Eigen::AngleAxisd(turn, Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+    return o;
+  };
+  std::vector<mps::WorldObject> world = {
+      mps::panda::box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015),
+      mps::panda::box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45),
+      shape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.25, 0.35), 0.0),
+      shape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.3, 0.2), 0.6),
+      shape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.25, 0.4, 0.25), -0.9),
+      shape("swinging", mps::ShapeType::kSphere, {0.06}, Vector3d(0.3, 0.0, 0.6), 0.0),
+  };
+  world.back().motion.type = mps::ObstacleMotion::Type::kOscillate;
+  world.back().motion.axis = Vector3d::UnitY();
+  world.back().motion.amplitude = 0.3;
+  world.back().motion.period = 4.0;
+  ASSERT_TRUE(culled->setWorld(world, &error)) << error;
+  ASSERT_TRUE(every->setWorld(world, &error)) << error;
+  culled->setMotionWindow(0.0, 0.5);
+  every->setMotionWindow(0.0, 0.5);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const std::size_t dof = model.dof();
+  std::size_t counts[3] = {0, 0, 0}, states = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::vector<double> q0(dof), q1(dof);
+    const double reach = std::array<double, 4>{0.02, 0.06, 0.13, 0.6}[trial % 4];  // rad per joint, at most
+    for (std::size_t i = 0; i < dof; ++i) {
+      const double lo = model.lowerLimits()[i], hi = model.upperLimits()[i];
+      const double from = trial % 3 == 0 ? lo + 0.5 * (unit(rng) + 1.0) * (hi - lo) : home[i] + 0.8 * unit(rng);
+      q0[i] = std::min(std::max(from, lo), hi);
+      q1[i] = std::min(std::max(q0[i] + reach * unit(rng), lo), hi);
+    }
+    mps::PathCheckRequest request;
+    request.find_first = trial % 2 == 0;
+    request.check_start = trial % 5 != 0;
+    request.check_goal = trial % 7 != 0;
+    request.state.max_pairs = std::array<std::size_t, 4>{0, 1, 2, 100}[trial % 3 + (trial % 8 == 0)];  // 100: all
+    request.state.compute_depth = trial % 4 == 1;
+    request.state.check_self = trial % 11 != 3;
+    request.state.check_world = trial % 13 != 4;
+    mps::PathCheckResult a, b;
+    culled->checkPath(q0.data(), q1.data(), request, &a);
+    every->checkPath(q0.data(), q1.data(), request, &b);
+    ASSERT_EQ(a.status, b.status) << "trial " << trial;
+    ASSERT_EQ(a.checked_states, b.checked_states) << "trial " << trial;
+    ASSERT_EQ(a.collision_fraction, b.collision_fraction) << "trial " << trial;
+    ASSERT_EQ(a.last_valid_fraction, b.last_valid_fraction) << "trial " << trial;
+    ASSERT_EQ(a.pairs.size(), b.pairs.size()) << "trial " << trial;
+    for (std::size_t k = 0; k < a.pairs.size(); ++k) {
+      EXPECT_EQ(a.pairs[k].a, b.pairs[k].a) << "trial " << trial;
+      EXPECT_EQ(a.pairs[k].b, b.pairs[k].b) << "trial " << trial;
+      EXPECT_EQ(a.pairs[k].depth, b.pairs[k].depth) << "trial " << trial;
+    }
+    ++counts[static_cast<int>(a.status)];
+    states += a.checked_states;
+  }
+  // Every kind of answer was asked for, and the segments were long enough to cull on.
+  EXPECT_GT(counts[0], 300u) << "free";
+  EXPECT_GT(counts[1], 100u) << "self";
+  EXPECT_GT(counts[2], 300u) << "world";
+  EXPECT_GT(states, 3000u * 8);
+}
+
+TEST(PathCulling, ThePandaGetsTheSameAnswersAsFromEveryPairAtEveryState) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  ASSERT_NE(model, nullptr) << error;
+  expectCullingChangesNoAnswer(*model, o.checker, {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}, 7);
+}
+
+TEST(PathCulling, TheIiwaGetsTheSameAnswersAsFromEveryPairAtEveryState) {
+  const std::string data = pybulletData();
+  ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
+  mps::RobotModelOptions o;
+  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
+  o.mesh_base_dir = data + "/kuka_iiwa";
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(data + "/kuka_iiwa/model.urdf"), o, &error);
+  ASSERT_NE(model, nullptr) << error;
+  expectCullingChangesNoAnswer(*model, mps::panda::options(kPandaUrdf).checker, {0.0, 0.5, 0.0, -1.5, 0.0, 1.0, 0.0},
+                               11);
+}
+
+// The support values the culling's separating planes are certified with, against FCL's GJK: every shape meets a slab
+// beyond the plane n . x = support - 1e-6 and not one beyond n . x = support + 1e-6, for every primitive the world
+// has and convex hulls, turned and moved, in random directions. (Slabs, not fcl::Halfspace: FCL 0.7's cone/half-space
+// test answers wrongly in some directions, where dense sampling of the cone's apex and base circle agrees with
+// shapeSupport.)
+TEST(PathCulling, ShapeSupportIsWhereGjkSaysTheShapeEnds) {
+  std::mt19937 rng(13);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::vector<Vector3d> cloud;
+  for (int k = 0; k < 200; ++k) cloud.emplace_back(0.1 * unit(rng), 0.05 * unit(rng), 0.2 * unit(rng));
+  const std::vector<std::shared_ptr<fcl::CollisionGeometryd>> shapes = {
+      std::make_shared<fcl::Boxd>(0.3, 0.2, 0.1),
+      std::make_shared<fcl::Sphered>(0.1),
+      std::make_shared<fcl::Capsuled>(0.05, 0.3),
+      std::make_shared<fcl::Cylinderd>(0.1, 0.4),
+      std::make_shared<fcl::Coned>(0.1, 0.3),
+      mps::makeFclConvex(cloud),
+      mps::makeFclConvex(mps::inflateHull(mps::computeConvexHull(cloud), 0.01))};
+  constexpr double kGap = 1e-6;
+  const fcl::Boxd slab(20.0, 20.0, 2.0);  // its face towards the shape at z = -1, in its frame
+  for (std::size_t s = 0; s < shapes.size(); ++s) {
+    for (int k = 0; k < 300; ++k) {
+      Eigen::Isometry3d tf = Eigen::Isometry3d::Identity();
+      tf.linear() = Eigen::AngleAxisd(3.0 * unit(rng), randomUnit(&rng)).toRotationMatrix();
+      tf.translation() = Vector3d(unit(rng), unit(rng), unit(rng));
+      const Vector3d n = randomUnit(&rng);
+      const double support = mps::shapeSupport(*shapes[s], tf, n);
+      ASSERT_TRUE(std::isfinite(support)) << "shape " << s;
+      // The slab {x : d <= n . x <= d + 2} (20 m wide): the shape meets it when it reaches past n . x = d.
+      auto reaches = [&](double d) {
+        fcl::Transform3d at = fcl::Transform3d::Identity();
+        at.linear() = Eigen::Quaterniond::FromTwoVectors(Vector3d::UnitZ(), n).toRotationMatrix();
+        at.translation() = (d + 1.0) * n;
+        fcl::CollisionRequestd request;
+        fcl::CollisionResultd result;
+        fcl::collide(shapes[s].get(), fcl::Transform3d(tf.matrix()), &slab, at, request, result);
+        return result.isCollision();
+      };
+      EXPECT_TRUE(reaches(support - kGap)) << "shape " << s << ": support too large, direction " << n.transpose();
+      EXPECT_FALSE(reaches(support + kGap)) << "shape " << s << ": support too small, direction " << n.transpose();
+    }
+  }
+  fcl::Halfspaced plane(Vector3d::UnitZ(), 0.0);
+  EXPECT_TRUE(std::isinf(mps::shapeSupport(plane, Eigen::Isometry3d::Identity(), Vector3d::UnitX())));
+}
+
+// The bound the culling rests on: the distance between a point of one link's (padded) shapes and a point of another's
+// (or a point fixed in the base frame, where world obstacles are) changes by no more than segmentMotionBound says
+// between any two states of a segment, over random segments of the Panda and the iiwa and every pair of links.
+void expectMotionBoundHolds(const mps::RobotModel& model, const mps::FclCheckerOptions& options, unsigned seed) {
+  std::string error;
+  mps::FclCheckerOptions o = options;
+  o.acm_samples = 0;
+  auto checker = mps::FclCollisionChecker::create(model, o, &error);
+  ASSERT_NE(checker, nullptr) << error;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const std::size_t dof = model.dof();
+  const int n_links = static_cast<int>(model.linkNames().size());
+  std::vector<std::vector<Vector3d>> points(n_links);  // per link, points of its shapes pushed out by the padding
+  for (int l = 0; l < n_links; ++l) {
+    for (const auto& g : checker->linkGeometry(l)) {
+      for (std::size_t k = 0; k < g.vertices.size(); k += 1 + g.vertices.size() / 12) {
+        points[l].push_back(g.origin * g.vertices[k] + options.self_padding * randomUnit(&rng));
+      }
+    }
+  }
+  std::vector<Vector3d> fixed;  // base-frame points around the robot
+  for (int k = 0; k < 12; ++k) fixed.push_back(Vector3d(2.0 * unit(rng) - 1.0, 2.0 * unit(rng) - 1.0, 1.5 * unit(rng)));
+  std::size_t compared = 0;
+  double tightest = 0.0;  // the largest change / bound seen
+  for (int trial = 0; trial < 100; ++trial) {
+    std::vector<double> q0(dof), q1(dof), qa(dof), qb(dof);
+    for (std::size_t i = 0; i < dof; ++i) {
+      const double lo = model.lowerLimits()[i], hi = model.upperLimits()[i];
+      q0[i] = lo + unit(rng) * (hi - lo);
+      q1[i] = std::min(std::max(q0[i] + 1.2 * (unit(rng) - 0.5), lo), hi);
+    }
+    const double ta = unit(rng), tb = unit(rng);
+    for (std::size_t i = 0; i < dof; ++i) {
+      qa[i] = q0[i] + ta * (q1[i] - q0[i]);
+      qb[i] = q0[i] + tb * (q1[i] - q0[i]);
+    }
+    std::vector<Eigen::Isometry3d> pa, pb;
+    model.computeLinkTransforms(qa.data(), &pa);
+    model.computeLinkTransforms(qb.data(), &pb);
+    for (int a = -1; a < n_links; ++a) {
+      for (int b = 0; b < n_links; ++b) {
+        if (a == b || points[b].empty()) continue;
+        const double bound = checker->segmentMotionBound(qa.data(), qb.data(), a, b);
+        for (const Vector3d& x : points[b]) {
+          const Vector3d xa = pa[b] * x, xb = pb[b] * x;
+          // The other end: a point of link a's shapes, or of the base frame around the robot.
+          for (const Vector3d& y : a < 0 ? fixed : points[a]) {
+            const double ya_gap = (xa - (a < 0 ? y : Vector3d(pa[a] * y))).norm();
+            const double yb_gap = (xb - (a < 0 ? y : Vector3d(pb[a] * y))).norm();
+            const double change = std::fabs(ya_gap - yb_gap);
+            ASSERT_LE(change, bound + 1e-12) << model.linkNames()[b] << " and "
+                                             << (a < 0 ? "the base" : model.linkNames()[a]) << ", trial " << trial;
+            if (bound > 0.0) tightest = std::max(tightest, change / bound);
+            ++compared;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(compared, 100000u);
+  EXPECT_GT(tightest, 0.2);  // the bound is not vacuous
+}
+
+TEST(PathCulling, ThePandasPointsMoveNoFartherThanTheBound) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  ASSERT_NE(model, nullptr) << error;
+  expectMotionBoundHolds(*model, o.checker, 3);
+}
+
+TEST(PathCulling, TheIiwasPointsMoveNoFartherThanTheBound) {
+  const std::string data = pybulletData();
+  ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
+  mps::RobotModelOptions o;
+  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
+  o.mesh_base_dir = data + "/kuka_iiwa";
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(data + "/kuka_iiwa/model.urdf"), o, &error);
+  ASSERT_NE(model, nullptr) << error;
+  expectMotionBoundHolds(*model, mps::panda::options(kPandaUrdf).checker, 5);
 }
 
 int main(int argc, char** argv) {

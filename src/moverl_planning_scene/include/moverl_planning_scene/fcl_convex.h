@@ -9,6 +9,7 @@
 
 #include <fcl/geometry/shape/convex.h>
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 
 namespace moverl_planning_scene {
 
@@ -18,5 +19,10 @@ namespace moverl_planning_scene {
 /// hull is not exact (degenerate, or points that round-off left outside its faces), no faces: FCL then scans every
 /// point, which is exactly the support function of their convex hull too.
 std::shared_ptr<fcl::Convexd> makeFclConvex(const std::vector<Eigen::Vector3d>& points);
+
+/// The support value max{n . x : x in shape} of an FCL shape placed at tf, for a unit vector n (world frame): convex
+/// hulls (every vertex), boxes, spheres, capsules, cylinders and cones (FCL's conventions: centred, axis z, a cone's
+/// apex at +lz/2). Infinity for any other shape (triangle meshes, planes): no finite bound is claimed for it.
+double shapeSupport(const fcl::CollisionGeometryd& shape, const Eigen::Isometry3d& tf, const Eigen::Vector3d& n);
 
 }  // namespace moverl_planning_scene

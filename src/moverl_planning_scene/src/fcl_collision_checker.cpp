@@ -132,7 +132,20 @@ bool FclCollisionChecker::linkPairCollides(int la, int lb, bool padded) {
 }
 
 void FclCollisionChecker::checkState(const double* q, const CollisionRequest& request, CollisionResult* result) {
-  checkStateImpl(q, request, result, false);
+  const std::size_t bytes = model_.dof() * sizeof(double);
+  const bool end = culled_stamp_ == world_stamp_ &&
+                   (std::memcmp(q, culled_q0_.data(), bytes) == 0 || std::memcmp(q, culled_q1_.data(), bytes) == 0);
+  checkStateImpl(q, request, result, end);
+}
+
+void FclCollisionChecker::prepareSegment(const double* q0, const double* q1) {
+  if (options_.cull_path_pairs && !culledFor(q0, q1)) cullPairs(q0, q1);
+}
+
+bool FclCollisionChecker::culledFor(const double* q0, const double* q1) const {
+  const std::size_t bytes = model_.dof() * sizeof(double);
+  return culled_stamp_ == world_stamp_ && std::memcmp(q0, culled_q0_.data(), bytes) == 0 &&
+         std::memcmp(q1, culled_q1_.data(), bytes) == 0;
 }
 
 void FclCollisionChecker::checkStateImpl(const double* q, const CollisionRequest& request, CollisionResult* result,
@@ -218,6 +231,9 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
     half_dq_[i] = 0.5 * std::fabs(q1[i] - q0[i]);
   }
   updateTransforms(q_scratch_.data());
+  culled_q0_.assign(q0, q0 + dof);
+  culled_q1_.assign(q1, q1 + dof);
+  culled_stamp_ = world_stamp_;
   auto reach = [&](const std::vector<double>& radius) {
     double m = kCullSlack;
     for (std::size_t i = 0; i < dof; ++i) m += half_dq_[i] * radius[i];
@@ -507,8 +523,9 @@ void FclCollisionChecker::checkPath(const double* q0, const double* q1, const Pa
   const double denom = static_cast<double>(n + 1);
   double last_valid = 0.0;
   // Shape pairs that cannot meet anywhere on the segment are left out of its states (worth it from a few states on).
-  const bool culled = options_.cull_path_pairs && n + request.check_start + request.check_goal >= kCullFromStates;
-  if (culled) cullPairs(q0, q1);
+  const bool culled = options_.cull_path_pairs &&
+                      (culledFor(q0, q1) || n + request.check_start + request.check_goal >= kCullFromStates);
+  if (culled && !culledFor(q0, q1)) cullPairs(q0, q1);
   // Checks the state at t; returns true when it collides (and fills the result).
   auto check_at = [&](double t) {
     for (std::size_t i = 0; i < dof; ++i) q_scratch_[i] = q0[i] + t * (q1[i] - q0[i]);

@@ -301,7 +301,9 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
     return;
   }
   // Moving obstacles are their whole motion envelope here (the checker's default), except for the straight path.
-  // Goal: self then world (one state check), then the start.
+  // Goal: self then world (one state check), then the start; both, and the straight path between them in a world
+  // without moving obstacles, skip the shape pairs that cannot meet on the way (prepareSegment: the same answers).
+  checker_->prepareSegment(start_.data(), goal_.data());
   checker_->checkState(goal_.data(), all_pairs_, &state_result_);
   if (state_result_.status == CollisionStatus::kSelf) {
     out->outcome = MotionOutcome::kSelfCollision;

@@ -138,6 +138,7 @@ bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std:
   window_t0_ = 0.0;
   window_t1_ = std::numeric_limits<double>::infinity();
   world_.swap(world);
+  ++world_stamp_;
   return true;
 }
 
@@ -156,6 +157,7 @@ void FclCollisionChecker::setMotionWindow(double t0, double t1) {
     sweptGeometry(ob.source, options_.padding, lo, hi, &ob.geom, &ob.pose, &ob.radius, &why);  // validated before
     ob.geom->computeLocalAABB();
   }
+  ++world_stamp_;
 }
 
 double FclCollisionChecker::obstacleRadius(std::size_t i) const { return world_.at(i).radius; }

@@ -419,9 +419,10 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
 }
 
 // checkPath leaves out, for a whole segment, the shape pairs a plane at its midpoint separates by more than they can
-// move over half of it (FclCheckerOptions::cull_path_pairs). It must answer exactly as checking every pair at every
-// state: over random segments short and long that meet the world (every obstacle shape, turned, and a moving one
-// checked over a window of its motion), the robot itself, or nothing, with every kind of request.
+// move over half of it (FclCheckerOptions::cull_path_pairs), and so do state checks of a prepared segment's ends. They
+// must answer exactly as checking every pair at every state: over random segments short and long that meet the world
+// (every obstacle shape, turned, and a moving one checked over a window of its motion), the robot itself, or nothing,
+// with every kind of request.
 void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerOptions options,
                                   const std::vector<double>& home, unsigned seed) {
   std::string error;
@@ -460,7 +461,7 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> unit(-1.0, 1.0);
   const std::size_t dof = model.dof();
-  std::size_t counts[3] = {0, 0, 0}, states = 0;
+  std::size_t counts[3] = {0, 0, 0}, ends[3] = {0, 0, 0}, states = 0;
   for (int trial = 0; trial < 3000; ++trial) {
     std::vector<double> q0(dof), q1(dof);
     const double reach = std::array<double, 4>{0.02, 0.06, 0.13, 0.6}[trial % 4];  // rad per joint, at most
@@ -478,9 +479,34 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
     request.state.compute_depth = trial % 4 == 1;
     request.state.check_self = trial % 11 != 3;
     request.state.check_world = trial % 13 != 4;
+    // As validateMotion: the segment prepared, then its ends checked; now and then the moving obstacle's window
+    // changes in between (the culling must not outlive the world it was made for).
+    const bool moved_window = trial % 9 == 5;
+    culled->prepareSegment(q0.data(), q1.data());
+    if (moved_window) {
+      culled->setMotionWindow(1.0, 3.0);
+      every->setMotionWindow(1.0, 3.0);
+    }
+    for (const std::vector<double>* q : {&q1, &q0}) {
+      mps::CollisionResult sa, sb;
+      culled->checkState(q->data(), request.state, &sa);
+      every->checkState(q->data(), request.state, &sb);
+      ASSERT_EQ(sa.status, sb.status) << "trial " << trial;
+      ASSERT_EQ(sa.pairs.size(), sb.pairs.size()) << "trial " << trial;
+      for (std::size_t k = 0; k < sa.pairs.size(); ++k) {
+        EXPECT_EQ(sa.pairs[k].a, sb.pairs[k].a) << "trial " << trial;
+        EXPECT_EQ(sa.pairs[k].b, sb.pairs[k].b) << "trial " << trial;
+        EXPECT_EQ(sa.pairs[k].depth, sb.pairs[k].depth) << "trial " << trial;
+      }
+      ends[static_cast<int>(sa.status)] += 1;
+    }
     mps::PathCheckResult a, b;
     culled->checkPath(q0.data(), q1.data(), request, &a);
     every->checkPath(q0.data(), q1.data(), request, &b);
+    if (moved_window) {
+      culled->setMotionWindow(0.0, 0.5);
+      every->setMotionWindow(0.0, 0.5);
+    }
     ASSERT_EQ(a.status, b.status) << "trial " << trial;
     ASSERT_EQ(a.checked_states, b.checked_states) << "trial " << trial;
     ASSERT_EQ(a.collision_fraction, b.collision_fraction) << "trial " << trial;
@@ -499,6 +525,8 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
   EXPECT_GT(counts[1], 100u) << "self";
   EXPECT_GT(counts[2], 300u) << "world";
   EXPECT_GT(states, 3000u * 8);
+  EXPECT_GT(ends[0], 1000u) << "free ends";
+  EXPECT_GT(ends[1] + ends[2], 500u) << "colliding ends";
 }
 
 TEST(PathCulling, ThePandaGetsTheSameAnswersAsFromEveryPairAtEveryState) {

@@ -84,7 +84,13 @@ class FclCollisionChecker : public CollisionChecker {
   bool setWorld(const std::vector<WorldObject>& objects, std::string* error) override;
   void setMotionWindow(double t0, double t1) override;
   bool hasMovingObstacles() const override { return !moving_.empty(); }
+  /// Also answers from the culling of the last segment prepared (prepareSegment, or checkPath's) when q is one of its
+  /// ends and the world has not changed since: the same answers.
   void checkState(const double* q, const CollisionRequest& request, CollisionResult* result) override;
+  /// \brief Culls the shape pairs for the segment q0 -> q1 (as checkPath does, see cull_path_pairs) ahead of checks
+  ///        of its ends and of the segment itself, which then reuse it while the world (setWorld, setMotionWindow)
+  ///        stays as it is. Nothing without cull_path_pairs.
+  void prepareSegment(const double* q0, const double* q1);
   void checkPath(const double* q0, const double* q1, const PathCheckRequest& request, PathCheckResult* result) override;
   std::size_t interiorStateCount(const double* q0, const double* q1) const override;
 
@@ -219,6 +225,11 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::vector<double>> pair_joint_radius_;
   std::vector<std::uint8_t> self_active_, world_active_;
   std::vector<double> half_dq_;
+  // The segment self_active_ and world_active_ were culled for, and the world then (world_stamp_ counts its changes).
+  std::vector<double> culled_q0_, culled_q1_;
+  std::uint64_t culled_stamp_ = 0, world_stamp_ = 1;
+  /// True when the culling in self_active_ / world_active_ holds for the segment q0 -> q1 in the current world.
+  bool culledFor(const double* q0, const double* q1) const;
   double reach_radius_ = 0.0;
   std::vector<Eigen::Isometry3d> link_poses_;
   std::vector<std::pair<double, Eigen::AlignedBox3d>> near_boxes_;  // occupancyDistance's scratch

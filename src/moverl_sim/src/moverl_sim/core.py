@@ -908,7 +908,7 @@ class Simulator:
         """Run up to max_substeps substeps of motion; returns how many ran."""
         robot, idx, cid = self.robot, self.joint_indices, self._cid
         self._q = None
-        reset = self._reset_states
+        reset = pybullet.resetJointStatesMultiDof  # (called directly: a wrapper's frame per substep costs)
         get_contacts = pybullet.getContactPoints
         kinematic = self.control == "kinematic"
         if kinematic:
@@ -937,7 +937,7 @@ class Simulator:
             if movers:
                 place((t_base + k) / hz)
             if kinematic:
-                reset(robot, idx, targets[k], vels[k])
+                reset(robot, idx, targets[k], vels[k], physicsClientId=cid)
                 detect(physicsClientId=cid)
             else:
                 motor(

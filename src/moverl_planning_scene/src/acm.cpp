@@ -336,6 +336,9 @@ void FclCollisionChecker::rebuildPairLists() {
     const int a = self_pairs_[p].first, b = self_pairs_[p].second;
     for (std::size_t i = 0; i < dof; ++i) pair_joint_radius_[p][i] = linkMotionRadius(a, b, i);
   }
+  std::size_t shape_pairs = 0;
+  for (const auto& lp : self_pairs_) shape_pairs += link_geoms_[lp.first].size() * link_geoms_[lp.second].size();
+  self_memory_.assign(shape_pairs, PairMemory());
 }
 
 double FclCollisionChecker::linkMotionRadius(int a, int b, std::size_t i) const {

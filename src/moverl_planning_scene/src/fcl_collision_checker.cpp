@@ -45,22 +45,33 @@ constexpr double kCullSlack = 1e-6;
 
 /// True when a plane separates shape a (at ta, bounding sphere (ca, ra)) from shape b by more than `motion`: the two
 /// cannot meet while their points move by at most `motion` relative to each other. Tries, cheapest first, the
-/// bounding spheres, the plane across the line between their centres, and the plane through GJK's nearest points.
-/// Every answer is certified by the shapes' own support values; GJK only proposes the plane.
+/// bounding spheres, the plane that separated them last time (memory, turned with a), the plane across the line
+/// between their centres, and the plane through GJK's nearest points; GJK is skipped when the memory's bound shows
+/// them no farther apart than `motion` (no plane can then do). Every answer is certified by the shapes' own support
+/// values: the memory and GJK only propose planes, so what they hold changes how often pairs are culled, never
+/// whether a culled pair could meet.
 bool farApart(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& ta, const Eigen::Vector3d& ca, double ra,
               const fcl::CollisionGeometryd& b, const Eigen::Isometry3d& tb, const Eigen::Vector3d& cb, double rb,
-              double motion) {
+              double motion, FclCollisionChecker::PairMemory* memory) {
   const Eigen::Vector3d d = cb - ca;
   const double gap = d.norm();
   if (gap - ra - rb > motion) return true;
   // The separation along a unit n, b on its + side: min over b of n . x minus max over a of n . x.
-  auto separated = [&](const Eigen::Vector3d& n) { return -shapeSupport(b, tb, -n) - shapeSupport(a, ta, n) > motion; };
+  auto separated = [&](const Eigen::Vector3d& n) {
+    if (!(-shapeSupport(b, tb, -n) - shapeSupport(a, ta, n) > motion)) return false;
+    memory->plane = ta.linear().transpose() * n;
+    return true;
+  };
+  if (memory->plane.squaredNorm() > 0.0 && separated(ta.linear() * memory->plane)) return true;
   if (gap > 0.0 && separated(d / gap)) return true;
+  memory->plane.setZero();
+  if (!(memory->upper > motion)) return false;
   fcl::DistanceRequestd request(true);  // with the nearest points
   fcl::DistanceResultd result;
   const double distance =
       fcl::distance(&a, fcl::Transform3d(ta.matrix()), &b, fcl::Transform3d(tb.matrix()), request, result);
-  if (!(distance > motion)) return false;  // (GJK's distance only proposes: the plane below is what is trusted)
+  memory->upper = distance >= 0.0 ? distance : std::numeric_limits<double>::infinity();
+  if (!(distance > motion)) return false;
   const Eigen::Vector3d n = result.nearest_points[1] - result.nearest_points[0];
   const double norm = n.norm();
   return norm > 0.0 && separated(n / norm);
@@ -226,40 +237,55 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
   // check) meet at none of the states and are left out.
   const std::size_t dof = model_.dof();
   half_dq_.resize(dof);
+  drift_.assign(dof, 0.0);  // how far each joint is from the last culling's midpoint (the memory's bounds grow by it)
   for (std::size_t i = 0; i < dof; ++i) {
     q_scratch_[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
     half_dq_[i] = 0.5 * std::fabs(q1[i] - q0[i]);
+    if (memory_mid_.size() == dof) drift_[i] = std::fabs(q_scratch_[i] - memory_mid_[i]);
   }
+  memory_mid_.assign(q_scratch_.begin(), q_scratch_.end());
   updateTransforms(q_scratch_.data());
   culled_q0_.assign(q0, q0 + dof);
   culled_q1_.assign(q1, q1 + dof);
   culled_stamp_ = world_stamp_;
-  auto reach = [&](const std::vector<double>& radius) {
-    double m = kCullSlack;
-    for (std::size_t i = 0; i < dof; ++i) m += half_dq_[i] * radius[i];
+  // Per pair, its motion over half the segment, and the memory's distance bound carried over to this midpoint.
+  auto motion = [&](const std::vector<double>& radius, PairMemory* memory) {
+    double m = kCullSlack, drift = 0.0;
+    for (std::size_t i = 0; i < dof; ++i) {
+      m += half_dq_[i] * radius[i];
+      drift += drift_[i] * radius[i];
+    }
+    memory->upper += drift;
     return m;
   };
-  self_active_.clear();
+  std::size_t k = 0;  // the shape pair's index in self_active_ and self_memory_
+  self_active_.resize(self_memory_.size());
   for (std::size_t p = 0; p < self_pairs_.size(); ++p) {
-    const double motion = reach(pair_joint_radius_[p]);
     for (int ga : link_geoms_[self_pairs_[p].first]) {
       for (int gb : link_geoms_[self_pairs_[p].second]) {
         const Geom& a = geoms_[ga];
         const Geom& b = geoms_[gb];
-        self_active_.push_back(!farApart(*a.padded, a.world_tf, a.world_center, a.padded_radius, *b.padded, b.world_tf,
-                                         b.world_center, b.padded_radius, motion));
+        PairMemory* memory = &self_memory_[k];
+        const double m = motion(pair_joint_radius_[p], memory);
+        self_active_[k++] = !farApart(*a.padded, a.world_tf, a.world_center, a.padded_radius, *b.padded, b.world_tf,
+                                      b.world_center, b.padded_radius, m, memory);
       }
     }
   }
   const std::size_t n_world = world_geoms_.size();
+  if (memory_world_stamp_ != world_stamp_ || world_memory_.size() != world_.size() * n_world) {
+    world_memory_.assign(world_.size() * n_world, PairMemory());  // obstacles changed: nothing remembered holds
+    memory_world_stamp_ = world_stamp_;
+  }
   world_active_.assign(world_.size() * n_world, 1);
   for (std::size_t w = 0; w < n_world; ++w) {
     const Geom& g = geoms_[world_geoms_[w]];
-    const double motion = reach(geom_joint_radius_[world_geoms_[w]]);
     for (std::size_t o = 0; o < world_.size(); ++o) {
       const Obstacle& ob = world_[o];
+      PairMemory* memory = &world_memory_[o * n_world + w];
+      const double m = motion(geom_joint_radius_[world_geoms_[w]], memory);
       world_active_[o * n_world + w] = !farApart(*g.geom, g.world_tf, g.world_center, g.radius, *ob.geom, ob.pose,
-                                                 ob.pose.translation(), ob.radius, motion);
+                                                 ob.pose.translation(), ob.radius, m, memory);
     }
   }
 }

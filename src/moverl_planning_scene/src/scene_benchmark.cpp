@@ -124,13 +124,22 @@ int main(int argc, char** argv) {
   }
   motions->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
   std::uniform_int_distribution<int> sign(0, 1);
-  for (const double step : {kStepRad, 0.5 * kStepRad}) {
+  // Moves from random states near home, and a walk as an env steps (each move starts where the last one ended, back
+  // near home every 50 moves or after a colliding one): the culling's memory of the last move is of use there.
+  struct Moves {
+    double step;
+    bool walk;
+  };
+  for (const Moves moves : {Moves{kStepRad, false}, Moves{0.5 * kStepRad, false}, Moves{0.5 * kStepRad, true}}) {
+    const double step = moves.step;
     std::vector<double> culled_times, all_times, vtimes, ptimes, vall;
     mps::MotionCheck mc;
     mps::PathCheck pc, pa;
     std::size_t states = 0, differ = 0;
+    std::vector<double> last;  // the walk's end so far (empty: start near home)
     for (int k = 0; k < kPathSamples; ++k) {
-      const auto q0 = near_home();
+      const auto q0 = moves.walk && !last.empty() && k % 50 != 0 ? last : near_home();
+      last.clear();
       auto q1 = q0;
       for (std::size_t i = 0; i < q1.size(); ++i) {
         q1[i] = std::min(std::max(q0[i] + (sign(rng) ? step : -step), scene->model().lowerLimits()[i]),
@@ -145,6 +154,7 @@ int main(int argc, char** argv) {
       }
       differ += pc.outcome != pa.outcome || pc.checked_states != pa.checked_states;
       if (pc.outcome != mps::CheckOutcome::kValid) continue;
+      last = q1;
       culled_times.push_back(pc.check_time);
       all_times.push_back(pa.check_time);
       states += pc.checked_states;
@@ -157,10 +167,11 @@ int main(int argc, char** argv) {
       vall.push_back(std::chrono::duration<double>(Clock::now() - t).count());
     }
     std::printf(
-        "(%.2f rad per joint moves: %.1f checked states on average; answers that differ without culling: %zu)\n", step,
+        "(%.2f rad per joint moves%s: %.1f checked states on average; answers that differ without culling: %zu)\n",
+        step, moves.walk ? ", a walk" : "",
         culled_times.empty() ? 0.0 : static_cast<double>(states) / culled_times.size(), differ);
     char what[64];
-    std::snprintf(what, sizeof what, "checkPath, %.2f rad/joint move (free)", step);
+    std::snprintf(what, sizeof what, "checkPath, %.2f rad/joint %s (free)", step, moves.walk ? "walk" : "move");
     report(what, culled_times);
     std::snprintf(what, sizeof what, "  the same, every pair at every state");
     report(what, all_times);

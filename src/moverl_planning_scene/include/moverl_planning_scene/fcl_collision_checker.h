@@ -168,6 +168,14 @@ class FclCollisionChecker : public CollisionChecker {
   bool obstacleContains(std::size_t i, const Eigen::Vector3d& p) const;
   const FclCheckerOptions& options() const { return options_; }
 
+  /// checkPath's culling remembers, per shape pair, what proposes its next separating plane: an upper bound on the
+  /// pair's distance at the last culling's midpoint (GJK's, grown by their motion since) and the plane that separated
+  /// them then (unit normal in the first shape's frame; zero: none).
+  struct PairMemory {
+    double upper = std::numeric_limits<double>::infinity();
+    Eigen::Vector3d plane = Eigen::Vector3d::Zero();
+  };
+
  private:
   struct Geom;
   struct Obstacle;
@@ -224,7 +232,12 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::vector<double>> geom_joint_radius_;
   std::vector<std::vector<double>> pair_joint_radius_;
   std::vector<std::uint8_t> self_active_, world_active_;
-  std::vector<double> half_dq_;
+  std::vector<double> half_dq_, drift_;
+  // The memory per shape pair (self: as self_active_; world: as world_active_, for the world of memory_world_stamp_),
+  // and the midpoint its bounds hold at.
+  std::vector<PairMemory> self_memory_, world_memory_;
+  std::vector<double> memory_mid_;
+  std::uint64_t memory_world_stamp_ = 0;
   // The segment self_active_ and world_active_ were culled for, and the world then (world_stamp_ counts its changes).
   std::vector<double> culled_q0_, culled_q1_;
   std::uint64_t culled_stamp_ = 0, world_stamp_ = 1;

@@ -273,10 +273,14 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
     }
   }
   const std::size_t n_world = world_geoms_.size();
-  if (memory_world_stamp_ != world_stamp_ || world_memory_.size() != world_.size() * n_world) {
-    world_memory_.assign(world_.size() * n_world, PairMemory());  // obstacles changed: nothing remembered holds
-    memory_world_stamp_ = world_stamp_;
+  if (world_memory_.size() != world_.size() * n_world) {
+    world_memory_.assign(world_.size() * n_world, PairMemory());  // other obstacles: nothing remembered applies
+  } else if (memory_world_stamp_ != world_stamp_) {
+    // The obstacles changed shape or place (a moving one's window): their distance bounds no longer hold; the planes
+    // are only proposals and mostly still separate.
+    for (PairMemory& m : world_memory_) m.upper = std::numeric_limits<double>::infinity();
   }
+  memory_world_stamp_ = world_stamp_;
   world_active_.assign(world_.size() * n_world, 1);
   for (std::size_t w = 0; w < n_world; ++w) {
     const Geom& g = geoms_[world_geoms_[w]];

@@ -7,7 +7,10 @@
 """
 
 import importlib.util
+import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -36,3 +39,21 @@ def pytest_collection_modifyitems(config, items):
             f"test files without exactly one tier ({', '.join(TIERS)}; tests/tiers.py):\n{lines}\n"
             "add `pytestmark = pytest.mark.<tier>` at module level"
         )
+
+
+_SB3_LOGDIR = None
+
+
+def pytest_configure(config):
+    # Stable-Baselines3 makes a folder SB3-<date> in the system's temp dir for every model that learns without a logger
+    # of its own (its configure() reads SB3_LOGDIR first): the tests' models use one folder of this run's, removed at
+    # its end, instead of leaving dozens behind per run.
+    global _SB3_LOGDIR
+    if "SB3_LOGDIR" not in os.environ:
+        _SB3_LOGDIR = os.environ["SB3_LOGDIR"] = tempfile.mkdtemp(prefix="moverl_sb3_")
+
+
+def pytest_unconfigure(config):
+    if _SB3_LOGDIR is not None:
+        os.environ.pop("SB3_LOGDIR", None)
+        shutil.rmtree(_SB3_LOGDIR, ignore_errors=True)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 namespace moverl_planning_scene {
 namespace {
@@ -38,6 +39,9 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
 
 // The flags of the points that end in a cell (end_): kPresent marks a cell as listed in order_.
 constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4, kPresent = 0x80;
+// A cell where only fixture points end was seen down to the fixture's surface (anything above it would have stopped a
+// beam): both integrations count it as seen free.
+constexpr bool onlyFixtureEnds(std::uint8_t end) { return (end & ~kPresent) == kFixture; }
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
@@ -226,7 +230,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     const double inset = 1e-6 * options_.resolution;
     const Eigen::Vector3d end =
         (order_end_[n].array() / order_count_[n]).max(lo + inset).min(lo + (options_.resolution - inset)).matrix();
-    const bool through_end = (end_[c_end] & ~kPresent) == kFixture;
+    const bool through_end = onlyFixtureEnds(end_[c_end]);
     end_[c_end] = 0;  // reset for the next cloud
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
@@ -347,7 +351,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   };
   // A cell where only fixture points end was seen down to the fixture's surface: seen free (computeUpdate's rule).
   for (std::int64_t c : order_) {
-    if ((end_[c] & ~kPresent) == kFixture && !testBit(seen_, c)) see(c);
+    if (onlyFixtureEnds(end_[c]) && !testBit(seen_, c)) see(c);
     end_[c] = 0;  // reset for the next cloud
   }
   // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
@@ -664,26 +668,22 @@ void OccupancyMap::fillUnobserved(bool on) {
   std::fill(seen_block_count_.begin(), seen_block_count_.end(), 0);
   std::fill(seen_super_count_.begin(), seen_super_count_.end(), 0);
   seen_occupied_ = 0;
-  // Every cell counts as dirty (unknown) until setValue says otherwise.
-  std::int64_t at[3];
-  for (at[0] = 0; at[0] < blocks_[0]; ++at[0]) {
-    for (at[1] = 0; at[1] < blocks_[1]; ++at[1]) {
-      for (at[2] = 0; at[2] < blocks_[2]; ++at[2]) {
-        std::int64_t n = 1;
-        for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << kBlockShift) - (at[i] << kBlockShift);
-        block_dirty_[(at[0] * blocks_[1] + at[1]) * blocks_[2] + at[2]] = static_cast<std::uint8_t>(n);
+  // Every cell counts as dirty (unknown) until setValue says otherwise: each block and superblock as many as it holds.
+  auto fill = [&](const std::int64_t* boxes, int shift, auto* dirty) {
+    using Count = typename std::remove_reference_t<decltype(*dirty)>::value_type;
+    std::int64_t at[3];
+    for (at[0] = 0; at[0] < boxes[0]; ++at[0]) {
+      for (at[1] = 0; at[1] < boxes[1]; ++at[1]) {
+        for (at[2] = 0; at[2] < boxes[2]; ++at[2]) {
+          std::int64_t n = 1;
+          for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << shift) - (at[i] << shift);
+          (*dirty)[(at[0] * boxes[1] + at[1]) * boxes[2] + at[2]] = static_cast<Count>(n);
+        }
       }
     }
-  }
-  for (at[0] = 0; at[0] < supers_[0]; ++at[0]) {
-    for (at[1] = 0; at[1] < supers_[1]; ++at[1]) {
-      for (at[2] = 0; at[2] < supers_[2]; ++at[2]) {
-        std::int64_t n = 1;
-        for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << kSuperShift) - (at[i] << kSuperShift);
-        super_dirty_[(at[0] * supers_[1] + at[1]) * supers_[2] + at[2]] = static_cast<std::uint16_t>(n);
-      }
-    }
-  }
+  };
+  fill(blocks_, kBlockShift, &block_dirty_);
+  fill(supers_, kSuperShift, &super_dirty_);
   const auto cells = static_cast<std::int64_t>(value_.size());
   for (std::int64_t c = 0; c < cells; ++c) {
     if (!testBit(observed_, c)) value_[c] = on ? prior_ : unknown;

@@ -9,7 +9,9 @@ A random policy with the shield on, 200,000 steps over the three worlds (table, 
 `--every` steps (10,000) it samples the resident memory (RSS) and open file descriptors of the env's process and of
 every process of its graph (found in the env process's own tree, named by their command line), the number of those
 processes, the env step's round-trip latency p50 / p99 over the steps since the last sample, and the ground-truth
-contacts. The first sample is taken after the first `--every` steps (warm-up).
+contacts. The first sample is taken after the first `--every` steps and at least WARMUP_SECONDS of stepping (warm-up:
+topic connections are made asynchronously, and a fast env can reach its first sample before one of them is, which
+would count as a file descriptor opened during the run).
 
 Checks (exit code 1 if one fails): memory growth from the first to the last sample under 5 % for every process,
 no growth in file descriptors or processes, p99 latency of the last window within 20 % of the first, zero contacts.
@@ -29,6 +31,7 @@ import numpy as np
 
 from moverl_gym.workers import run_json_worker
 
+WARMUP_SECONDS = 1.0  # s of stepping before the first sample
 NAMES = ("sim_node", "world_server", "planning_scene_node", "shield_node", "rosmaster", "rosout", "roslaunch")
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -97,7 +100,7 @@ def worker(world: str, steps: int, every: int, obstacles: str, seed: int) -> dic
             contacts += max(0, info["contacts"])
             if term or trunc:
                 env.reset()
-            if k % every == 0:
+            if k % every == 0 and (samples or time.monotonic() - t0 >= WARMUP_SECONDS or k == steps):
                 samples.append(sample(k, latencies, contacts))
                 latencies = []
         return {

@@ -39,9 +39,24 @@ namespace {
 constexpr std::size_t kMaxInteriorStates = 1000000;  // guard against absurd segments
 // checkPath culls from this many states on (below, the culling's own queries cost about what they save).
 constexpr std::size_t kCullFromStates = 4;
-// m: a culled pair's separation must exceed its motion by this much (far above the rounding of the dot products, far
-// below anything GJK tells apart).
+// m: a culled pair's separation must exceed its motion by this much: far above the rounding of the dot products that
+// certify it, of the order of GJK's own tolerance (libccd decides intersection near machine precision).
 constexpr double kCullSlack = 1e-6;
+
+/// True for the shapes shapeSupport has a support function for (others are never culled: no GJK spent on them).
+bool hasSupport(const fcl::CollisionGeometryd& shape) {
+  switch (shape.getNodeType()) {
+    case fcl::GEOM_CONVEX:
+    case fcl::GEOM_BOX:
+    case fcl::GEOM_SPHERE:
+    case fcl::GEOM_CAPSULE:
+    case fcl::GEOM_CYLINDER:
+    case fcl::GEOM_CONE:
+      return true;
+    default:
+      return false;
+  }
+}
 
 /// True when a plane separates shape a (at ta, bounding sphere (ca, ra)) from shape b by more than `motion`: the two
 /// cannot meet while their points move by at most `motion` relative to each other. Tries, cheapest first, the
@@ -65,7 +80,7 @@ bool farApart(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& ta, con
   if (memory->plane.squaredNorm() > 0.0 && separated(ta.linear() * memory->plane)) return true;
   if (gap > 0.0 && separated(d / gap)) return true;
   memory->plane.setZero();
-  if (!(memory->upper > motion)) return false;
+  if (!(memory->upper > motion) || !hasSupport(a) || !hasSupport(b)) return false;
   fcl::DistanceRequestd request(true);  // with the nearest points
   fcl::DistanceResultd result;
   const double distance =
@@ -150,7 +165,7 @@ void FclCollisionChecker::checkState(const double* q, const CollisionRequest& re
 }
 
 void FclCollisionChecker::prepareSegment(const double* q0, const double* q1) {
-  if (options_.cull_path_pairs && !culledFor(q0, q1)) cullPairs(q0, q1);
+  if (cullable(q0, q1) && !culledFor(q0, q1)) cullPairs(q0, q1);
 }
 
 bool FclCollisionChecker::culledFor(const double* q0, const double* q1) const {
@@ -245,9 +260,7 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
   }
   memory_mid_.assign(q_scratch_.begin(), q_scratch_.end());
   updateTransforms(q_scratch_.data());
-  culled_q0_.assign(q0, q0 + dof);
-  culled_q1_.assign(q1, q1 + dof);
-  culled_stamp_ = world_stamp_;
+  culled_stamp_ = 0;  // no culling holds while this one is made (the stamp is set last)
   // Per pair, its motion over half the segment, and the memory's distance bound carried over to this midpoint.
   auto motion = [&](const std::vector<double>& radius, PairMemory* memory) {
     double m = kCullSlack, drift = 0.0;
@@ -256,6 +269,7 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
       drift += drift_[i] * radius[i];
     }
     memory->upper += drift;
+    if (!(memory->upper >= 0.0)) memory->upper = std::numeric_limits<double>::infinity();  // (NaN: forget it)
     return m;
   };
   std::size_t k = 0;  // the shape pair's index in self_active_ and self_memory_
@@ -292,6 +306,23 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
                                                  ob.pose.translation(), ob.radius, m, memory);
     }
   }
+  culled_q0_.assign(q0, q0 + dof);
+  culled_q1_.assign(q1, q1 + dof);
+  culled_stamp_ = world_stamp_;
+}
+
+bool FclCollisionChecker::cullable(const double* q0, const double* q1) const {
+  // The motion bound counts a prismatic joint's travel within its limits (RobotModel::chainOffsetBound): beyond them
+  // (a measured state a little past a limit) it does not hold. Both ends within: every state between is.
+  const auto& lower = model_.lowerLimits();
+  const auto& upper = model_.upperLimits();
+  for (std::size_t i = 0; i < model_.dof(); ++i) {
+    if (!model_.isPrismatic(i)) continue;
+    for (const double* q : {q0, q1}) {
+      if (!(q[i] >= lower[i] && q[i] <= upper[i])) return false;
+    }
+  }
+  return options_.cull_path_pairs;
 }
 
 bool FclCollisionChecker::setOctreeMargin(double margin) {
@@ -553,8 +584,8 @@ void FclCollisionChecker::checkPath(const double* q0, const double* q1, const Pa
   const double denom = static_cast<double>(n + 1);
   double last_valid = 0.0;
   // Shape pairs that cannot meet anywhere on the segment are left out of its states (worth it from a few states on).
-  const bool culled = options_.cull_path_pairs &&
-                      (culledFor(q0, q1) || n + request.check_start + request.check_goal >= kCullFromStates);
+  const bool culled =
+      cullable(q0, q1) && (culledFor(q0, q1) || n + request.check_start + request.check_goal >= kCullFromStates);
   if (culled && !culledFor(q0, q1)) cullPairs(q0, q1);
   // Checks the state at t; returns true when it collides (and fills the result).
   auto check_at = [&](double t) {

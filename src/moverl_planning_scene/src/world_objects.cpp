@@ -112,6 +112,10 @@ bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std:
       if (!std::isfinite(v) || v <= 0.0 || v > kMaxExtent) return bad("dimensions must be finite, > 0 and <= 1e4 m");
     }
     if (!o.pose.matrix().allFinite()) return bad("pose is not finite");
+    if (!(o.pose.linear().transpose() * o.pose.linear()).isApprox(Eigen::Matrix3d::Identity(), 1e-6) ||
+        o.pose.linear().determinant() < 0.0) {
+      return bad("pose's rotation is not a rotation (orthonormal, determinant 1)");
+    }
     if (o.pose.translation().norm() > kMaxExtent) return bad("pose is more than 1e4 m away");
     const ObstacleMotion& m = o.motion;
     if (m.type != ObstacleMotion::Type::kNone) {

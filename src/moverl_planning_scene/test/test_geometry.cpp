@@ -597,6 +597,75 @@ TEST(PathCulling, ShapeSupportIsWhereGjkSaysTheShapeEnds) {
   EXPECT_TRUE(std::isinf(mps::shapeSupport(plane, Eigen::Isometry3d::Identity(), Vector3d::UnitX())));
 }
 
+// The motion bound counts a prismatic joint's travel within its limits: a segment with one beyond them (a measured
+// state past a limit) is not culled. A slider held 0.5 m out on a 0.1 m rail swings into a box at the segment's end; a
+// bound from the rail's limits would have left the pair out at every state.
+TEST(PathCulling, APrismaticJointBeyondItsLimitsIsNotCulled) {
+  const std::string urdf = R"(<robot name="swing">
+  <link name="base"/>
+  <link name="arm"/>
+  <link name="slider"><collision><geometry><box size="0.04 0.04 0.04"/></geometry></collision></link>
+  <joint name="turn" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="slide" type="prismatic"><parent link="arm"/><child link="slider"/><origin xyz="0.05 0 0"/>
+    <axis xyz="1 0 0"/><limit lower="0" upper="0.1" effort="1" velocity="1"/></joint>
+</robot>)";
+  mps::RobotModelOptions ro;
+  ro.joint_names = {"turn", "slide"};
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(urdf, ro, &error);
+  ASSERT_NE(model, nullptr) << error;
+  mps::FclCheckerOptions co = mps::panda::options(kPandaUrdf).checker;
+  co.acm_samples = 0;
+  auto culled = mps::FclCollisionChecker::create(*model, co, &error);
+  ASSERT_NE(culled, nullptr) << error;
+  co.cull_path_pairs = false;
+  auto every = mps::FclCollisionChecker::create(*model, co, &error);
+  ASSERT_NE(every, nullptr) << error;
+  const double out = 0.5;  // m along the rail, beyond its 0.1 m
+  const Vector3d end(0.05 + out, 0.0, 0.0);
+  const Vector3d at_goal = Eigen::AngleAxisd(0.5, Vector3d::UnitZ()) * end;
+  const std::vector<mps::WorldObject> world = {
+      mps::panda::box("box", 0.05, 0.05, 0.05, at_goal.x(), at_goal.y(), at_goal.z())};
+  ASSERT_TRUE(culled->setWorld(world, &error)) << error;
+  ASSERT_TRUE(every->setWorld(world, &error)) << error;
+  const std::vector<double> q0 = {-0.5, out}, q1 = {0.5, out};
+  // The bound within the rail's limits is far below how far the slider swings from the midpoint to the box.
+  const std::vector<double> mid = {0.0, out};
+  ASSERT_LT(culled->segmentMotionBound(mid.data(), q1.data(), -1, model->linkIndex("slider")),
+            0.5 * ((Eigen::AngleAxisd(0.5, Vector3d::UnitZ()) * end) - end).norm());
+  mps::PathCheckRequest request;
+  mps::PathCheckResult a, b;
+  culled->checkPath(q0.data(), q1.data(), request, &a);
+  every->checkPath(q0.data(), q1.data(), request, &b);
+  EXPECT_EQ(b.status, mps::CollisionStatus::kWorld);
+  EXPECT_EQ(a.status, b.status);
+  EXPECT_EQ(a.collision_fraction, b.collision_fraction);
+}
+
+// A world object's pose must be a rigid transform: the culling's support values and FCL's shapes read its rotation.
+TEST(PathCulling, AnObstacleWhosePoseIsNotRigidIsRefused) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
+  std::string error;
+  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  ASSERT_NE(model, nullptr) << error;
+  mps::FclCheckerOptions co = o.checker;
+  co.acm_samples = 0;
+  auto checker = mps::FclCollisionChecker::create(*model, co, &error);
+  ASSERT_NE(checker, nullptr) << error;
+  mps::WorldObject skewed = mps::panda::box("skewed", 0.1, 0.1, 0.1, 0.5, 0.0, 0.3);
+  skewed.pose.linear() = Eigen::Vector3d(1.0, 2.0, 1.0).asDiagonal();
+  EXPECT_FALSE(checker->setWorld({skewed}, &error));
+  EXPECT_NE(error.find("not a rotation"), std::string::npos) << error;
+  mps::WorldObject mirrored = mps::panda::box("mirrored", 0.1, 0.1, 0.1, 0.5, 0.0, 0.3);
+  mirrored.pose.linear() = Eigen::Vector3d(1.0, 1.0, -1.0).asDiagonal();
+  EXPECT_FALSE(checker->setWorld({mirrored}, &error));
+  mps::WorldObject turned = mps::panda::box("turned", 0.1, 0.1, 0.1, 0.5, 0.0, 0.3);
+  turned.pose.linear() = Eigen::AngleAxisd(0.7, Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  EXPECT_TRUE(checker->setWorld({turned}, &error)) << error;
+}
+
 // The bound the culling rests on: the distance between a point of one link's (padded) shapes and a point of another's
 // (or a point fixed in the base frame, where world obstacles are) changes by no more than segmentMotionBound says
 // between any two states of a segment, over random segments of the Panda and the iiwa and every pair of links.

@@ -243,6 +243,9 @@ class FclCollisionChecker : public CollisionChecker {
   std::uint64_t culled_stamp_ = 0, world_stamp_ = 1;
   /// True when the culling in self_active_ / world_active_ holds for the segment q0 -> q1 in the current world.
   bool culledFor(const double* q0, const double* q1) const;
+  /// True when the segment q0 -> q1 may be culled: cull_path_pairs, and every prismatic joint within its limits at
+  /// both ends (the motion bound counts its travel within them).
+  bool cullable(const double* q0, const double* q1) const;
   double reach_radius_ = 0.0;
   std::vector<Eigen::Isometry3d> link_poses_;
   std::vector<std::pair<double, Eigen::AlignedBox3d>> near_boxes_;  // occupancyDistance's scratch

@@ -44,6 +44,20 @@ std::string pybulletData() {
   return dir.substr(0, dir.rfind('/'));
 }
 
+/// The Panda's model as config/robots/panda.yaml gives it (pybullet_data's URDF); nullptr with *error.
+std::unique_ptr<mps::RobotModel> pandaModel(std::string* error) {
+  return mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf).robot, error);
+}
+
+/// pybullet_data's KUKA iiwa, its seven joints controlled, its meshes next to its URDF; nullptr with *error.
+std::unique_ptr<mps::RobotModel> iiwaModel(std::string* error) {
+  const std::string data = pybulletData();
+  mps::RobotModelOptions o;
+  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
+  o.mesh_base_dir = data + "/kuka_iiwa";
+  return mps::RobotModel::fromUrdf(mps::panda::readFile(data + "/kuka_iiwa/model.urdf"), o, error);
+}
+
 double support(const std::vector<Vector3d>& pts, const Vector3d& u) {
   double best = -1e300;
   for (const auto& p : pts) best = std::max(best, u.dot(p));
@@ -299,12 +313,8 @@ TEST(MeshLoader, ColladaUnitAndNodeTransformApplyUpAxisDoesNot) {
 TEST(IiwaMeshes, EveryStlVertexIsInsideTheSceneShape) {
   const std::string data = pybulletData();
   ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
-  const std::string urdf = data + "/kuka_iiwa/model.urdf";
-  mps::RobotModelOptions o;
-  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
-  o.mesh_base_dir = data + "/kuka_iiwa";
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(urdf), o, &error);
+  auto model = iiwaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   mps::FclCheckerOptions co = mps::panda::options(kPandaUrdf).checker;
   co.acm_samples = 0;
@@ -423,6 +433,15 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
 // must answer exactly as checking every pair at every state: over random segments short and long that meet the world
 // (every obstacle shape, turned, and a moving one checked over a window of its motion), the robot itself, or nothing,
 // with every kind of request.
+void expectSamePairs(const std::vector<mps::ContactPair>& a, const std::vector<mps::ContactPair>& b, int trial) {
+  ASSERT_EQ(a.size(), b.size()) << "trial " << trial;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].a, b[k].a) << "trial " << trial;
+    EXPECT_EQ(a[k].b, b[k].b) << "trial " << trial;
+    EXPECT_EQ(a[k].depth, b[k].depth) << "trial " << trial;
+  }
+}
+
 void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerOptions options,
                                   const std::vector<double>& home, unsigned seed) {
   std::string error;
@@ -492,12 +511,7 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
       culled->checkState(q->data(), request.state, &sa);
       every->checkState(q->data(), request.state, &sb);
       ASSERT_EQ(sa.status, sb.status) << "trial " << trial;
-      ASSERT_EQ(sa.pairs.size(), sb.pairs.size()) << "trial " << trial;
-      for (std::size_t k = 0; k < sa.pairs.size(); ++k) {
-        EXPECT_EQ(sa.pairs[k].a, sb.pairs[k].a) << "trial " << trial;
-        EXPECT_EQ(sa.pairs[k].b, sb.pairs[k].b) << "trial " << trial;
-        EXPECT_EQ(sa.pairs[k].depth, sb.pairs[k].depth) << "trial " << trial;
-      }
+      expectSamePairs(sa.pairs, sb.pairs, trial);
       ends[static_cast<int>(sa.status)] += 1;
     }
     mps::PathCheckResult a, b;
@@ -511,12 +525,7 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
     ASSERT_EQ(a.checked_states, b.checked_states) << "trial " << trial;
     ASSERT_EQ(a.collision_fraction, b.collision_fraction) << "trial " << trial;
     ASSERT_EQ(a.last_valid_fraction, b.last_valid_fraction) << "trial " << trial;
-    ASSERT_EQ(a.pairs.size(), b.pairs.size()) << "trial " << trial;
-    for (std::size_t k = 0; k < a.pairs.size(); ++k) {
-      EXPECT_EQ(a.pairs[k].a, b.pairs[k].a) << "trial " << trial;
-      EXPECT_EQ(a.pairs[k].b, b.pairs[k].b) << "trial " << trial;
-      EXPECT_EQ(a.pairs[k].depth, b.pairs[k].depth) << "trial " << trial;
-    }
+    expectSamePairs(a.pairs, b.pairs, trial);
     ++counts[static_cast<int>(a.status)];
     states += a.checked_states;
   }
@@ -533,19 +542,15 @@ TEST(PathCulling, ThePandaGetsTheSameAnswersAsFromEveryPairAtEveryState) {
   ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
   const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  auto model = pandaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   expectCullingChangesNoAnswer(*model, o.checker, {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}, 7);
 }
 
 TEST(PathCulling, TheIiwaGetsTheSameAnswersAsFromEveryPairAtEveryState) {
-  const std::string data = pybulletData();
-  ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
-  mps::RobotModelOptions o;
-  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
-  o.mesh_base_dir = data + "/kuka_iiwa";
+  ASSERT_FALSE(pybulletData().empty()) << "pybullet_data not found at configure time";
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(data + "/kuka_iiwa/model.urdf"), o, &error);
+  auto model = iiwaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   expectCullingChangesNoAnswer(*model, mps::panda::options(kPandaUrdf).checker, {0.0, 0.5, 0.0, -1.5, 0.0, 1.0, 0.0},
                                11);
@@ -648,7 +653,7 @@ TEST(PathCulling, AnObstacleWhosePoseIsNotRigidIsRefused) {
   ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
   const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  auto model = pandaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   mps::FclCheckerOptions co = o.checker;
   co.acm_samples = 0;
@@ -734,19 +739,15 @@ TEST(PathCulling, ThePandasPointsMoveNoFartherThanTheBound) {
   ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
   const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), o.robot, &error);
+  auto model = pandaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   expectMotionBoundHolds(*model, o.checker, 3);
 }
 
 TEST(PathCulling, TheIiwasPointsMoveNoFartherThanTheBound) {
-  const std::string data = pybulletData();
-  ASSERT_FALSE(data.empty()) << "pybullet_data not found at configure time";
-  mps::RobotModelOptions o;
-  for (int i = 1; i <= 7; ++i) o.joint_names.push_back("lbr_iiwa_joint_" + std::to_string(i));
-  o.mesh_base_dir = data + "/kuka_iiwa";
+  ASSERT_FALSE(pybulletData().empty()) << "pybullet_data not found at configure time";
   std::string error;
-  auto model = mps::RobotModel::fromUrdf(mps::panda::readFile(data + "/kuka_iiwa/model.urdf"), o, &error);
+  auto model = iiwaModel(&error);
   ASSERT_NE(model, nullptr) << error;
   expectMotionBoundHolds(*model, mps::panda::options(kPandaUrdf).checker, 5);
 }

@@ -10,10 +10,12 @@
  * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
  * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda.
  *
- * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--check]
+ * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--check] [--identity]
  *   (synthetic: default worlds/human.yaml, 60 clouds, cameras in turn, --size overrides the cameras' images)
  *   --check: exit 1 when either integration sees free a cell whose centre lies inside the synthetic person (a cell
  *   holding part of an obstacle; the static table's cells are the fixture filter's to clear, and are not counted).
+ *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated) into
+ *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets).
  */
 #include <yaml-cpp/yaml.h>
 
@@ -204,12 +206,14 @@ int usage(const char* why) {
 int main(int argc, char** argv) {
   std::string world = MOVERL_CONFIG_DIR "/../worlds/human.yaml", recording;
   int clouds_wanted = 60, width = 0, height = 0;
-  bool check = false;
+  bool check = false, identity = false;
   std::vector<std::string> positional;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--check") {
       check = true;
+    } else if (a == "--identity") {
+      identity = true;
     } else if (a == "--size" || a == "--recording") {
       if (i + 1 >= argc) return usage((a + " needs a value").c_str());
       const std::string v = argv[++i];
@@ -219,7 +223,7 @@ int main(int argc, char** argv) {
         return usage("--size takes WxH, both >= 2 (e.g. 640x480)");
       }
     } else if (a.rfind("--", 0) == 0) {
-      return usage(("unknown option " + a + " (--size, --recording, --check)").c_str());
+      return usage(("unknown option " + a + " (--size, --recording, --check, --identity)").c_str());
     } else {
       positional.push_back(a);
     }
@@ -316,7 +320,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<mps::OccupancyMap> map;
     std::unique_ptr<mps::CloudIntegrator> integrator;
     std::vector<double> t_points, t_self, t_static, t_update, t_known_free, t_apply, t_total;
-    std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0;
+    std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0, reused = 0;
   };
   Run runs[2];
   runs[0].integration = mps::Integration::kRayCasting;
@@ -329,6 +333,18 @@ int main(int argc, char** argv) {
     }
     io.integration = r.integration;
     r.integrator = std::make_unique<mps::CloudIntegrator>(r.map.get(), &scene->checker(), nullptr, io);
+  }
+  // --identity: a third map, integrated by projection with every block evaluated.
+  std::unique_ptr<mps::OccupancyMap> reference_map;
+  std::unique_ptr<mps::CloudIntegrator> reference;
+  std::size_t identity_failures = 0;
+  std::vector<double> reference_total, reference_update;
+  if (identity) {
+    mps::OccupancyMapOptions every_block = mo;
+    every_block.skip_unchanged_blocks = false;
+    reference_map = mps::OccupancyMap::create(every_block, &error);
+    io.integration = mps::Integration::kProjective;
+    reference = std::make_unique<mps::CloudIntegrator>(reference_map.get(), &scene->checker(), nullptr, io);
   }
   std::printf("%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static%s)\n",
               source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach,
@@ -357,6 +373,29 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s: cloud of %s fell back to ray casting: %s\n", mps::integrationName(r.integration),
                      c.camera.c_str(), why.c_str());
       }
+      if (reference && r.integration == mps::Integration::kProjective) {
+        // The same cloud with every block evaluated: the same hits and misses (as sets), or --identity fails.
+        mps::MapUpdate full;
+        mps::CloudTiming tr;
+        reference->compute(view, c.pose, {c.joints}, &full, &tr, nullptr);
+        const auto a0 = Clock::now();
+        reference_map->apply(full);
+        if (!first) {
+          reference_total.push_back(tr.total() + std::chrono::duration<double>(Clock::now() - a0).count());
+          reference_update.push_back(tr.update);
+        }
+        auto same = [](std::vector<std::uint64_t> a, std::vector<std::uint64_t> b) {
+          std::sort(a.begin(), a.end());
+          std::sort(b.begin(), b.end());
+          return a == b;
+        };
+        if (!same(u.hits, full.hits) || !same(u.misses, full.misses)) {
+          ++identity_failures;
+          std::fprintf(
+              stderr, "identity: cloud %zu of %s: %zu hits, %zu misses with skip_unchanged_blocks, %zu, %zu without\n",
+              compared, c.camera.c_str(), u.hits.size(), u.misses.size(), full.hits.size(), full.misses.size());
+        }
+      }
       // A cell whose centre lies inside the person holds part of the person: seeing it free is a miss of the map.
       if (!std::isnan(c.person_y)) {
         for (std::uint64_t key : u.misses) r.freed_inside += insidePerson(r.map->cellCentre(key), c.person_y) ? 1 : 0;
@@ -374,7 +413,9 @@ int main(int argc, char** argv) {
       r.t_total.push_back(t.total() + apply);
       r.free_cells += u.stats.free_cells;
       r.changed += u.stats.changed_cells;
+      r.reused += u.stats.reused_blocks;
     }
+
     // The occupied cells of the two maps: the ray-cast map's that the projective map lacks (cells it cleared, rightly
     // or not: inside the person, in the synthetic scene, is the wrong kind), and the
     // projective map's extra ones (cells it clears later, or not).
@@ -412,10 +453,13 @@ int main(int argc, char** argv) {
     const std::size_t n = std::max<std::size_t>(1, r.t_total.size());
     for (double v : r.t_total) mean_total[k] += v / n;
     std::printf(
-        "  per cloud: %zu cells seen free, %zu cells changed; %zu occupied cells at the end; %.2f million "
+        "  per cloud: %zu cells seen free, %zu cells changed%s; %zu occupied cells at the end; %.2f million "
         "points/s; %zu fallbacks to ray casting\n",
-        r.free_cells / n, r.changed / n, r.map->occupiedLeafCount(),
-        mean_total[k] > 0 ? points / mean_total[k] / 1e6 : 0.0, r.fallbacks);
+        r.free_cells / n, r.changed / n,
+        r.integration == mps::Integration::kProjective
+            ? (", " + std::to_string(r.reused / n) + " blocks left as the camera's last view").c_str()
+            : "",
+        r.map->occupiedLeafCount(), mean_total[k] > 0 ? points / mean_total[k] / 1e6 : 0.0, r.fallbacks);
     if (recording.empty()) {
       std::printf("  cells seen free with their centre inside the person (all clouds): %zu\n", r.freed_inside);
     }
@@ -429,6 +473,14 @@ int main(int argc, char** argv) {
   if (recording.empty()) {
     std::printf("  of the ray-cast map's missing cells, with their centre inside the person (all clouds): %zu\n",
                 ray_only_person);
+  }
+  if (identity) {
+    std::printf("projective, every block evaluated (skip_unchanged_blocks off, the same clouds):\n");
+    report("pinhole fit + update", reference_update);
+    report("total", reference_total);
+    std::printf("identity (skip_unchanged_blocks against every block evaluated): %zu of %zu updates differ\n",
+                identity_failures, clouds.size());
+    if (identity_failures > 0) return 1;
   }
   if (check && (runs[0].freed_inside > 0 || runs[1].freed_inside > 0)) {
     std::printf("CHECK FAILED: cells inside the person were seen free\n");

@@ -43,6 +43,42 @@ constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4, kPresent = 0x80;
 // beam): both integrations count it as seen free.
 constexpr bool onlyFixtureEnds(std::uint8_t end) { return (end & ~kPresent) == kFixture; }
 
+/// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
+/// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
+/// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
+struct Footprint {
+  int state = 1;
+  double zmin = 0.0, zmax = 0.0;
+  int u0 = 0, u1 = -1, v0 = 0, v1 = -1;
+};
+
+/// skip_unchanged_blocks: a cloud from a pose and intrinsics this close to a remembered view's is that camera's next
+/// view (fitPinhole's intrinsics of a fixed camera differ from cloud to cloud by about 1e-7 px, the points' float
+/// rounding); the view's own values are then used. At most kMaxViews cameras are remembered (the least recently seen
+/// one makes way).
+constexpr double kSameCameraPx = 1e-4, kSamePose = 1e-9;
+constexpr std::size_t kMaxViews = 8;
+
+bool sameCamera(const PinholeCamera& a, const PinholeCamera& b) {
+  if (a.width != b.width || a.height != b.height) return false;
+  // The largest difference of the two models' pixel coordinates over the image's rays.
+  const double ru = std::max(a.cx, a.width - 1.0 - a.cx) / a.fx, rv = std::max(a.cy, a.height - 1.0 - a.cy) / a.fy;
+  return std::fabs(a.fx - b.fx) * ru + std::fabs(a.cx - b.cx) <= kSameCameraPx &&
+         std::fabs(a.fy - b.fy) * rv + std::fabs(a.cy - b.cy) <= kSameCameraPx;
+}
+
+bool samePose(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff() <= kSamePose;
+}
+
+/// splitmix64's finalizer: a cell's id and flags to a 64-bit hash (a block's end cells: the sum of theirs).
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
 void clearBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] &= ~(std::uint64_t{1} << (k & 63)); }
@@ -113,6 +149,8 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->super_dirty_.assign(static_cast<std::size_t>(supers), 0);
   m->seen_block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->seen_super_count_.assign(static_cast<std::size_t>(supers), 0);
+  m->block_dirtied_.assign(static_cast<std::size_t>(blocks), 0);
+  m->end_hash_.assign(static_cast<std::size_t>(blocks), 0);
   m->log_hit_ = logodds(o.prob_hit);
   m->log_miss_ = logodds(o.prob_miss);
   m->clamp_min_ = logodds(o.clamp_min);
@@ -128,6 +166,19 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->fillUnobserved(o.unknown_occupied);
   return m;
 }
+
+struct OccupancyMap::View {
+  PinholeCamera camera;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  std::uint64_t id = 0;    ///< the epoch this camera was first seen at: tags the footprints computed for it
+  std::uint64_t last = 0;  ///< the epoch of its last view (0: none)
+  std::vector<float> free_depth, past_depth;            ///< that view's depths (computeUpdateProjective's)
+  std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
+  std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
+  std::vector<std::uint64_t> block_none, super_none;    ///< the epoch of a view that saw none of its cells free
+  std::vector<std::uint64_t> end_hash;                  ///< per block: end_hash_ at the last view
+  std::vector<std::int64_t> end_blocks;                 ///< the blocks where end_hash is not 0
+};
 
 OccupancyMap::~OccupancyMap() = default;
 
@@ -210,6 +261,7 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
 void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
                                  const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
                                  MapUpdate* out) {
+  ++epoch_;
   collectEndCells(points, robot_mask, origin, out);
   // 3. Beams from the origin to the centroid of each end cell's points (octomap's discretized insertion casts to the
   //    cell's centre: with a sparse cloud of a static scene the same centres are hit every view, and a cell that no
@@ -331,18 +383,59 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
 
 void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& points,
                                            const std::vector<std::uint8_t>& robot_mask, const std::vector<float>& depth,
-                                           const std::vector<std::uint8_t>& pixel_mask, const PinholeCamera& camera,
-                                           const Eigen::Isometry3d& sensor_pose, MapUpdate* out) {
-  const int w = camera.width, h = camera.height;
-  if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(camera.fx > 0) || !(camera.fy > 0)) {
+                                           const std::vector<std::uint8_t>& pixel_mask, const PinholeCamera& fitted,
+                                           const Eigen::Isometry3d& fitted_pose, MapUpdate* out) {
+  ++epoch_;
+  const int w = fitted.width, h = fitted.height;
+  // 1-2. End cells and hits, as computeUpdate's.
+  collectEndCells(points, robot_mask, fitted_pose.translation(), out);
+  if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(fitted.fx > 0) || !(fitted.fy > 0)) {
     // A caller's error: nothing is seen free (the hits still count).
-    collectEndCells(points, robot_mask, sensor_pose.translation(), out);
     for (std::int64_t c : order_) end_[c] = 0;
     out->stats.changed_cells = out->hits.size();
     return;
   }
-  // 1-2. End cells and hits, as computeUpdate's.
-  collectEndCells(points, robot_mask, sensor_pose.translation(), out);
+  // The camera: a remembered one when this cloud comes from its pose and intrinsics (kSameCameraPx, kSamePose), whose
+  // values are used from here on; else a new one, in place of the one seen longest ago.
+  View* view = nullptr;
+  for (auto& v : views_) {
+    if (sameCamera(v->camera, fitted) && samePose(v->pose, fitted_pose)) view = v.get();
+  }
+  if (view == nullptr) {
+    if (views_.size() < kMaxViews) {
+      views_.push_back(std::make_unique<View>());
+      view = views_.back().get();
+      const std::size_t blocks = block_dirty_.size(), supers = super_dirty_.size();
+      view->block_fp.resize(blocks);
+      view->block_fp_id.assign(blocks, 0);
+      view->block_none.assign(blocks, 0);
+      view->end_hash.assign(blocks, 0);
+      view->super_fp.resize(supers);
+      view->super_fp_id.assign(supers, 0);
+      view->super_none.assign(supers, 0);
+    } else {
+      view = std::min_element(views_.begin(), views_.end(), [](const auto& a, const auto& b) {
+               return a->last < b->last;
+             })->get();
+    }
+    view->camera = fitted;
+    view->pose = fitted_pose;
+    view->id = epoch_;
+    view->last = 0;
+    for (std::int64_t b : view->end_blocks) view->end_hash[b] = 0;
+    view->end_blocks.clear();
+  }
+  const PinholeCamera& camera = view->camera;
+  const Eigen::Isometry3d& sensor_pose = view->pose;
+  // The end cells per block (a sum of hashes of their ids and flags): the cloud's points in a block, as far as they
+  // decide its cells (hits, and the fixture end cells seen free below, take no part in the projection).
+  for (std::int64_t c : order_) {
+    if ((end_[c] & (kHit | kFixture)) == 0) continue;
+    const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
+    const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+    if (end_hash_[b] == 0) end_blocks_.push_back(b);
+    end_hash_[b] += mix((static_cast<std::uint64_t>(c) << 8) | (end_[c] & ~kPresent));
+  }
   std::size_t free_cells = 0;
   auto see = [&](std::int64_t k) {
     setBit(&seen_, k);
@@ -421,18 +514,23 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     }
     return m;
   };
-  // A box of the grid as the camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
-  // rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels,
-  // 1 nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
+  // skip_unchanged_blocks: what changed since this camera's last view. A block's cells are decided by the depths over
+  // its rectangle (through the pyramids: over the tiles that cover it, the same tiles `changed` looks at one pixel
+  // wider), the cloud's end cells in it (hits, fixture cells) and which of its cells are clamped free. When none of
+  // these changed and that view saw none of its cells free, this one sees none either; a block that turned dirty
+  // since (block_dirtied_) is looked at again. Skipping a block can only leave cells as they are (no miss is added).
+  const std::uint64_t last = options_.skip_unchanged_blocks ? view->last : 0;
+  if (last != 0) {
+    changed_.resize(pixels);
+    for (std::size_t k = 0; k < pixels; ++k) {
+      changed_[k] = free_depth_[k] != view->free_depth[k] || past_depth_[k] != view->past_depth[k] ? 1.0f : 0.0f;
+    }
+    build(&changed_max_, changed_, false);
+  }
   const Eigen::Matrix3d rt = sensor_pose.linear().transpose();
   const Eigen::Vector3d tr = sensor_pose.translation();
   const double res = options_.resolution;
   const Eigen::Vector3d axis[3] = {rt.col(0) * res, rt.col(1) * res, rt.col(2) * res};  // one cell along x, y, z
-  struct Footprint {
-    int state = 1;
-    double zmin = 0.0, zmax = 0.0;
-    int u0 = 0, u1 = -1, v0 = 0, v1 = -1;
-  };
   constexpr double kNear = 1e-6;
   auto footprint = [&](const std::int64_t* a, const std::int64_t* b, Footprint* f) {
     // Cells [a, b] (inclusive): the box from a's low corner to b's high corner, in the optical frame.
@@ -466,6 +564,16 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     f->v1 = static_cast<int>(std::min(h - 1.0, std::floor(vmax)));
     f->state = f->u0 > f->u1 || f->v0 > f->v1 ? 1 : 0;
   };
+  // A block's or superblock's footprint, computed once per camera (it depends on the pose and intrinsics only).
+  auto cached = [&](std::vector<Footprint>* fps, std::vector<std::uint64_t>* ids, std::int64_t index,
+                    const std::int64_t* a, const std::int64_t* b) -> const Footprint& {
+    Footprint& f = (*fps)[static_cast<std::size_t>(index)];
+    if ((*ids)[static_cast<std::size_t>(index)] != view->id) {
+      footprint(a, b, &f);
+      (*ids)[static_cast<std::size_t>(index)] = view->id;
+    }
+    return f;
+  };
   // A box wholly behind what every pixel that may see it saw holds nothing this cloud sees free.
   auto hidden = [&](const Footprint& f) {
     return f.state == 1 || (f.state == 0 && f.zmin > over(max_depth_, false, f.u0, f.u1, f.v0, f.v1));
@@ -475,29 +583,47 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const double half_depth = 0.5 * (std::fabs(axis[0].z()) + std::fabs(axis[1].z()) + std::fabs(axis[2].z()));
   std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3], at[3];
   Footprint f;
+  std::size_t reused = 0;
   for (s[0] = 0; s[0] < supers_[0]; ++s[0]) {
     for (s[1] = 0; s[1] < supers_[1]; ++s[1]) {
       for (s[2] = 0; s[2] < supers_[2]; ++s[2]) {
-        if (super_dirty_[(s[0] * supers_[1] + s[1]) * supers_[2] + s[2]] == 0) continue;  // all clamped free
+        const std::int64_t si = (s[0] * supers_[1] + s[1]) * supers_[2] + s[2];
+        if (super_dirty_[si] == 0) continue;  // all clamped free
         for (int i = 0; i < 3; ++i) {
           sa[i] = s[i] << kSuperShift;
           sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
         }
-        footprint(sa, sb, &f);
-        if (hidden(f)) continue;
+        if (hidden(cached(&view->super_fp, &view->super_fp_id, si, sa, sb))) {
+          view->super_none[si] = epoch_;
+          continue;
+        }
         for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
           for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
             for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-              if (block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] == 0) continue;
+              const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
+              if (block_dirty_[bi] == 0) continue;
               for (int i = 0; i < 3; ++i) {
                 ba[i] = bl[i] << kBlockShift;
                 bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
               }
-              footprint(ba, bb, &f);
-              if (hidden(f)) continue;
+              const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
+              if (hidden(fb)) {
+                view->block_none[bi] = epoch_;
+                continue;
+              }
+              if (last != 0 && (view->block_none[bi] == last || view->super_none[si] == last) &&
+                  block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] &&
+                  fb.state == 0 &&  // across the camera's plane: its cells' pixels are not within a rectangle
+                  over(changed_max_, false, std::max(0, fb.u0 - 1), std::min(w - 1, fb.u1 + 1), std::max(0, fb.v0 - 1),
+                       std::min(h - 1, fb.v1 + 1)) == 0.0f) {
+                view->block_none[bi] = epoch_;  // as the last view left it
+                ++reused;
+                continue;
+              }
+              const std::size_t seen_before = free_cells;
               // A block wholly in front of what every pixel that may see it saw (robot pixels aside): each of its
               // cells passes the rectangle test; a pixel crossing the cell and seeing past it is what is left.
-              const bool in_front = f.state == 0 && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) >= f.zmax;
+              const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
               // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
               const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
               for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
@@ -568,13 +694,27 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   }
                 }
               }
+              view->block_none[bi] = free_cells == seen_before ? epoch_ : 0;
             }
           }
         }
       }
     }
   }
+  // This view, for the camera's next one.
+  view->last = epoch_;
+  view->free_depth.swap(free_depth_);
+  view->past_depth.swap(past_depth_);
+  for (std::int64_t b : view->end_blocks) view->end_hash[b] = 0;
+  view->end_blocks.clear();
+  for (std::int64_t b : end_blocks_) {
+    view->end_hash[b] = end_hash_[b];
+    if (end_hash_[b] != 0) view->end_blocks.push_back(b);
+    end_hash_[b] = 0;
+  }
+  end_blocks_.clear();
   out->stats.free_cells = free_cells;
+  out->stats.reused_blocks = reused;
   out->stats.changed_cells = out->hits.size() + out->misses.size();
 }
 
@@ -598,6 +738,7 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
   const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
   block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
+  if (dirty && !was_dirty) block_dirtied_[b] = epoch_;
   super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
   if (now == testBit(occupied_, c)) return;
   if (now) {
@@ -626,6 +767,7 @@ void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdat
 }
 
 void OccupancyMap::apply(const MapUpdate& update) {
+  ++epoch_;  // cells it turns not clamped free are newer than every view so far
   for (const auto* cells : {&update.hits, &update.misses}) {
     const float u = cells == &update.hits ? log_hit_ : log_miss_;
     for (std::uint64_t key : *cells) {
@@ -661,6 +803,8 @@ void OccupancyMap::setUnknownOccupied(bool on) {
 }
 
 void OccupancyMap::fillUnobserved(bool on) {
+  ++epoch_;
+  for (auto& view : views_) view->last = 0;  // every cell may change: no view is up to date
   const float unknown = std::numeric_limits<float>::quiet_NaN();
   std::fill(occupied_.begin(), occupied_.end(), 0);
   std::fill(block_count_.begin(), block_count_.end(), 0);

@@ -5,6 +5,7 @@
  */
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -266,6 +267,119 @@ TEST(Projective, RobotPixelsHideNothingBesideThemAndSeeNothingFree) {
     EXPECT_FALSE(map->observed(behind)) << on_robot;
     EXPECT_EQ(map->occupied(link), !on_robot) << on_robot;  // the link's own cells: hit as an obstacle only
   }
+}
+
+TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
+  // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
+  // maps, one with it and one evaluating every block, take the same views: two fixed cameras that overlap (intrinsics
+  // jittered as fitPinhole's are), one that moves now and then, a ball that walks, a static one, robot pixels that
+  // move, a patch without returns that comes and goes, a cloud integrated by ray casting now and then, and the
+  // unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
+  const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
+  std::size_t reused = 0;
+  for (bool unknown_occupied : {false, true}) {
+    mps::OccupancyMapOptions o = mps::panda::mapOptions();
+    o.resolution = 0.02;
+    o.max_range = 3.0;
+    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+    o.unknown_occupied = unknown_occupied;
+    std::string error;
+    auto skipping = mps::OccupancyMap::create(o, &error);
+    o.skip_unchanged_blocks = false;
+    auto every = mps::OccupancyMap::create(o, &error);
+    ASSERT_TRUE(skipping && every) << error;
+    for (int n = 0; n < 90; ++n) {
+      const int which = n % 3;
+      Eigen::Isometry3d pose = lookingAlongX(which == 0   ? Eigen::Vector3d(0.0, 0.0, 0.0)
+                                             : which == 1 ? Eigen::Vector3d(0.0, 0.4, 0.2)
+                                                          : Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0));
+      mps::PinholeCamera camera = kCamera;
+      camera.fx += 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
+      const double t = 0.15 * n;
+      const Eigen::Vector3d walking(1.1, 0.35 * std::sin(t), 0.0);
+      const Eigen::Vector3d a = pose.inverse() * walking, b = pose.inverse() * fixed_ball;
+      const bool robot_here = which == 0;
+      const int robot_u0 = 10 + (n / 6) % 20;  // robot pixels (a link in front) that move every other view of A
+      auto depth = [&](int u, int v) {
+        if (robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35) return 0.7;
+        if (which == 1 && (n / 9) % 2 == 1 && u > 60 && v < 15) return std::numeric_limits<double>::quiet_NaN();
+        return std::min(sphereOrWall(camera, u, v, a, 0.12, 2.0), sphereOrWall(camera, u, v, b, 0.1, 2.0));
+      };
+      const auto xyz = image(camera, depth);
+      std::vector<std::uint8_t> pixel_mask, point_mask;
+      for (int v = 0; v < camera.height; ++v) {
+        for (int u = 0; u < camera.width; ++u) {
+          const bool robot = robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35;
+          pixel_mask.push_back(robot ? mps::kPointOnRobot : mps::kPointObstacle);
+          if (std::isfinite(xyz[3 * (v * camera.width + u) + 2])) point_mask.push_back(pixel_mask.back());
+        }
+      }
+      const auto points = mapPoints(xyz, pose);
+      mps::MapUpdate us, ue;
+      if (n % 17 == 16) {  // a cloud integrated by ray casting (a fallback): the views' records must stay right
+        skipping->computeUpdate(points, point_mask, pose.translation(), &us);
+        every->computeUpdate(points, point_mask, pose.translation(), &ue);
+      } else {
+        skipping->computeUpdateProjective(points, point_mask, depths(xyz), pixel_mask, camera, pose, &us);
+        every->computeUpdateProjective(points, point_mask, depths(xyz), pixel_mask, camera, pose, &ue);
+      }
+      reused += us.stats.reused_blocks;
+      EXPECT_EQ(ue.stats.reused_blocks, 0u);
+      for (auto* cells : {&us.hits, &us.misses, &ue.hits, &ue.misses}) std::sort(cells->begin(), cells->end());
+      ASSERT_EQ(us.hits, ue.hits) << "view " << n << " unknown_occupied " << unknown_occupied;
+      ASSERT_EQ(us.misses, ue.misses) << "view " << n << " unknown_occupied " << unknown_occupied;
+      skipping->apply(us);
+      every->apply(ue);
+      if (n == 40) {
+        skipping->setUnknownOccupied(!unknown_occupied);
+        every->setUnknownOccupied(!unknown_occupied);
+      }
+      if (n == 60) {
+        skipping->clear();
+        every->clear();
+      }
+    }
+  }
+  EXPECT_GT(reused, 1000u);  // it did skip
+}
+
+TEST(Projective, ACellThePointsStopHittingIsLookedAtAgainThoughTheDepthsStay) {
+  // The hits come from the cloud's points, the free space from its depths. A point off every pixel's ray (a cloud
+  // within fitPinhole's tolerance, not on it) hits its cell in every view, so the cell never turns clamped free; when
+  // the point is gone and the depths are the same, that cell's block must be looked at again (the end cells in each
+  // block are part of what a view remembers), and the cell is seen free as with every block evaluated.
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const mps::PinholeCamera fine{320, 240, 240.0, 240.0, 159.5, 119.5};
+  const auto wall = image(fine, [](int, int) { return 2.0; });
+  const Eigen::Vector3d stray(1.0, 0.013, 0.007);
+  auto views = [&](bool skip) {  // views until the cell is free again once the point is gone
+    mps::OccupancyMapOptions o = mps::panda::mapOptions();
+    o.resolution = 0.02;
+    o.max_range = 3.0;
+    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+    o.skip_unchanged_blocks = skip;
+    std::string error;
+    auto map = mps::OccupancyMap::create(o, &error);
+    EXPECT_TRUE(map) << error;
+    mps::MapUpdate u;
+    for (int n = 0; n < 8; ++n) {
+      auto points = mapPoints(wall, pose);
+      points.push_back(stray);
+      map->computeUpdateProjective(points, {}, depths(wall), {}, fine, pose, &u);
+      map->apply(u);
+    }
+    EXPECT_EQ(u.stats.reused_blocks > 0, skip);  // the settled blocks are left alone
+    EXPECT_TRUE(map->occupied(stray));
+    for (int n = 1; n <= 20; ++n) {
+      map->computeUpdateProjective(mapPoints(wall, pose), {}, depths(wall), {}, fine, pose, &u);
+      map->apply(u);
+      if (!map->occupied(stray)) return n;
+    }
+    return 1000;
+  };
+  const int every = views(false);
+  EXPECT_LT(every, 20);
+  EXPECT_EQ(views(true), every);
 }
 
 TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {

@@ -20,7 +20,12 @@
  * pyramids of the image) is seen free when some pixel's ray crosses it and sees past all of it, and every pixel whose
  * ray may cross it (the bounding rectangle of its corners' projections), robot pixels aside, sees past all of it too.
  * It never sees free a cell where a pixel that may cross it saw a surface short of the cell's far side; ray casting's
- * beams to the end cells' centroids can graze such cells.
+ * beams to the end cells' centroids can graze such cells. A fixed camera sees mostly the same image view after view:
+ * a block whose inputs did not change since the camera's last view (the depths over the tiles its rectangle reads, the
+ * cloud's end cells in it, none of its cells newly not clamped free), and in which that view saw no cell free, is left
+ * as it is (skip_unchanged_blocks; the cells that stay unknown behind surfaces are most of them). The updates are the
+ * same as when every block is evaluated (gtest Projective.SkippingUnchangedBlocksGivesTheSameUpdates,
+ * `map_benchmark --identity`).
  *
  * Unknown space: by default cells never observed are unknown and count as free for collision checking (as in
  * MoveIt). With unknown_occupied they count as occupied (a person may stand where no camera looks): every cell of the
@@ -68,6 +73,11 @@ struct OccupancyMapOptions {
   /// Cells never observed count as occupied (see the file comment). Set by the scenario (a world file's `sensing:
   /// unknown_occupied:`), not by config/planning_scene.yaml; setUnknownOccupied switches it later.
   bool unknown_occupied = false;
+  /// computeUpdateProjective leaves a block of cells as a camera's last view left it when nothing it depends on changed
+  /// since (the same camera, the same depths over the block's pixels, the same cloud points in it, none of its cells
+  /// newly not clamped free) and that view saw none of its cells free: the same updates with fewer cells projected.
+  /// Not a tunable (the updates do not depend on it): false evaluates every block, for the tests that compare the two.
+  bool skip_unchanged_blocks = true;
 };
 
 /// \brief What a point of a cloud is, as computeUpdate's mask says.
@@ -94,6 +104,7 @@ struct MapUpdateStats {
   std::size_t free_cells = 0;     ///< distinct cells marked free (projective: those not yet clamped free only)
   std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
   std::size_t known_free = 0;     ///< unobserved cells turned free by addKnownFree (inside the robot, static objects)
+  std::size_t reused_blocks = 0;  ///< projective: blocks left as the camera's last view (skip_unchanged_blocks)
 };
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.
@@ -182,6 +193,9 @@ class OccupancyMap {
   const OccupancyMapOptions& options() const { return options_; }
 
  private:
+  /// What computeUpdateProjective keeps of one camera's last view (skip_unchanged_blocks); defined in the .cpp.
+  struct View;
+
   OccupancyMap() = default;
   /// The cell of a coordinate (octomap's key convention), or -1 outside the map.
   std::int64_t cellOf(const Eigen::Vector3d& p) const;
@@ -237,6 +251,16 @@ class OccupancyMap {
   float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied
   float threshold_ = 0.0f;          ///< log-odds of occupancy_threshold
   std::int64_t seen_occupied_ = 0;  ///< observed cells at or above the threshold
+  // skip_unchanged_blocks: a counter of the map's updates (computeUpdate*, apply, clear) and, per block, its value when
+  // a cell of the block last turned not clamped free (a view that saw the block before then is out of date); the
+  // cameras' last views; per block, a sum of hashes of the cloud's end cells in it (and the blocks holding any).
+  std::uint64_t epoch_ = 0;
+  std::vector<std::uint64_t> block_dirtied_;
+  std::vector<std::unique_ptr<View>> views_;
+  std::vector<std::uint64_t> end_hash_;
+  std::vector<std::int64_t> end_blocks_;
+  std::vector<float> changed_;                   ///< per pixel: 1 where the depths differ from the camera's last view
+  std::vector<std::vector<float>> changed_max_;  ///< its max pyramid
 };
 
 }  // namespace moverl_planning_scene

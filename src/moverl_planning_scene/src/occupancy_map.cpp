@@ -37,11 +37,11 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
   return true;
 }
 
-// The flags of the points that end in a cell (end_): kPresent marks a cell as listed in order_.
-constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4, kPresent = 0x80;
+// The flags of the points that end in a cell (order_flags_).
+constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4;
 // A cell where only fixture points end was seen down to the fixture's surface (anything above it would have stopped a
 // beam): both integrations count it as seen free.
-constexpr bool onlyFixtureEnds(std::uint8_t end) { return (end & ~kPresent) == kFixture; }
+constexpr bool onlyFixtureEnds(std::uint8_t end) { return end == kFixture; }
 
 /// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
 /// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
@@ -134,8 +134,6 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->observed_.assign(words, 0);
   m->occupied_.assign(words, 0);
   m->clamped_.assign(words, 0);
-  m->end_.assign(static_cast<std::size_t>(cells), 0);
-  m->end_slot_.assign(static_cast<std::size_t>(cells), 0);
   std::int64_t blocks = 1, supers = 1;
   for (int i = 0; i < 3; ++i) {
     m->blocks_[i] = ((m->size_[i] - 1) >> kBlockShift) + 1;
@@ -188,6 +186,27 @@ std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
   return (i * size_[1] + j) * size_[2] + k;
 }
 
+std::size_t OccupancyMap::slot(std::int64_t c) const {
+  // Fibonacci hashing, then linear probing to c's slot or the first empty one.
+  const std::size_t mask = slot_key_.size() - 1;
+  std::size_t at =
+      static_cast<std::size_t>((static_cast<std::uint64_t>(c) * 0x9e3779b97f4a7c15ULL) >> (64 - slot_bits_));
+  while (slot_key_[at] != c && slot_key_[at] != -1) at = (at + 1) & mask;
+  return at;
+}
+
+void OccupancyMap::growSlots() {
+  slot_bits_ = std::max(12, slot_bits_ + 1);
+  slot_key_.assign(std::size_t{1} << slot_bits_, -1);
+  slot_index_.assign(slot_key_.size(), 0);
+  for (std::size_t n = 0; n < order_.size(); ++n) {
+    const std::size_t at = slot(order_[n]);
+    slot_key_[at] = order_[n];
+    slot_index_[at] = static_cast<std::uint32_t>(n);
+    order_slot_[n] = at;
+  }
+}
+
 void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                                    const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
                                    MapUpdate* out) {
@@ -197,10 +216,14 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
   // 1. End points (beyond max_range: cut there, free space only), grouped by cell: one beam per end cell (step 3),
-  //    to the centroid of the cell's points (order_end_ sums them, order_count_ counts them). end_ holds the flags of
-  //    each cell's points (reset at the end), order_ the cells in the order of their first point (neighbouring
-  //    pixels cast neighbouring beams one after another: cache).
+  //    to the centroid of the cell's points (order_end_ sums them, order_count_ counts them). order_flags_ holds the
+  //    flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels cast
+  //    neighbouring beams one after another: cache). The cells are found in a small hash table (slot_key_), not in
+  //    a per-cell array: a cloud's end cells are scattered over the grid, and each would miss the cache.
+  for (std::size_t at : order_slot_) slot_key_[at] = -1;  // the last cloud's (by place: a probe needs the chain)
+  order_slot_.clear();
   order_.clear();
+  order_flags_.clear();
   order_end_.clear();
   order_count_.clear();
   for (std::size_t k = 0; k < points.size(); ++k) {
@@ -230,17 +253,22 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                          fz = static_cast<float>(end.z());
     const std::int64_t c = cellOf(Eigen::Vector3d(fx, fy, fz));
     if (c < 0) continue;
-    if (end_[c] == 0) {
-      end_slot_[c] = static_cast<std::uint32_t>(order_.size());
+    if (2 * (order_.size() + 1) > slot_key_.size()) growSlots();
+    const std::size_t at = slot(c);
+    std::uint32_t n = slot_index_[at];
+    if (slot_key_[at] != c) {
+      n = static_cast<std::uint32_t>(order_.size());
+      slot_key_[at] = c;
+      slot_index_[at] = n;
+      order_slot_.push_back(at);
       order_.push_back(c);
-      order_end_.push_back(end);
-      order_count_.push_back(1);
-    } else {
-      const std::uint32_t n = end_slot_[c];
-      order_end_[n] += end;
-      ++order_count_[n];
+      order_flags_.push_back(0);
+      order_end_.push_back(Eigen::Vector3d::Zero());
+      order_count_.push_back(0);
     }
-    end_[c] |= flag | kPresent;
+    order_end_[n] += end;
+    ++order_count_[n];
+    order_flags_[n] |= flag;
   }
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
   std::fill(seen_.begin(), seen_.end(), 0);
@@ -249,8 +277,9 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   // obstacle point is hit even when robot or fixture points end in it too: something else is there (a hand next to a
   // link).
   std::size_t hit_cells = 0;
-  for (std::int64_t c : order_) {
-    if ((end_[c] & kHit) == 0) continue;
+  for (std::size_t n = 0; n < order_.size(); ++n) {
+    if ((order_flags_[n] & kHit) == 0) continue;
+    const std::int64_t c = order_[n];
     setBit(&hit_, c);
     ++hit_cells;
     if (!(value_[c] == clamp_max_)) out->hits.push_back(static_cast<std::uint64_t>(c));  // a hit changes it
@@ -282,8 +311,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     const double inset = 1e-6 * options_.resolution;
     const Eigen::Vector3d end =
         (order_end_[n].array() / order_count_[n]).max(lo + inset).min(lo + (options_.resolution - inset)).matrix();
-    const bool through_end = onlyFixtureEnds(end_[c_end]);
-    end_[c_end] = 0;  // reset for the next cloud
+    const bool through_end = onlyFixtureEnds(order_flags_[n]);
     double t0, t1;
     if (!clipToBox(origin, end, options_.bounds, &t0, &t1)) continue;
     const Eigen::Vector3d a = origin + t0 * (end - origin),
@@ -391,7 +419,6 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   collectEndCells(points, robot_mask, fitted_pose.translation(), out);
   if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(fitted.fx > 0) || !(fitted.fy > 0)) {
     // A caller's error: nothing is seen free (the hits still count).
-    for (std::int64_t c : order_) end_[c] = 0;
     out->stats.changed_cells = out->hits.size();
     return;
   }
@@ -429,12 +456,13 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const Eigen::Isometry3d& sensor_pose = view->pose;
   // The end cells per block (a sum of hashes of their ids and flags): the cloud's points in a block, as far as they
   // decide its cells (hits, and the fixture end cells seen free below, take no part in the projection).
-  for (std::int64_t c : order_) {
-    if ((end_[c] & (kHit | kFixture)) == 0) continue;
+  for (std::size_t n = 0; n < order_.size(); ++n) {
+    if ((order_flags_[n] & (kHit | kFixture)) == 0) continue;
+    const std::int64_t c = order_[n];
     const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
     const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
     if (end_hash_[b] == 0) end_blocks_.push_back(b);
-    end_hash_[b] += mix((static_cast<std::uint64_t>(c) << 8) | (end_[c] & ~kPresent));
+    end_hash_[b] += mix((static_cast<std::uint64_t>(c) << 8) | order_flags_[n]);
   }
   std::size_t free_cells = 0;
   auto see = [&](std::int64_t k) {
@@ -443,9 +471,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     if (!testBit(clamped_, k)) out->misses.push_back(static_cast<std::uint64_t>(k));
   };
   // A cell where only fixture points end was seen down to the fixture's surface: seen free (computeUpdate's rule).
-  for (std::int64_t c : order_) {
-    if (onlyFixtureEnds(end_[c]) && !testBit(seen_, c)) see(c);
-    end_[c] = 0;  // reset for the next cloud
+  for (std::size_t n = 0; n < order_.size(); ++n) {
+    if (onlyFixtureEnds(order_flags_[n]) && !testBit(seen_, order_[n])) see(order_[n]);
   }
   // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
   //    max_range (a beam is integrated up to max_range, and a no-return at the far plane clears up to it); 0 for a
@@ -545,6 +572,24 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       return;
     }
     if (f->zmin <= kNear) {
+      // Across the camera's plane: no projection. Still nothing to see when the box lies wholly beyond one of the
+      // image's four sides, a plane through the camera: u < 0 where fx x + cx z < 0 (z > 0), u > w - 1 where
+      // fx x + (cx - w + 1) z > 0, and so on (linear in the box's points: its corners decide).
+      // (a, b, axis): a coordinate + b z < 0 for every corner puts the box beyond that side.
+      const double side[4][3] = {{camera.fx, camera.cx, 0},
+                                 {-camera.fx, w - 1.0 - camera.cx, 0},
+                                 {camera.fy, camera.cy, 1},
+                                 {-camera.fy, h - 1.0 - camera.cy, 1}};
+      for (const auto& pl : side) {
+        const int i = static_cast<int>(pl[2]);
+        // The largest of a p_i + b p_z over the box's corners: from s0, each edge adds where it adds.
+        double most = pl[0] * s0[i] + pl[1] * s0.z();
+        for (int k = 0; k < 3; ++k) most += std::max(0.0, pl[0] * e[k][i] + pl[1] * e[k].z());
+        if (most < 0.0) {
+          f->state = 1;
+          return;
+        }
+      }
       f->state = 2;
       return;
     }

@@ -269,6 +269,57 @@ TEST(Projective, RobotPixelsHideNothingBesideThemAndSeeNothingFree) {
   }
 }
 
+TEST(Projective, CellsJustInFrontOfTheCameraAreSeenAndNoneBesideIt) {
+  // The blocks across the camera's plane have no rectangle in the image; the ones wholly beyond a side of the image
+  // hold nothing to see, the others are looked into cell by cell. A camera inside the map, a wall 2 m ahead: a cell
+  // 2-4 cm in front of the lens (in a block across its plane) is seen free; cells beside it, out of the image, and
+  // behind the camera are not. Two cameras: one centred, one whose principal point and focal lengths differ by axis.
+  for (const mps::PinholeCamera& camera : {kCamera, mps::PinholeCamera{80, 60, 35.0, 70.0, 20.0, 45.0}}) {
+    auto map = makeMap();
+    const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+    const auto wall = image(camera, [](int, int) { return 2.0; });
+    mps::MapUpdate u;
+    map->computeUpdateProjective(mapPoints(wall, pose), {}, depths(wall), {}, camera, pose, &u);
+    map->apply(u);
+    EXPECT_TRUE(map->observed(Eigen::Vector3d(0.03, 0.0, 0.0)));
+    EXPECT_TRUE(map->observed(Eigen::Vector3d(0.05, -0.01, 0.0)));
+    EXPECT_FALSE(map->observed(Eigen::Vector3d(0.03, 0.5, 0.0)));   // beside: out of the image
+    EXPECT_FALSE(map->observed(Eigen::Vector3d(0.03, 0.0, -0.5)));  // below
+    EXPECT_FALSE(map->observed(Eigen::Vector3d(-0.03, 0.0, 0.0)));  // behind
+    // Every cell near the camera's plane: one whose corners all project into the image (a pixel inside) is seen free
+    // (every ray there sees the wall), one whose corners all lie beyond the same side of the image is not.
+    std::size_t inside = 0, beyond = 0;
+    for (double x = 0.01; x < 0.2; x += 0.02) {
+      for (double y = -0.29; y < 0.3; y += 0.02) {
+        for (double z = -0.29; z < 0.3; z += 0.02) {
+          int in = 0, side[4] = {0, 0, 0, 0};
+          for (int c = 0; c < 8; ++c) {
+            const Eigen::Vector3d q =
+                pose.inverse() * Eigen::Vector3d(x + ((c & 1) ? 0.01 : -0.01), y + ((c & 2) ? 0.01 : -0.01),
+                                                 z + ((c & 4) ? 0.01 : -0.01));
+            const double uu = camera.fx * q.x() / q.z() + camera.cx, vv = camera.fy * q.y() / q.z() + camera.cy;
+            in += uu > 1 && uu < camera.width - 2 && vv > 1 && vv < camera.height - 2 ? 1 : 0;
+            side[0] += uu < -1 ? 1 : 0;
+            side[1] += uu > camera.width ? 1 : 0;
+            side[2] += vv < -1 ? 1 : 0;
+            side[3] += vv > camera.height ? 1 : 0;
+          }
+          const Eigen::Vector3d centre(x, y, z);
+          if (in == 8) {
+            ++inside;
+            EXPECT_TRUE(map->observed(centre)) << centre.transpose();
+          } else if (*std::max_element(side, side + 4) == 8) {
+            ++beyond;
+            EXPECT_FALSE(map->observed(centre)) << centre.transpose();
+          }
+        }
+      }
+    }
+    EXPECT_GT(inside, 100u);
+    EXPECT_GT(beyond, 100u);
+  }
+}
+
 TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
   // maps, one with it and one evaluating every block, take the same views: two fixed cameras that overlap (intrinsics

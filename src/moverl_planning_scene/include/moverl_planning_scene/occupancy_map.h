@@ -214,6 +214,10 @@ class OccupancyMap {
   ///        out->hits); clears the seen_ marks and out.
   void collectEndCells(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                        const Eigen::Vector3d& origin, MapUpdate* out);
+  /// collectEndCells' table: the slot of cell c (where it is, or the empty one where it goes), and a table twice as
+  ///        large (the cells of order_ kept).
+  std::size_t slot(std::int64_t c) const;
+  void growSlots();
   /// Set cell c's value, keeping the occupied bit and the block counts.
   void setValue(std::int64_t c, float v);
   /// Every unobserved cell at the prior (on) or unknown (off).
@@ -227,14 +231,19 @@ class OccupancyMap {
   std::int64_t size_[3] = {0, 0, 0};
   std::vector<float> value_;                ///< log-odds of each cell; NaN: never observed
   std::vector<std::uint64_t> seen_, hit_;   ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
-  std::vector<std::uint8_t> end_;           ///< computeUpdate's scratch: the flags of the points ending in a cell
   std::vector<std::int64_t> order_;         ///< computeUpdate's scratch: the end cells, in the order of their points
+  std::vector<std::uint8_t> order_flags_;   ///< computeUpdate's scratch: the flags of the points ending in each
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
-  std::vector<std::uint32_t> end_slot_;     ///< computeUpdate's scratch: a cell's index in order_ (valid if listed)
-  std::vector<std::uint64_t> observed_;     ///< a bit per cell: hit or seen free at least once since the last clear
-  std::vector<std::uint64_t> occupied_;     ///< a bit per cell: log-odds >= the threshold
-  std::vector<std::uint64_t> clamped_;      ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
+  /// computeUpdate's scratch: the end cells' index in order_, an open-addressing table keyed by cell id (-1: empty),
+  /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many).
+  std::vector<std::int64_t> slot_key_;
+  std::vector<std::uint32_t> slot_index_;
+  std::vector<std::size_t> order_slot_;  ///< where each end cell of order_ is in that table
+  int slot_bits_ = 0;
+  std::vector<std::uint64_t> observed_;  ///< a bit per cell: hit or seen free at least once since the last clear
+  std::vector<std::uint64_t> occupied_;  ///< a bit per cell: log-odds >= the threshold
+  std::vector<std::uint64_t> clamped_;   ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
   // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.
   std::vector<std::uint8_t> block_count_;
   std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)

@@ -148,7 +148,9 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->seen_block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->seen_super_count_.assign(static_cast<std::size_t>(supers), 0);
   m->block_dirtied_.assign(static_cast<std::size_t>(blocks), 0);
+  m->super_dirtied_.assign(static_cast<std::size_t>(supers), 0);
   m->end_hash_.assign(static_cast<std::size_t>(blocks), 0);
+  m->super_end_hash_.assign(static_cast<std::size_t>(supers), 0);
   m->log_hit_ = logodds(o.prob_hit);
   m->log_miss_ = logodds(o.prob_miss);
   m->clamp_min_ = logodds(o.clamp_min);
@@ -174,8 +176,9 @@ struct OccupancyMap::View {
   std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
   std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
   std::vector<std::uint64_t> block_none, super_none;    ///< the epoch of a view that saw none of its cells free
-  std::vector<std::uint64_t> end_hash;                  ///< per block: end_hash_ at the last view
-  std::vector<std::int64_t> end_blocks;                 ///< the blocks where end_hash is not 0
+  std::vector<std::uint64_t> super_all_none;            ///< ... of a view that saw no cell free in its blocks
+  std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
+  std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
 };
 
 OccupancyMap::~OccupancyMap() = default;
@@ -440,6 +443,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       view->super_fp.resize(supers);
       view->super_fp_id.assign(supers, 0);
       view->super_none.assign(supers, 0);
+      view->super_all_none.assign(supers, 0);
+      view->super_end_hash.assign(supers, 0);
     } else {
       view = std::min_element(views_.begin(), views_.end(), [](const auto& a, const auto& b) {
                return a->last < b->last;
@@ -450,7 +455,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     view->id = epoch_;
     view->last = 0;
     for (std::int64_t b : view->end_blocks) view->end_hash[b] = 0;
+    for (std::int64_t b : view->end_supers) view->super_end_hash[b] = 0;
     view->end_blocks.clear();
+    view->end_supers.clear();
   }
   const PinholeCamera& camera = view->camera;
   const Eigen::Isometry3d& sensor_pose = view->pose;
@@ -461,8 +468,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     const std::int64_t c = order_[n];
     const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
     const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+    const std::int64_t sb = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+    const std::uint64_t hash = mix((static_cast<std::uint64_t>(c) << 8) | order_flags_[n]);
     if (end_hash_[b] == 0) end_blocks_.push_back(b);
-    end_hash_[b] += mix((static_cast<std::uint64_t>(c) << 8) | order_flags_[n]);
+    if (super_end_hash_[sb] == 0) end_supers_.push_back(sb);
+    end_hash_[b] += hash;
+    super_end_hash_[sb] += hash;
   }
   std::size_t free_cells = 0;
   auto see = [&](std::int64_t k) {
@@ -619,6 +630,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     }
     return f;
   };
+  // No pixel changed since the camera's last view over the tiles a box's rectangle reads (one pixel wider); a box
+  // across the camera's plane has no rectangle (its cells' pixels are anywhere): changed.
+  auto unchanged = [&](const Footprint& f) {
+    return f.state == 0 && over(changed_max_, false, std::max(0, f.u0 - 1), std::min(w - 1, f.u1 + 1),
+                                std::max(0, f.v0 - 1), std::min(h - 1, f.v1 + 1)) == 0.0f;
+  };
   // A box wholly behind what every pixel that may see it saw holds nothing this cloud sees free.
   auto hidden = [&](const Footprint& f) {
     return f.state == 1 || (f.state == 0 && f.zmin > over(max_depth_, false, f.u0, f.u1, f.v0, f.v1));
@@ -638,10 +655,26 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           sa[i] = s[i] << kSuperShift;
           sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
         }
-        if (hidden(cached(&view->super_fp, &view->super_fp_id, si, sa, sb))) {
+        const Footprint& fs = cached(&view->super_fp, &view->super_fp_id, si, sa, sb);
+        if (hidden(fs)) {
           view->super_none[si] = epoch_;
           continue;
         }
+        // A superblock whose blocks the last view saw nothing free in and whose inputs did not change (as a block's
+        // below, over its own rectangle's tiles, which hold its blocks'): left as it is, blocks and all.
+        if (last != 0 && view->super_all_none[si] == last && super_dirtied_[si] < last &&
+            super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
+          view->super_all_none[si] = epoch_;
+          for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
+            for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
+              for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
+                reused += block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] != 0 ? 1 : 0;
+              }
+            }
+          }
+          continue;
+        }
+        bool all_none = true;  // the last view saw no cell of its blocks free
         for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
           for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
             for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
@@ -656,11 +689,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                 view->block_none[bi] = epoch_;
                 continue;
               }
-              if (last != 0 && (view->block_none[bi] == last || view->super_none[si] == last) &&
-                  block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] &&
-                  fb.state == 0 &&  // across the camera's plane: its cells' pixels are not within a rectangle
-                  over(changed_max_, false, std::max(0, fb.u0 - 1), std::min(w - 1, fb.u1 + 1), std::max(0, fb.v0 - 1),
-                       std::min(h - 1, fb.v1 + 1)) == 0.0f) {
+              if (last != 0 &&
+                  (view->block_none[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
+                  block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
                 view->block_none[bi] = epoch_;  // as the last view left it
                 ++reused;
                 continue;
@@ -740,9 +771,11 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                 }
               }
               view->block_none[bi] = free_cells == seen_before ? epoch_ : 0;
+              all_none = all_none && free_cells == seen_before;
             }
           }
         }
+        view->super_all_none[si] = all_none ? epoch_ : 0;
       }
     }
   }
@@ -750,14 +783,19 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   view->last = epoch_;
   view->free_depth.swap(free_depth_);
   view->past_depth.swap(past_depth_);
-  for (std::int64_t b : view->end_blocks) view->end_hash[b] = 0;
-  view->end_blocks.clear();
-  for (std::int64_t b : end_blocks_) {
-    view->end_hash[b] = end_hash_[b];
-    if (end_hash_[b] != 0) view->end_blocks.push_back(b);
-    end_hash_[b] = 0;
-  }
-  end_blocks_.clear();
+  auto keep = [](std::vector<std::uint64_t>* now, std::vector<std::int64_t>* now_listed,
+                 std::vector<std::uint64_t>* kept, std::vector<std::int64_t>* kept_listed) {
+    for (std::int64_t b : *kept_listed) (*kept)[b] = 0;
+    kept_listed->clear();
+    for (std::int64_t b : *now_listed) {
+      (*kept)[b] = (*now)[b];
+      if ((*now)[b] != 0) kept_listed->push_back(b);
+      (*now)[b] = 0;
+    }
+    now_listed->clear();
+  };
+  keep(&end_hash_, &end_blocks_, &view->end_hash, &view->end_blocks);
+  keep(&super_end_hash_, &end_supers_, &view->super_end_hash, &view->end_supers);
   out->stats.free_cells = free_cells;
   out->stats.reused_blocks = reused;
   out->stats.changed_cells = out->hits.size() + out->misses.size();
@@ -783,7 +821,7 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
   const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
   block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
-  if (dirty && !was_dirty) block_dirtied_[b] = epoch_;
+  if (dirty && !was_dirty) block_dirtied_[b] = super_dirtied_[s] = epoch_;
   super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
   if (now == testBit(occupied_, c)) return;
   if (now) {

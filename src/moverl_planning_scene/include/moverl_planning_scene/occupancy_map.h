@@ -260,14 +260,15 @@ class OccupancyMap {
   float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied
   float threshold_ = 0.0f;          ///< log-odds of occupancy_threshold
   std::int64_t seen_occupied_ = 0;  ///< observed cells at or above the threshold
-  // skip_unchanged_blocks: a counter of the map's updates (computeUpdate*, apply, clear) and, per block, its value when
-  // a cell of the block last turned not clamped free (a view that saw the block before then is out of date); the
-  // cameras' last views; per block, a sum of hashes of the cloud's end cells in it (and the blocks holding any).
+  // skip_unchanged_blocks: a counter of the map's updates (computeUpdate*, apply, clear) and, per block and
+  // superblock, its value when a cell in it last turned not clamped free (a view before then is out of date); the
+  // cameras' last views; per block and superblock, a sum of hashes of the cloud's end cells in it (and the ones
+  // holding any).
   std::uint64_t epoch_ = 0;
-  std::vector<std::uint64_t> block_dirtied_;
+  std::vector<std::uint64_t> block_dirtied_, super_dirtied_;
   std::vector<std::unique_ptr<View>> views_;
-  std::vector<std::uint64_t> end_hash_;
-  std::vector<std::int64_t> end_blocks_;
+  std::vector<std::uint64_t> end_hash_, super_end_hash_;
+  std::vector<std::int64_t> end_blocks_, end_supers_;
   std::vector<float> changed_;                   ///< per pixel: 1 where the depths differ from the camera's last view
   std::vector<std::vector<float>> changed_max_;  ///< its max pyramid
 };

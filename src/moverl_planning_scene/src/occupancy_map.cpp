@@ -173,6 +173,7 @@ struct OccupancyMap::View {
   std::uint64_t id = 0;    ///< the epoch this camera was first seen at: tags the footprints computed for it
   std::uint64_t last = 0;  ///< the epoch of its last view (0: none)
   std::vector<float> free_depth, past_depth;            ///< that view's depths (computeUpdateProjective's)
+  std::vector<float> reach;                             ///< per pixel: the z-depth where its ray reaches max_range
   std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
   std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
   std::vector<std::uint64_t> block_none, super_none;    ///< the epoch of a view that saw none of its cells free
@@ -229,6 +230,8 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   order_flags_.clear();
   order_end_.clear();
   order_count_.clear();
+  std::int64_t last_cell = -1;
+  std::uint32_t last_index = 0;
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
     if (!p.allFinite()) {
@@ -256,9 +259,16 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                          fz = static_cast<float>(end.z());
     const std::int64_t c = cellOf(Eigen::Vector3d(fx, fy, fz));
     if (c < 0) continue;
+    if (c == last_cell) {  // the previous point's cell (neighbouring pixels): no look-up
+      order_end_[last_index] += end;
+      ++order_count_[last_index];
+      order_flags_[last_index] |= flag;
+      continue;
+    }
     if (2 * (order_.size() + 1) > slot_key_.size()) growSlots();
     const std::size_t at = slot(c);
     std::uint32_t n = slot_index_[at];
+    last_cell = c;
     if (slot_key_[at] != c) {
       n = static_cast<std::uint32_t>(order_.size());
       slot_key_[at] = c;
@@ -269,6 +279,7 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       order_end_.push_back(Eigen::Vector3d::Zero());
       order_count_.push_back(0);
     }
+    last_index = n;
     order_end_[n] += end;
     ++order_count_[n];
     order_flags_[n] |= flag;
@@ -496,16 +507,21 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const bool masked_pixels = pixel_mask.size() == pixels;
   free_depth_.resize(pixels);
   past_depth_.resize(pixels);
-  for (int v = 0; v < h; ++v) {
-    const double ry = (v - camera.cy) / camera.fy;
-    for (int u = 0; u < w; ++u) {
-      const double rx = (u - camera.cx) / camera.fx;
-      const std::size_t k = static_cast<std::size_t>(v) * w + u;
-      const float z = depth[k];
-      const auto reach = static_cast<float>(options_.max_range / std::sqrt(rx * rx + ry * ry + 1.0));
-      free_depth_[k] = std::isfinite(z) && z > 0.0f ? std::min(z, reach) : 0.0f;
-      past_depth_[k] = masked_pixels && pixel_mask[k] == kPointOnRobot ? reach : free_depth_[k];
+  if (view->reach.size() != pixels || view->last == 0) {  // a camera new here (its intrinsics fixed from now on)
+    view->reach.resize(pixels);
+    for (int v = 0; v < h; ++v) {
+      const double ry = (v - camera.cy) / camera.fy;
+      for (int u = 0; u < w; ++u) {
+        const double rx = (u - camera.cx) / camera.fx;
+        view->reach[static_cast<std::size_t>(v) * w + u] =
+            static_cast<float>(options_.max_range / std::sqrt(rx * rx + ry * ry + 1.0));
+      }
     }
+  }
+  for (std::size_t k = 0; k < pixels; ++k) {
+    const float z = depth[k], reach = view->reach[k];
+    free_depth_[k] = std::isfinite(z) && z > 0.0f ? std::min(z, reach) : 0.0f;
+    past_depth_[k] = masked_pixels && pixel_mask[k] == kPointOnRobot ? reach : free_depth_[k];
   }
   // Pyramids of the smallest and largest of those depths over tiles of 2^L x 2^L pixels (level 0: the pixels).
   auto build = [&](std::vector<std::vector<float>>* pyramid, const std::vector<float>& base, bool smallest) {

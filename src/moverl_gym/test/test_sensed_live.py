@@ -76,21 +76,24 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
         cls.status = msg
 
     def wait_for_clouds(self, n):
-        """One hold of a camera period (lockstep sim time moves on, so the cameras render again), then wait until
-        n more clouds were integrated."""
+        """Holds of a camera period (lockstep sim time moves on, so the cameras render again) until n more clouds
+        were integrated. One hold may not do: a camera's view that arrives while its previous one still waits to be
+        integrated replaces it (the newest view is what counts), so a hold's renders may give fewer clouds."""
         deadline = time.monotonic() + WAIT
         while self.status is None and time.monotonic() < deadline:
             time.sleep(0.05)
         self.assertIsNotNone(self.status, "no /planning_scene/octomap_status")
         start = self.status.clouds
-        self.assert_no_contacts(self.step(target=self.current, duration=0.25))
         while self.status.clouds < start + n:
             self.assertLess(
                 time.monotonic(),
                 deadline,
                 "the map integrated %d of %d clouds in %.0f s" % (self.status.clouds - start, n, WAIT),
             )
-            time.sleep(0.02)
+            self.assert_no_contacts(self.step(target=self.current, duration=0.25))
+            settle = time.monotonic() + 1.0  # the hold's clouds integrated (each takes milliseconds)
+            while self.status.clouds < start + n and time.monotonic() < settle:
+                time.sleep(0.02)
 
     def test_camera_schedule(self):
         clouds, states, lock = [], [], threading.Lock()  # clouds: (frame, stamp, monotonic arrival); states: stamps

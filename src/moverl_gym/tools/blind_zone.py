@@ -47,12 +47,12 @@ def _distances(p, probe, body, points):
     return out
 
 
-def measure(robot: str, world_name: str, n: int, seed: int) -> dict:
+def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual") -> dict:
     rc = load_robot_config(robot if robot.endswith(".yaml") else robot_config_file(robot))
     world = load_world(world_file(world_name))
-    # The robot as a real camera sees it, its visual meshes (the simulator's cameras draw its collision shapes:
-    # config/sim.yaml robot_visuals), so that the distance measured is the visual surface's from the shapes.
-    sim = simulator_for(rc, world, robot_visuals="visual")
+    # The robot as a real camera sees it, its visual meshes by default (--robot-visuals: as the simulator's cameras
+    # draw it, config/sim.yaml robot_visuals), so that the distance measured is that surface's from the shapes.
+    sim = simulator_for(rc, world, robot_visuals=looks)
     p = sim._p
     probe = p.createMultiBody(0, p.createCollisionShape(pybullet.GEOM_SPHERE, radius=PROBE_RADIUS), -1, [9, 9, 9])
     cams = [Camera(c) for c in world.cameras]
@@ -99,14 +99,20 @@ def main(argv=None) -> int:
     ap.add_argument("--worlds", nargs="+", default=["table", "human", "case"])
     ap.add_argument("-n", type=int, default=20, help="random collision-free configurations per world")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--robot-visuals",
+        default="visual",
+        choices=["visual", "simplified", "collision"],
+        help="how the robot is drawn (default visual: as a real camera sees it; config/sim.yaml robot_visuals)",
+    )
     args = ap.parse_args(argv)
     print(
-        f"== points of the depth cameras outside the collision shapes of their body ({args.robot}, {args.n} "
-        f"configurations per world)"
+        f"== points of the depth cameras outside the collision shapes of their body ({args.robot} drawn as "
+        f"robot_visuals {args.robot_visuals}, {args.n} configurations per world)"
     )
     print(f"{'world':<8} {'body':<7} {'points':>8} {'max mm':>8} {'p99.9 mm':>9}")
     for w in args.worlds:
-        r = measure(args.robot, w, args.n, args.seed)
+        r = measure(args.robot, w, args.n, args.seed, args.robot_visuals)
         for body in ("robot", "static"):
             s = r[body]
             print(f"{w:<8} {body:<7} {s['points']:>8} {s['max_mm']:>8.2f} {s['p999_mm']:>9.2f}")

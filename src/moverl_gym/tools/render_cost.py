@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer with the robot drawn as its
-visual meshes and as its collision shapes (config/sim.yaml robot_visuals: what the simulator's cameras see), and by
+visual meshes, as those meshes simplified and as its collision shapes (config/sim.yaml robot_visuals: what the
+simulator's cameras see), and by
 PyBullet's batched ray test over the same pixel rays (collision shapes), on one thread and on all, in this process (no
 ROS).
 
@@ -70,7 +71,7 @@ def main(argv=None) -> int:
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
-    sims = {looks: simulator_for(rc, world, robot_visuals=looks) for looks in ("visual", "collision")}
+    sims = {looks: simulator_for(rc, world, robot_visuals=looks) for looks in ("visual", "simplified", "collision")}
     sim = sims["visual"]
     try:
         for s in sims.values():
@@ -84,14 +85,19 @@ def main(argv=None) -> int:
             cpu, wall, depth = timed(lambda: cam.render_depth(cid), args.renders)
             size = f"{cam.width}x{cam.height}"
             print(f"{cam.id:8s} {size:>9s} {'TinyRenderer, visual meshes':28s} {cpu:8.1f} {wall:8.1f}")
-            cpu, wall, hulls = timed(lambda: cam.render_depth(sims["collision"].client_id), args.renders)
-            dz = np.abs(hulls - depth)
-            label = "TinyRenderer, collision shapes"
-            print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
-            # Where the hulls change the image: nearer (they hide more than the arm) or farther (the camera would see
-            # past the arm's surface), by more than a millimetre.
-            nearer, farther = np.mean(hulls < depth - 1e-3), np.mean(hulls > depth + 1e-3)
-            print(f"{'':8s} {'':>9s}   pixels nearer {100 * nearer:.2f} %, farther {100 * farther:.2f} %")
+            for looks, label in (("simplified", "TinyRenderer, simplified"), ("collision", "TinyRenderer, hulls")):
+                cpu, wall, other = timed(lambda: cam.render_depth(sims[looks].client_id), args.renders)
+                dz = np.abs(other - depth)
+                print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
+                # Where they change the image: nearer (they hide more than the arm) or farther (the camera would see
+                # past the arm's surface), by more than 1 mm and by more than 1 cm.
+                share = [np.mean(other < depth - t) for t in (1e-3, 1e-2)] + [
+                    np.mean(other > depth + t) for t in (1e-3, 1e-2)
+                ]
+                print(
+                    f"{'':8s} {'':>9s}   pixels nearer by > 1 mm {100 * share[0]:.2f} %, > 1 cm {100 * share[1]:.2f} %;"
+                    f" farther by > 1 mm {100 * share[2]:.2f} %, > 1 cm {100 * share[3]:.2f} %"
+                )
             for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
                 cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
                 dz = np.abs(rays - depth)

@@ -121,19 +121,80 @@ def test_collision_as_visual_draws_the_collision_shapes(tmp_path):
 
 def test_simulator_draws_what_robot_visuals_says(panda_urdf):
     """The simulator's PyBullet robot shows collision meshes only with robot_visuals collision, its visual meshes with
-    visual; a wrong value is refused naming both."""
+    visual, simplified copies of them (gone once loaded) with simplified; a wrong value is refused naming all three."""
     import pybullet
     from conftest import make_sim
 
-    for looks in ("collision", "visual"):
+    for looks in ("collision", "visual", "simplified"):
         sim = make_sim(panda_urdf, None, robot_visuals=looks)
         try:
             files = {d[4].decode() for d in pybullet.getVisualShapeData(sim.robot, physicsClientId=sim.client_id)}
             if looks == "collision":
                 assert all("/collision/" in f for f in files), files
-            else:
+            elif looks == "visual":
                 assert any("/visual/" in f for f in files), files
+            else:
+                simplified = [f for f in files if "moverl_robot_" in f]
+                assert simplified and not any(os.path.exists(f) for f in simplified), files
         finally:
             sim.close()
-    with pytest.raises(ValueError, match="robot_visuals must be 'visual' or 'collision'"):
+    with pytest.raises(ValueError, match="robot_visuals must be 'visual', 'simplified' or 'collision'"):
         make_sim(panda_urdf, None, robot_visuals="hulls")
+    with pytest.raises(ValueError, match="simplified_faces"):
+        make_sim(panda_urdf, None, robot_visuals="simplified", simplified_faces=None)
+
+
+def test_simplified_visuals_decimate_every_visual_mesh(tmp_path):
+    """robot_visuals simplified: every OBJ or STL visual mesh is written simplified to at most config/sim.yaml's
+    simplified_faces triangles, within its original's bounding box grown by 3 mm (blind_zone.py measures the points'
+    distance from the collision shapes); collision shapes, primitives and meshes already that small stay; a mesh that
+    cannot be read is refused naming it."""
+    from moverl_sim import meshes
+    from moverl_sim.settings import sim_settings
+    from moverl_sim.urdf import simplified_visuals
+
+    faces = sim_settings()["simplified_faces"]
+    text = robot_description(PANDA_URI)
+    out = ET.fromstring(simplified_visuals(text, str(tmp_path), faces))
+    before = ET.fromstring(text)
+    for link in out.findall("link"):
+        old = before.find(f"link[@name='{link.get('name')}']")
+        assert [ET.tostring(c) for c in link.findall("collision")] == [ET.tostring(c) for c in old.findall("collision")]
+        for new_mesh, old_mesh in zip(link.iter("mesh"), old.iter("mesh")):
+            if new_mesh.get("filename") == old_mesh.get("filename"):
+                continue
+            v0, f0 = meshes.read_mesh(old_mesh.get("filename"))
+            v1, f1 = meshes.read_mesh(new_mesh.get("filename"))
+            assert new_mesh.get("filename").startswith(str(tmp_path))
+            assert len(f0) > faces and len(f1) <= faces, (old_mesh.get("filename"), len(f0), len(f1))
+            assert (v1.min(axis=0) >= v0.min(axis=0) - 0.003).all() and (v1.max(axis=0) <= v0.max(axis=0) + 0.003).all()
+    assert len(list(tmp_path.iterdir())) >= 7  # the Panda's seven large visual meshes
+    # STL (binary and ASCII) as OBJ: a tetrahedron, as its 4 vertices and 4 faces
+    tet = [((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((0, 0, 0), (0, 0, 1), (1, 0, 0)), ((0, 0, 0), (0, 1, 0), (0, 0, 1)),
+           ((1, 0, 0), (0, 0, 1), (0, 1, 0))]  # fmt: skip
+    import struct
+
+    binary = tmp_path / "tet.stl"
+    binary.write_bytes(
+        b"\0" * 80 + struct.pack("<I", 4) + b"".join(struct.pack("<12fH", *(0, 0, 0), *sum(t, ()), 0) for t in tet)
+    )
+    ascii_ = tmp_path / "tet_ascii.stl"
+    ascii_.write_text(
+        "solid t\n"
+        + "".join(
+            "facet normal 0 0 0\nouter loop\n" + "".join("vertex %g %g %g\n" % v for v in t) + "endloop\nendfacet\n"
+            for t in tet
+        )
+        + "endsolid t\n"
+    )
+    for f in (binary, ascii_):
+        v, faces = meshes.read_mesh(str(f))
+        assert v.shape == (4, 3) and faces.shape == (4, 3)
+    broken = tmp_path / "broken.obj"
+    broken.write_text("v 0 0 0\nf 1 2 3\n")
+    with pytest.raises(ValueError, match="broken.obj"):
+        meshes.read_mesh(str(broken))
+    with pytest.raises(ValueError, match="only .obj, .stl"):
+        meshes.read_mesh(str(tmp_path / "x.dae"))
+    with pytest.raises(ValueError, match="max_faces"):
+        meshes.simplified(v, faces, 3)

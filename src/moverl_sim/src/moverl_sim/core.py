@@ -10,6 +10,7 @@ simulators can live in one process. It is not thread safe: callers serialise acc
 
 import math
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from typing import Dict, NamedTuple, Tuple
@@ -19,7 +20,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from .follow import spline_at
-from .urdf import JointLimits, collision_as_visual
+from .urdf import JointLimits, collision_as_visual, simplified_visuals
 from .world import World
 
 __all__ = [
@@ -220,8 +221,9 @@ class Simulator:
         for code that runs without the node's parameters).
     control: "kinematic" (joints set exactly at every substep, collision detection only) or
         "dynamic" (position-controlled motors track the setpoint, full physics).
-    robot_visuals: "collision" (the robot is drawn as its collision shapes: what the depth cameras see, 6x cheaper to
-        render) or "visual" (its visual meshes: pictures for people); required, config/sim.yaml's robot_visuals.
+    robot_visuals: "visual" (the robot is drawn as its visual meshes), "simplified" (its visual meshes decimated to
+        at most simplified_faces triangles each: what the depth cameras see at a fraction of the cost) or "collision"
+        (its collision shapes); required, config/sim.yaml's robot_visuals (and simplified_faces).
     """
 
     def __init__(
@@ -238,6 +240,7 @@ class Simulator:
         moving_speed,
         motion_time_scale=1.0,
         robot_visuals,
+        simplified_faces=None,
     ):
         if control not in ("kinematic", "dynamic"):
             raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
@@ -269,22 +272,35 @@ class Simulator:
             p.setGravity(0, 0, -9.81)
             p.setTimeStep(self.dt)
             flags = pybullet.URDF_USE_SELF_COLLISION | pybullet.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
-            if robot_visuals not in ("visual", "collision"):
-                raise ValueError("robot_visuals must be 'visual' or 'collision', got %r" % (robot_visuals,))
+            if robot_visuals not in ("visual", "simplified", "collision"):
+                raise ValueError(
+                    "robot_visuals must be 'visual', 'simplified' or 'collision', got %r" % (robot_visuals,)
+                )
+            if robot_visuals == "simplified" and not (isinstance(simplified_faces, int) and simplified_faces >= 4):
+                raise ValueError(
+                    "robot_visuals 'simplified' needs simplified_faces, an int >= 4, got %r" % (simplified_faces,)
+                )
             loaded = str(urdf_path)
-            if robot_visuals == "collision":  # the same URDF, drawn as its collision shapes (a temporary copy)
+            scratch = None  # the rewritten URDF (and simplified meshes) live here until PyBullet has loaded them
+            if robot_visuals != "visual":
+                scratch = tempfile.mkdtemp(prefix="moverl_robot_")
                 with open(urdf_path, encoding="utf-8") as fh:
-                    text = collision_as_visual(fh.read(), os.path.dirname(str(urdf_path)), str(urdf_path))
-                fd, loaded = tempfile.mkstemp(prefix="moverl_robot_", suffix=".urdf")
-                with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                    text = fh.read()
+                base_dir = os.path.dirname(str(urdf_path))
+                if robot_visuals == "collision":  # the same URDF, drawn as its collision shapes
+                    text = collision_as_visual(text, base_dir, str(urdf_path))
+                else:
+                    text = simplified_visuals(text, scratch, simplified_faces, base_dir, str(urdf_path))
+                loaded = os.path.join(scratch, "robot.urdf")
+                with open(loaded, "w", encoding="utf-8") as fh:
                     fh.write(text)
             try:
                 self.robot = p.loadURDF(loaded, [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
             except pybullet.error as exc:
                 raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
             finally:
-                if loaded != str(urdf_path):
-                    os.unlink(loaded)
+                if scratch is not None:
+                    shutil.rmtree(scratch, ignore_errors=True)
             self._setup_robot(str(urdf_path), list(joints), base_link, dict(fixed_joint_positions or {}))
             self._setup_world()
             self._setup_collision_filters()

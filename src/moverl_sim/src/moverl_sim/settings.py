@@ -16,8 +16,8 @@ _ROOT = os.environ.get("MOVERL_ROOT") or os.path.dirname(
 
 
 def sim_settings(path: str | None = None) -> dict:
-    """physics_hz, control, moving_speed and robot_visuals from config/sim.yaml (or `path`), as keyword arguments of
-    Simulator."""
+    """physics_hz, control, moving_speed, robot_visuals and simplified_faces from config/sim.yaml (or `path`), as
+    keyword arguments of Simulator."""
     with open(path or os.path.join(_ROOT, "config", "sim.yaml"), encoding="utf-8") as f:
         cfg = yaml.safe_load(f)
     return {
@@ -25,6 +25,7 @@ def sim_settings(path: str | None = None) -> dict:
         "control": str(cfg["control"]),
         "moving_speed": float(cfg["moving_speed"]),
         "robot_visuals": str(cfg["robot_visuals"]),
+        "simplified_faces": int(cfg["simplified_faces"]),
     }
 
 

@@ -226,6 +226,36 @@ def collision_as_visual(text, base_dir=None, source="robot description"):
     return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
+def simplified_visuals(text, out_dir, max_faces, base_dir=None, source="robot description"):
+    """URDF text whose visual meshes (OBJ, STL) are drawn simplified: each is read, decimated to at most about
+    max_faces triangles (moverl_sim.meshes) and written to ``out_dir`` as an OBJ the text names (absolute paths), so
+    that a renderer draws a fraction of the triangles with the same silhouette to within millimetres (the simulator's
+    depth cameras; render_cost.py measures it). Collision shapes, primitives and meshes of other formats stay as they
+    are. ``out_dir`` must exist and outlive the loading of the text."""
+    from . import meshes
+
+    root = _parse_urdf(rewrite_mesh_paths(text, base_dir, source), source)
+    written = {}
+    for visual in root.iter("visual"):
+        for mesh in visual.iter("mesh"):
+            path = mesh.get("filename")
+            if os.path.splitext(path)[1].lower() not in meshes.SIMPLIFIABLE:
+                continue
+            if path not in written:
+                try:
+                    vertices, faces = meshes.read_mesh(path)
+                    if len(faces) <= max_faces:  # small enough: drawn as it is
+                        written[path] = path
+                        continue
+                    vertices, faces = meshes.simplified(vertices, faces, max_faces)
+                except (OSError, ValueError) as exc:
+                    raise UrdfError("%s: visual mesh %s cannot be simplified: %s" % (source, path, exc)) from None
+                written[path] = os.path.join(out_dir, "%d_%s.obj" % (len(written), os.path.basename(path)))
+                meshes.write_obj(written[path], vertices, faces)
+            mesh.set("filename", written[path])
+    return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
 def robot_description(uri):
     """The URDF text of ``uri`` with every mesh filename rewritten to an absolute, existing path."""
     path = resolve_uri(uri)

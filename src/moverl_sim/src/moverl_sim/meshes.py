@@ -1,0 +1,90 @@
+"""Triangle meshes of a robot's visuals, read and simplified for the simulator's depth cameras. ROS-free.
+
+A depth camera at 160x120 sees a link of the Panda over a few hundred pixels, yet its visual mesh has up to 22,000
+triangles: PyBullet's TinyRenderer spends nine tenths of an image on them (docs/sensing.md, render_cost.py). Drawn as
+a quadric-error simplification of itself (fast_simplification, the decimation of pyvista) with at most ``faces``
+triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the depths move) at a
+tenth of the cost. Meshes this module reads: Wavefront OBJ (vertices and faces; texture and normal indices ignored)
+and STL (ASCII or binary); any other format is drawn as it is.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+
+import numpy as np
+
+__all__ = ["read_mesh", "write_obj", "simplified", "SIMPLIFIABLE"]
+
+#: Mesh file suffixes this module reads (lower case).
+SIMPLIFIABLE = (".obj", ".stl")
+
+
+def _read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
+    vertices: list[list[float]] = []
+    faces: list[list[int]] = []
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            if line.startswith("v "):
+                vertices.append([float(x) for x in line.split()[1:4]])
+            elif line.startswith("f "):
+                # v, v/vt, v//vn or v/vt/vn; 1-based, or negative: relative to the vertices read so far
+                idx = [int(t.split("/")[0]) for t in line.split()[1:]]
+                idx = [i - 1 if i > 0 else len(vertices) + i for i in idx]
+                faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))  # a fan per polygon
+    return np.asarray(vertices, dtype=float).reshape(-1, 3), np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+
+
+def _read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
+    with open(path, "rb") as fh:
+        data = fh.read()
+    corners: np.ndarray
+    if len(data) >= 84 and 84 + 50 * struct.unpack("<I", data[80:84])[0] == len(data):  # binary
+        n = struct.unpack("<I", data[80:84])[0]
+        record = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+        corners = np.frombuffer(data, dtype=record, count=n, offset=84)["v"].reshape(-1, 3).astype(float)
+    else:  # ASCII: "vertex x y z" lines, three per facet
+        words = data.decode("utf-8", errors="replace").split()
+        corners = np.asarray(
+            [
+                [float(words[k + 1]), float(words[k + 2]), float(words[k + 3])]
+                for k, w in enumerate(words)
+                if w == "vertex"
+            ],
+            dtype=float,
+        ).reshape(-1, 3)
+    # Shared corners become one vertex (the decimation needs the mesh's connectivity).
+    vertices, inverse = np.unique(corners, axis=0, return_inverse=True)
+    return vertices, inverse.reshape(-1, 3).astype(np.int64)
+
+
+def read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices n x 3, triangles m x 3 vertex indices) of an OBJ or STL file; ValueError for another format or a
+    file without triangles."""
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix not in SIMPLIFIABLE:
+        raise ValueError("%s: a mesh of this format is not read here (only %s)" % (path, ", ".join(SIMPLIFIABLE)))
+    vertices, faces = _read_obj(path) if suffix == ".obj" else _read_stl(path)
+    if len(faces) == 0 or (faces.size and (faces.min() < 0 or faces.max() >= len(vertices))):
+        raise ValueError("%s: no triangles, or faces that name missing vertices" % path)
+    return vertices, faces
+
+
+def write_obj(path: str, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """A Wavefront OBJ of the triangles (vertex coordinates as given, 1-based faces)."""
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write("".join("v %.9g %.9g %.9g\n" % tuple(v) for v in vertices))
+        fh.write("".join("f %d %d %d\n" % (a + 1, b + 1, c + 1) for a, b, c in faces))
+
+
+def simplified(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with at most about max_faces triangles (quadric-error decimation); a mesh already that small is
+    returned as it is."""
+    if max_faces < 4:
+        raise ValueError("max_faces must be >= 4, got %r" % (max_faces,))
+    if len(faces) <= max_faces:
+        return vertices, faces
+    import fast_simplification  # imported where used: the simulator without simplified visuals does not need it
+
+    return fast_simplification.simplify(vertices, faces, target_count=int(max_faces))

@@ -57,11 +57,13 @@ double sphereOrWall(const mps::PinholeCamera& c, int u, int v, const Eigen::Vect
   return s > 0 && s < wall ? s : wall;
 }
 
-std::unique_ptr<mps::OccupancyMap> makeMap() {
+std::unique_ptr<mps::OccupancyMap> makeMap(bool unknown_occupied = false, bool skip_unchanged_blocks = true) {
   mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.resolution = 0.02;
   o.max_range = 3.0;
   o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+  o.unknown_occupied = unknown_occupied;
+  o.skip_unchanged_blocks = skip_unchanged_blocks;
   std::string error;
   auto m = mps::OccupancyMap::create(o, &error);
   EXPECT_TRUE(m) << error;
@@ -329,16 +331,8 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
   std::size_t reused = 0;
   for (bool unknown_occupied : {false, true}) {
-    mps::OccupancyMapOptions o = mps::panda::mapOptions();
-    o.resolution = 0.02;
-    o.max_range = 3.0;
-    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
-    o.unknown_occupied = unknown_occupied;
-    std::string error;
-    auto skipping = mps::OccupancyMap::create(o, &error);
-    o.skip_unchanged_blocks = false;
-    auto every = mps::OccupancyMap::create(o, &error);
-    ASSERT_TRUE(skipping && every) << error;
+    auto skipping = makeMap(unknown_occupied, true), every = makeMap(unknown_occupied, false);
+    ASSERT_TRUE(skipping && every);
     for (int n = 0; n < 90; ++n) {
       const int which = n % 3;
       Eigen::Isometry3d pose = lookingAlongX(which == 0   ? Eigen::Vector3d(0.0, 0.0, 0.0)
@@ -404,14 +398,7 @@ TEST(Projective, ACellThePointsStopHittingIsLookedAtAgainThoughTheDepthsStay) {
   const auto wall = image(fine, [](int, int) { return 2.0; });
   const Eigen::Vector3d stray(1.0, 0.013, 0.007);
   auto views = [&](bool skip) {  // views until the cell is free again once the point is gone
-    mps::OccupancyMapOptions o = mps::panda::mapOptions();
-    o.resolution = 0.02;
-    o.max_range = 3.0;
-    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
-    o.skip_unchanged_blocks = skip;
-    std::string error;
-    auto map = mps::OccupancyMap::create(o, &error);
-    EXPECT_TRUE(map) << error;
+    auto map = makeMap(false, skip);
     mps::MapUpdate u;
     for (int n = 0; n < 8; ++n) {
       auto points = mapPoints(wall, pose);

@@ -184,6 +184,12 @@ struct OccupancyMap::View {
 
 OccupancyMap::~OccupancyMap() = default;
 
+void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const {
+  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
+  *block = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+  *super = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+}
+
 std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
   const std::int64_t i = indexOf(p.x(), 0), j = indexOf(p.y(), 1), k = indexOf(p.z(), 2);
   if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
@@ -477,9 +483,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   for (std::size_t n = 0; n < order_.size(); ++n) {
     if ((order_flags_[n] & (kHit | kFixture)) == 0) continue;
     const std::int64_t c = order_[n];
-    const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
-    const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
-    const std::int64_t sb = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+    std::int64_t b, sb;
+    boxesOf(c, &b, &sb);
     const std::uint64_t hash = mix((static_cast<std::uint64_t>(c) << 8) | order_flags_[n]);
     if (end_hash_[b] == 0) end_blocks_.push_back(b);
     if (super_end_hash_[sb] == 0) end_supers_.push_back(sb);
@@ -507,7 +512,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const bool masked_pixels = pixel_mask.size() == pixels;
   free_depth_.resize(pixels);
   past_depth_.resize(pixels);
-  if (view->reach.size() != pixels || view->last == 0) {  // a camera new here (its intrinsics fixed from now on)
+  if (view->reach.size() != pixels || view->last == 0) {  // a camera new here, or after a clear
     view->reach.resize(pixels);
     for (int v = 0; v < h; ++v) {
       const double ry = (v - camera.cy) / camera.fy;
@@ -569,8 +574,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     return m;
   };
   // skip_unchanged_blocks: what changed since this camera's last view. A block's cells are decided by the depths over
-  // its rectangle (through the pyramids: over the tiles that cover it, the same tiles `changed` looks at one pixel
-  // wider), the cloud's end cells in it (hits, fixture cells) and which of its cells are clamped free. When none of
+  // its rectangle (through the pyramids: over the tiles that cover it, which lie within the tiles `changed` looks at
+  // over the rectangle one pixel wider), the cloud's end cells in it (hits, fixture cells) and which of its cells are
+  // clamped free. When none of
   // these changed and that view saw none of its cells free, this one sees none either; a block that turned dirty
   // since (block_dirtied_) is looked at again. Skipping a block can only leave cells as they are (no miss is added).
   const std::uint64_t last = options_.skip_unchanged_blocks ? view->last : 0;
@@ -833,9 +839,8 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   }
   const bool now = v >= threshold_;  // false for NaN (unknown)
   if (now == testBit(occupied_, c) && was_dirty == dirty) return;
-  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
-  const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
-  const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  std::int64_t b, s;
+  boxesOf(c, &b, &s);
   block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
   if (dirty && !was_dirty) block_dirtied_[b] = super_dirtied_[s] = epoch_;
   super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
@@ -887,9 +892,8 @@ void OccupancyMap::clear() {
 }
 
 void OccupancyMap::countSeen(std::int64_t c, int delta) {
-  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
-  const std::int64_t b = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
-  const std::int64_t s = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  std::int64_t b, s;
+  boxesOf(c, &b, &s);
   seen_block_count_[b] = static_cast<std::uint8_t>(seen_block_count_[b] + delta);
   seen_super_count_[s] = static_cast<std::uint16_t>(seen_super_count_[s] + delta);
   seen_occupied_ += delta;

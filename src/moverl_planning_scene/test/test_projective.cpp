@@ -325,19 +325,21 @@ TEST(Projective, CellsJustInFrontOfTheCameraAreSeenAndNoneBesideIt) {
 TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
   // maps, one with it and one evaluating every block, take the same views: two fixed cameras that overlap (intrinsics
-  // jittered as fitPinhole's are), one that moves now and then, a ball that walks, a static one, robot pixels that
-  // move, a patch without returns that comes and goes, a cloud integrated by ray casting now and then, and the
-  // unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
+  // jittered as fitPinhole's are), one that moves now and then, one that moves every view (more cameras than the map
+  // remembers: the least recently seen make way, and their records are reused), a ball that walks, a static one, robot
+  // pixels that move, a patch without returns that comes and goes, a cloud integrated by ray casting now and then, and
+  // the unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
   const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
   std::size_t reused = 0;
   for (bool unknown_occupied : {false, true}) {
     auto skipping = makeMap(unknown_occupied, true), every = makeMap(unknown_occupied, false);
     ASSERT_TRUE(skipping && every);
-    for (int n = 0; n < 90; ++n) {
-      const int which = n % 3;
+    for (int n = 0; n < 120; ++n) {
+      const int which = n % 4;
       Eigen::Isometry3d pose = lookingAlongX(which == 0   ? Eigen::Vector3d(0.0, 0.0, 0.0)
                                              : which == 1 ? Eigen::Vector3d(0.0, 0.4, 0.2)
-                                                          : Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0));
+                                             : which == 2 ? Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0)
+                                                          : Eigen::Vector3d(0.0, -0.5 + 0.01 * n, 0.1));
       mps::PinholeCamera camera = kCamera;
       camera.fx += 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
       const double t = 0.15 * n;
@@ -375,11 +377,11 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
       ASSERT_EQ(us.misses, ue.misses) << "view " << n << " unknown_occupied " << unknown_occupied;
       skipping->apply(us);
       every->apply(ue);
-      if (n == 40) {
+      if (n == 60) {
         skipping->setUnknownOccupied(!unknown_occupied);
         every->setUnknownOccupied(!unknown_occupied);
       }
-      if (n == 60) {
+      if (n == 90) {
         skipping->clear();
         every->clear();
       }

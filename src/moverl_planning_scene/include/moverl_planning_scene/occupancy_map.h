@@ -38,8 +38,11 @@
  * unknown_occupied prior included) and, for the collision checks, how many cells are occupied in every block of 4^3
  * cells and every superblock of 16^3 (anyOccupied: empty blocks are skipped whole, full ones tested as one box). The
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
- * cell already clamped at clamp_min stays where it is when seen free again. Nothing else is kept up to date: an update
- * costs its beams and the cells it changes (`rosrun moverl_planning_scene map_benchmark`).
+ * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
+ * projective update remembers of each camera's last view (skip_unchanged_blocks: about 64 bytes per block, 1 per
+ * cell, for each of up to 8 cameras; a camera that moves takes a new record at each pose, the least recently seen
+ * one making way). An update costs its beams (projective: the blocks whose inputs changed) and the cells it changes
+ * (`rosrun moverl_planning_scene map_benchmark`).
  */
 #pragma once
 
@@ -75,7 +78,11 @@ struct OccupancyMapOptions {
   bool unknown_occupied = false;
   /// computeUpdateProjective leaves a block of cells as a camera's last view left it when nothing it depends on changed
   /// since (the same camera, the same depths over the block's pixels, the same cloud points in it, none of its cells
-  /// newly not clamped free) and that view saw none of its cells free: the same updates with fewer cells projected.
+  /// newly not clamped free) and that view saw none of its cells free: the same updates with fewer cells projected
+  /// (the cloud points are compared by a 64-bit hash sum per block: a collision, about 2^-64, could only leave cells
+  /// as they were, never see one free). A cloud from within 1e-4 px and 1e-9 of a remembered camera's intrinsics and
+  /// pose is that camera's, whose values are used, with this on or off (fitPinhole's fits of a fixed camera differ by
+  /// about 1e-7 px; its tolerance is kPinholeTolerancePx, 0.05 px).
   /// Not a tunable (the updates do not depend on it): false evaluates every block, for the tests that compare the two.
   bool skip_unchanged_blocks = true;
 };
@@ -104,7 +111,9 @@ struct MapUpdateStats {
   std::size_t free_cells = 0;     ///< distinct cells marked free (projective: those not yet clamped free only)
   std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
   std::size_t known_free = 0;     ///< unobserved cells turned free by addKnownFree (inside the robot, static objects)
-  std::size_t reused_blocks = 0;  ///< projective: blocks left as the camera's last view (skip_unchanged_blocks)
+  /// projective: dirty blocks left as the camera's last view left them, unvisited (skip_unchanged_blocks; with a
+  /// superblock left whole, its blocks hidden from the camera too)
+  std::size_t reused_blocks = 0;
 };
 
 /// \brief The cell updates computed from one cloud, applied later under the caller's lock.
@@ -117,7 +126,9 @@ struct MapUpdate {
 /// \brief Occupancy grid in the robot base frame.
 ///        computeUpdate, addKnownFree and unobservedCells read the map and may run concurrently with collision checks
 ///        (anyOccupied), but not with apply, clear or setUnknownOccupied; those modify the map and must be serialized
-///        with every reader by the caller. One thread integrates clouds (computeUpdate uses the map's scratch space).
+///        with every reader by the caller. One thread integrates clouds (computeUpdate uses the map's scratch space,
+///        and computeUpdateProjective keeps each camera's last view between calls; apply, clear and setUnknownOccupied
+///        write the counters it reads them with).
 class OccupancyMap {
  public:
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).
@@ -210,14 +221,16 @@ class OccupancyMap {
   }
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
-  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, end_) and its hits (hit_,
-  ///        out->hits); clears the seen_ marks and out.
+  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, order_flags_) and its
+  ///        hits (hit_, out->hits); clears the seen_ marks and out.
   void collectEndCells(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                        const Eigen::Vector3d& origin, MapUpdate* out);
   /// collectEndCells' table: the slot of cell c (where it is, or the empty one where it goes), and a table twice as
   ///        large (the cells of order_ kept).
   std::size_t slot(std::int64_t c) const;
   void growSlots();
+  /// The block and the superblock that hold cell c.
+  void boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const;
   /// Set cell c's value, keeping the occupied bit and the block counts.
   void setValue(std::int64_t c, float v);
   /// Every unobserved cell at the prior (on) or unknown (off).
@@ -260,7 +273,8 @@ class OccupancyMap {
   float prior_ = 0.0f;              ///< log-odds of an unobserved cell under unknown_occupied
   float threshold_ = 0.0f;          ///< log-odds of occupancy_threshold
   std::int64_t seen_occupied_ = 0;  ///< observed cells at or above the threshold
-  // skip_unchanged_blocks: a counter of the map's updates (computeUpdate*, apply, clear) and, per block and
+  // skip_unchanged_blocks: a counter of the map's updates (computeUpdate*, apply, clear, setUnknownOccupied) and, per
+  // block and
   // superblock, its value when a cell in it last turned not clamped free (a view before then is out of date); the
   // cameras' last views; per block and superblock, a sum of hashes of the cloud's end cells in it (and the ones
   // holding any).

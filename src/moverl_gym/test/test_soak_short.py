@@ -25,7 +25,7 @@ def test_soak_short(tmp_path):
             "--steps",
             "6000",
             "--octomap-steps",
-            "400",
+            "1200",  # >= 2 samples 200 steps apart after soak.py's 1 s warm-up (about 340 steps/s here)
             "--every",
             "200",
             "--out",

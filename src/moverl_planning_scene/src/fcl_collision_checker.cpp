@@ -43,21 +43,6 @@ constexpr std::size_t kCullFromStates = 4;
 // certify it, of the order of GJK's own tolerance (libccd decides intersection near machine precision).
 constexpr double kCullSlack = 1e-6;
 
-/// True for the shapes shapeSupport has a support function for (others are never culled: no GJK spent on them).
-bool hasSupport(const fcl::CollisionGeometryd& shape) {
-  switch (shape.getNodeType()) {
-    case fcl::GEOM_CONVEX:
-    case fcl::GEOM_BOX:
-    case fcl::GEOM_SPHERE:
-    case fcl::GEOM_CAPSULE:
-    case fcl::GEOM_CYLINDER:
-    case fcl::GEOM_CONE:
-      return true;
-    default:
-      return false;
-  }
-}
-
 /// True when a plane separates shape a (at ta, bounding sphere (ca, ra)) from shape b by more than `motion`: the two
 /// cannot meet while their points move by at most `motion` relative to each other. Tries, cheapest first, the
 /// bounding spheres, the plane that separated them last time (memory, turned with a), the plane across the line
@@ -80,7 +65,9 @@ bool farApart(const fcl::CollisionGeometryd& a, const Eigen::Isometry3d& ta, con
   if (memory->plane.squaredNorm() > 0.0 && separated(ta.linear() * memory->plane)) return true;
   if (gap > 0.0 && separated(d / gap)) return true;
   memory->plane.setZero();
-  if (!(memory->upper > motion) || !hasSupport(a) || !hasSupport(b)) return false;
+  if (!(memory->upper > motion) || !hasShapeSupport(a) || !hasShapeSupport(b)) {
+    return false;  // no support function (triangle meshes): never culled, no GJK spent on them
+  }
   fcl::DistanceRequestd request(true);  // with the nearest points
   fcl::DistanceResultd result;
   const double distance =
@@ -295,7 +282,7 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
     for (PairMemory& m : world_memory_) m.upper = std::numeric_limits<double>::infinity();
   }
   memory_world_stamp_ = world_stamp_;
-  world_active_.assign(world_.size() * n_world, 1);
+  world_active_.resize(world_.size() * n_world);  // every entry written below
   for (std::size_t w = 0; w < n_world; ++w) {
     const Geom& g = geoms_[world_geoms_[w]];
     for (std::size_t o = 0; o < world_.size(); ++o) {

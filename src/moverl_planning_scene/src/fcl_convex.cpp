@@ -28,6 +28,20 @@ std::shared_ptr<fcl::Convexd> makeFclConvex(const std::vector<Eigen::Vector3d>& 
                                         std::make_shared<const std::vector<int>>(std::move(faces)));
 }
 
+bool hasShapeSupport(const fcl::CollisionGeometryd& shape) {
+  switch (shape.getNodeType()) {  // the shapes shapeSupport's switch answers
+    case fcl::GEOM_CONVEX:
+    case fcl::GEOM_BOX:
+    case fcl::GEOM_SPHERE:
+    case fcl::GEOM_CAPSULE:
+    case fcl::GEOM_CYLINDER:
+    case fcl::GEOM_CONE:
+      return true;
+    default:
+      return false;
+  }
+}
+
 double shapeSupport(const fcl::CollisionGeometryd& shape, const Eigen::Isometry3d& tf, const Eigen::Vector3d& n) {
   const Eigen::Vector3d l = tf.linear().transpose() * n;  // n in the shape's frame
   const double at = n.dot(tf.translation()), radial = std::hypot(l.x(), l.y());

@@ -584,6 +584,7 @@ TEST(PathCulling, ShapeSupportIsWhereGjkSaysTheShapeEnds) {
       const Vector3d n = randomUnit(&rng);
       const double support = mps::shapeSupport(*shapes[s], tf, n);
       ASSERT_TRUE(std::isfinite(support)) << "shape " << s;
+      ASSERT_TRUE(mps::hasShapeSupport(*shapes[s])) << "shape " << s;
       // The slab {x : d <= n . x <= d + 2} (20 m wide): the shape meets it when it reaches past n . x = d.
       auto reaches = [&](double d) {
         fcl::Transform3d at = fcl::Transform3d::Identity();
@@ -600,6 +601,7 @@ TEST(PathCulling, ShapeSupportIsWhereGjkSaysTheShapeEnds) {
   }
   fcl::Halfspaced plane(Vector3d::UnitZ(), 0.0);
   EXPECT_TRUE(std::isinf(mps::shapeSupport(plane, Eigen::Isometry3d::Identity(), Vector3d::UnitX())));
+  EXPECT_FALSE(mps::hasShapeSupport(plane));  // the two lists of fcl_convex.cpp agree
 }
 
 // The motion bound counts a prismatic joint's travel within its limits: a segment with one beyond them (a measured

@@ -24,5 +24,8 @@ std::shared_ptr<fcl::Convexd> makeFclConvex(const std::vector<Eigen::Vector3d>& 
 /// hulls (every vertex), boxes, spheres, capsules, cylinders and cones (FCL's conventions: centred, axis z, a cone's
 /// apex at +lz/2). Infinity for any other shape (triangle meshes, planes): no finite bound is claimed for it.
 double shapeSupport(const fcl::CollisionGeometryd& shape, const Eigen::Isometry3d& tf, const Eigen::Vector3d& n);
+/// True for the shapes shapeSupport answers (a finite value), false for the others; the two switches of fcl_convex.cpp
+/// list the same shapes.
+bool hasShapeSupport(const fcl::CollisionGeometryd& shape);
 
 }  // namespace moverl_planning_scene

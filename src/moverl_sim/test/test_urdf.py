@@ -198,3 +198,23 @@ def test_simplified_visuals_decimate_every_visual_mesh(tmp_path):
         meshes.read_mesh(str(tmp_path / "x.dae"))
     with pytest.raises(ValueError, match="max_faces"):
         meshes.simplified(v, faces, 3)
+
+
+def test_simulator_refuses_a_visual_mesh_it_cannot_simplify(tmp_path):
+    """robot_visuals simplified with a broken visual mesh: a ValueError naming the mesh (the node's clear error), and
+    no scratch folder left behind."""
+    import glob
+    import tempfile
+
+    from moverl_sim.core import Simulator
+    from moverl_sim.settings import sim_settings
+
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    urdf = tmp_path / "r.urdf"
+    urdf.write_text(
+        '<robot name="r"><link name="a"><visual><geometry><mesh filename="bad.obj"/></geometry></visual></link></robot>'
+    )
+    before = set(glob.glob(os.path.join(tempfile.gettempdir(), "moverl_robot_*")))
+    with pytest.raises(ValueError, match="bad.obj cannot be simplified"):
+        Simulator(str(urdf), [], "a", None, None, **{**sim_settings(), "robot_visuals": "simplified"})
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "moverl_robot_*"))) == before

@@ -20,7 +20,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from .follow import spline_at
-from .urdf import JointLimits, collision_as_visual, simplified_visuals
+from .urdf import JointLimits, UrdfError, collision_as_visual, simplified_visuals
 from .world import World
 
 __all__ = [
@@ -282,20 +282,22 @@ class Simulator:
                 )
             loaded = str(urdf_path)
             scratch = None  # the rewritten URDF (and simplified meshes) live here until PyBullet has loaded them
-            if robot_visuals != "visual":
-                scratch = tempfile.mkdtemp(prefix="moverl_robot_")
-                with open(urdf_path, encoding="utf-8") as fh:
-                    text = fh.read()
-                base_dir = os.path.dirname(str(urdf_path))
-                if robot_visuals == "collision":  # the same URDF, drawn as its collision shapes
-                    text = collision_as_visual(text, base_dir, str(urdf_path))
-                else:
-                    text = simplified_visuals(text, scratch, simplified_faces, base_dir, str(urdf_path))
-                loaded = os.path.join(scratch, "robot.urdf")
-                with open(loaded, "w", encoding="utf-8") as fh:
-                    fh.write(text)
             try:
+                if robot_visuals != "visual":
+                    scratch = tempfile.mkdtemp(prefix="moverl_robot_")
+                    with open(urdf_path, encoding="utf-8") as fh:
+                        text = fh.read()
+                    base_dir = os.path.dirname(str(urdf_path))
+                    if robot_visuals == "collision":  # the same URDF, drawn as its collision shapes
+                        text = collision_as_visual(text, base_dir, str(urdf_path))
+                    else:
+                        text = simplified_visuals(text, scratch, simplified_faces, base_dir, str(urdf_path))
+                    loaded = os.path.join(scratch, "robot.urdf")
+                    with open(loaded, "w", encoding="utf-8") as fh:
+                        fh.write(text)
                 self.robot = p.loadURDF(loaded, [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
+            except UrdfError as exc:  # a mesh that cannot be read or simplified: the caller's ValueError
+                raise ValueError(str(exc)) from None
             except pybullet.error as exc:
                 raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
             finally:

@@ -3,9 +3,9 @@
 A depth camera at 160x120 sees a link of the Panda over a few hundred pixels, yet its visual mesh has up to 22,000
 triangles: PyBullet's TinyRenderer spends nine tenths of an image on them (docs/sensing.md, render_cost.py). Drawn as
 a quadric-error simplification of itself (fast_simplification, the decimation of pyvista) with at most ``faces``
-triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the depths move) at a
-tenth of the cost. Meshes this module reads: Wavefront OBJ (vertices and faces; texture and normal indices ignored)
-and STL (ASCII or binary); any other format is drawn as it is.
+triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the depths move) and
+the Panda's 160x120 image costs about a quarter (4.7 ms against 18). Meshes this module reads: Wavefront OBJ
+(vertices and faces; texture and normal indices ignored) and STL (ASCII or binary); any other format is drawn as it is.
 """
 
 from __future__ import annotations

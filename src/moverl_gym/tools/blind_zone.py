@@ -72,7 +72,7 @@ def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual
             continue
         configs += 1
         for cam in cams:
-            depth, seg = cam.render_segmented(sim.client_id)
+            depth, seg = sim.render_segmented(cam)  # config/sim.yaml camera_renderer draws it
             seg = seg.reshape(-1)
             pts = cam.optical_to_world(cam.points_from_depth(depth))
             body_of = seg & ((1 << 24) - 1)  # PyBullet packs (link + 1) << 24 | body into the mask

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Record the point clouds a world's simulated depth cameras produce, exactly as the simulator publishes them on
-~points (moverl_sim.camera.Camera.render in a Simulator built as the sim node builds it), with the robot at its
+~points (Simulator.render_points in a Simulator built as the sim node builds it), with the robot at its
 config's home and the world's moving obstacles where their motions put them at each instant, into a directory a C++
 benchmark reads. In this process, no ROS.
 
@@ -232,7 +232,7 @@ def main(argv=None) -> int:
             sim.place_obstacles(t - sim.motion_epoch)  # the moving obstacles where their motions put them at t
             for cam, (xyz, quat) in zip(cameras, poses):
                 r0 = time.perf_counter()
-                points = cam.render(sim.client_id)
+                points = sim.render_points(cam)
                 ms = 1e3 * (time.perf_counter() - r0)
                 name = f"cloud_{len(clouds):04d}.f32"
                 np.ascontiguousarray(points, dtype="<f4").tofile(args.out / name)

@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer with the robot drawn as its
-visual meshes, as those meshes simplified and as its collision shapes (config/sim.yaml robot_visuals: what the
-simulator's cameras see), and by
-PyBullet's batched ray test over the same pixel rays (collision shapes), on one thread and on all, in this process (no
-ROS).
+"""What one depth image costs: each camera of a world rendered by PyBullet's TinyRenderer and by the simulator's own
+rasterizer (config/sim.yaml camera_renderer: tinyrenderer, raster), with the robot drawn as its visual meshes, as
+those meshes simplified and as its collision shapes (config/sim.yaml robot_visuals: what the simulator's cameras
+see), and by PyBullet's batched ray test over the same pixel rays (collision shapes), on one thread and on all, in
+this process (no ROS).
 
     python src/moverl_gym/tools/render_cost.py --world human --renders 10
 
@@ -52,6 +52,16 @@ def timed(fn, n: int) -> tuple[float, float, object]:
     return 1e3 * (time.process_time() - c0) / n, 1e3 * (time.perf_counter() - w0) / n, out
 
 
+def print_shares(other: np.ndarray, depth: np.ndarray) -> None:
+    """Where another image differs from the reference: nearer (it hides more than the arm) or farther (the camera would
+    see past the arm's surface), by more than 1 mm and by more than 1 cm."""
+    share = [np.mean(other < depth - t) for t in (1e-3, 1e-2)] + [np.mean(other > depth + t) for t in (1e-3, 1e-2)]
+    print(
+        f"{'':8s} {'':>9s}   pixels nearer by > 1 mm {100 * share[0]:.2f} %, > 1 cm {100 * share[1]:.2f} %;"
+        f" farther by > 1 mm {100 * share[2]:.2f} %, > 1 cm {100 * share[3]:.2f} %"
+    )
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
@@ -71,7 +81,11 @@ def main(argv=None) -> int:
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
-    sims = {looks: simulator_for(rc, world, robot_visuals=looks) for looks in ("visual", "simplified", "collision")}
+    # camera_renderer raster: each sim's render_depth is the rasterizer's image; cam.render_depth(client) TinyRenderer's
+    sims = {
+        looks: simulator_for(rc, world, robot_visuals=looks, camera_renderer="raster")
+        for looks in ("visual", "simplified", "collision")
+    }
     sim = sims["visual"]
     try:
         for s in sims.values():
@@ -89,15 +103,13 @@ def main(argv=None) -> int:
                 cpu, wall, other = timed(lambda: cam.render_depth(sims[looks].client_id), args.renders)
                 dz = np.abs(other - depth)
                 print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
-                # Where they change the image: nearer (they hide more than the arm) or farther (the camera would see
-                # past the arm's surface), by more than 1 mm and by more than 1 cm.
-                share = [np.mean(other < depth - t) for t in (1e-3, 1e-2)] + [
-                    np.mean(other > depth + t) for t in (1e-3, 1e-2)
-                ]
-                print(
-                    f"{'':8s} {'':>9s}   pixels nearer by > 1 mm {100 * share[0]:.2f} %, > 1 cm {100 * share[1]:.2f} %;"
-                    f" farther by > 1 mm {100 * share[2]:.2f} %, > 1 cm {100 * share[3]:.2f} %"
-                )
+                print_shares(other, depth)
+            for looks in ("visual", "simplified", "collision"):
+                cpu, wall, other = timed(lambda: sims[looks].render_depth(cam), args.renders)
+                dz = np.abs(other - depth)
+                label = f"raster, {looks}"
+                print(f"{'':8s} {'':>9s} {label:28s} {cpu:8.1f} {wall:8.1f} {np.median(dz):12.4f} {dz.max():7.3f}")
+                print_shares(other, depth)
             for threads, label in ((1, "rayTestBatch, 1 thread"), (0, "rayTestBatch, all threads")):
                 cpu, wall, rays = timed(lambda: ray_depth(cam, cid, threads), args.renders)
                 dz = np.abs(rays - depth)

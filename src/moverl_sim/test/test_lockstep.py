@@ -105,7 +105,7 @@ def run_rendering(sim, motion, cameras, fail_at=None):
             return []
         shapes = []
         for i in due:
-            shapes.append(cameras[i].render(sim.client_id).shape)
+            shapes.append(sim.render_points(cameras[i]).shape)
             schedule.rendered(i, sim.sim_time)
         calls.append((sim.substeps_total, due, during, shapes))
         return [sim.substeps_total]

@@ -82,15 +82,20 @@ def rotation_to_quaternion(R):
 
 
 def quaternion_to_rotation(q):
-    """Unit quaternion (x, y, z, w) -> 3 x 3 rotation matrix."""
-    x, y, z, w = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """Unit quaternion (x, y, z, w) -> 3 x 3 rotation matrix; an array of quaternions (..., 4) -> (..., 3, 3)."""
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - z * w)
+    R[..., 0, 2] = 2 * (x * z + y * w)
+    R[..., 1, 0] = 2 * (x * y + z * w)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - x * w)
+    R[..., 2, 0] = 2 * (x * z - y * w)
+    R[..., 2, 1] = 2 * (y * z + x * w)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
 
 
 def depth_from_zbuffer(zbuf, near, far):
@@ -196,7 +201,7 @@ class Camera:
     def render_segmented(self, client_id):
         """Metric z-depth image (as render_depth) and what each pixel sees: PyBullet's segmentation mask (height x
         width int, (link + 1) << 24 | body unique id; -1: no return)."""
-        zbuf, seg = self._image(client_id, 0)
+        zbuf, seg = self._image(client_id, pybullet.ER_SEGMENTATION_MASK_OBJECT_AND_LINKINDEX)
         depth = depth_from_zbuffer(
             np.asarray(zbuf, dtype=np.float32).reshape(self.height, self.width), self.near, self.far
         )

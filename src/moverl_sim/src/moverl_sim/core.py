@@ -19,6 +19,7 @@ import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
 
+from .depth_scene import DepthScene
 from .follow import spline_at
 from .urdf import JointLimits, UrdfError, collision_as_visual, simplified_visuals
 from .world import World
@@ -38,6 +39,9 @@ VELOCITY_TOLERANCE = 1e-6  # relative tolerance on the velocity limits
 START_TOLERANCE = 1e-4  # a first point at t=0 must be this close to the current state
 # Bullet's broadphase collision filter groups (btBroadphaseProxy): a fixed base's collider is static, and static
 # colliders do not collide with each other.
+#: What may draw the depth cameras' images (Simulator's camera_renderer; config/sim.yaml says which and why).
+CAMERA_RENDERERS = ("raster", "tinyrenderer")
+
 _STATIC_FILTER = 2
 _ALL_FILTER = -1
 
@@ -224,6 +228,9 @@ class Simulator:
     robot_visuals: "visual" (the robot is drawn as its visual meshes), "simplified" (its visual meshes decimated to
         at most simplified_faces triangles each: what the depth cameras see at a fraction of the cost) or "collision"
         (its collision shapes); required, config/sim.yaml's robot_visuals (and simplified_faces).
+    camera_renderer: what draws the depth cameras' images (render_depth): "raster" (moverl_sim.depth_scene: a
+        depth-only rasterizer of the visual shapes, read once here) or "tinyrenderer" (PyBullet's); required,
+        config/sim.yaml's camera_renderer.
     """
 
     def __init__(
@@ -241,6 +248,7 @@ class Simulator:
         motion_time_scale=1.0,
         robot_visuals,
         simplified_faces=None,
+        camera_renderer,
     ):
         if control not in ("kinematic", "dynamic"):
             raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
@@ -280,8 +288,14 @@ class Simulator:
                 raise ValueError(
                     "robot_visuals 'simplified' needs simplified_faces, an int >= 4, got %r" % (simplified_faces,)
                 )
+            if camera_renderer not in CAMERA_RENDERERS:
+                raise ValueError(
+                    "camera_renderer must be one of %s, got %r"
+                    % (", ".join(map(repr, CAMERA_RENDERERS)), camera_renderer)
+                )
             loaded = str(urdf_path)
-            scratch = None  # the rewritten URDF (and simplified meshes) live here until PyBullet has loaded them
+            # The rewritten URDF (and simplified meshes) live here until PyBullet and the depth scene have read them.
+            scratch = None
             try:
                 if robot_visuals != "visual":
                     scratch = tempfile.mkdtemp(prefix="moverl_robot_")
@@ -295,17 +309,19 @@ class Simulator:
                     loaded = os.path.join(scratch, "robot.urdf")
                     with open(loaded, "w", encoding="utf-8") as fh:
                         fh.write(text)
-                self.robot = p.loadURDF(loaded, [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
+                try:
+                    self.robot = p.loadURDF(loaded, [0, 0, 0], [0, 0, 0, 1], useFixedBase=True, flags=flags)
+                except pybullet.error as exc:
+                    raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
+                self._setup_robot(str(urdf_path), list(joints), base_link, dict(fixed_joint_positions or {}))
+                self._setup_world()
+                self._setup_collision_filters()
+                self._depth_scene = DepthScene.from_client(p._client) if camera_renderer == "raster" else None
             except UrdfError as exc:  # a mesh that cannot be read or simplified: the caller's ValueError
                 raise ValueError(str(exc)) from None
-            except pybullet.error as exc:
-                raise ValueError("PyBullet cannot load the URDF %s: %s" % (urdf_path, exc)) from None
             finally:
                 if scratch is not None:
                     shutil.rmtree(scratch, ignore_errors=True)
-            self._setup_robot(str(urdf_path), list(joints), base_link, dict(fixed_joint_positions or {}))
-            self._setup_world()
-            self._setup_collision_filters()
         except Exception:
             self.close()
             raise
@@ -582,6 +598,26 @@ class Simulator:
     def client_id(self):
         """PyBullet physicsClientId of this simulator's world (e.g. for moverl_sim.camera rendering)."""
         return self._cid
+
+    def render_depth(self, camera):
+        """The z-depth image (height x width, metres; far = no return) a moverl_sim.camera.Camera sees of the world
+        now, drawn by this simulator's camera_renderer."""
+        if self._depth_scene is not None:
+            return self._depth_scene.render(camera)
+        return camera.render_depth(self._cid)
+
+    def render_points(self, camera):
+        """render_depth back-projected: (height * width) x 3 float32 points in the camera's optical frame."""
+        return camera.points_from_depth(self.render_depth(camera))
+
+    def render_segmented(self, camera):
+        """(render_depth, what each pixel sees: (link + 1) << 24 | body unique id, -1 for no return), the
+        segmentation mask of PyBullet's getCameraImage, from this simulator's camera_renderer."""
+        if self._depth_scene is None:
+            return camera.render_segmented(self._cid)
+        depth, parts = self._depth_scene.render(camera, parts=True)
+        codes = np.asarray([((link + 1) << 24) | body for body, link in self._depth_scene.parts] + [-1])
+        return depth, codes[parts]  # part -1 indexes the trailing -1
 
     @property
     def sim_time(self):

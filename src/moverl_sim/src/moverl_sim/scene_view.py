@@ -103,7 +103,8 @@ class SceneView:
                 robot.get("fixed_joint_positions") or {},
                 world,
                 gui=False,
-                **{**sim_settings(), "robot_visuals": "visual"},  # a picture for people: the robot as it looks
+                # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
+                **{**sim_settings(), "robot_visuals": "visual", "camera_renderer": "tinyrenderer"},
             )
         p = self.sim._p
         for oid, (body, link) in self.sim._object_links.items():

@@ -16,8 +16,8 @@ _ROOT = os.environ.get("MOVERL_ROOT") or os.path.dirname(
 
 
 def sim_settings(path: str | None = None) -> dict:
-    """physics_hz, control, moving_speed, robot_visuals and simplified_faces from config/sim.yaml (or `path`), as
-    keyword arguments of Simulator."""
+    """physics_hz, control, moving_speed, robot_visuals, simplified_faces and camera_renderer from config/sim.yaml
+    (or `path`), as keyword arguments of Simulator."""
     with open(path or os.path.join(_ROOT, "config", "sim.yaml"), encoding="utf-8") as f:
         cfg = yaml.safe_load(f)
     return {
@@ -26,6 +26,7 @@ def sim_settings(path: str | None = None) -> dict:
         "moving_speed": float(cfg["moving_speed"]),
         "robot_visuals": str(cfg["robot_visuals"]),
         "simplified_faces": int(cfg["simplified_faces"]),
+        "camera_renderer": str(cfg["camera_renderer"]),
     }
 
 

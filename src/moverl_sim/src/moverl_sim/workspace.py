@@ -86,7 +86,7 @@ class Workspace:
                 robot["base_link"],
                 robot.get("fixed_joint_positions") or {},
                 gui=False,
-                **sim_settings(),
+                **{**sim_settings(), "camera_renderer": "tinyrenderer"},  # no depth camera: no depth scene to read
             )
         try:
             return _Kinematics(sim, robot["ee_link"], robot["home"]).workspace()

@@ -1,0 +1,197 @@
+"""The depth cameras' own renderer (moverl_sim.depth_scene, the C++ rasterizer behind it) against the geometry it
+draws: the world file's shapes ray-cast exactly, and PyBullet's TinyRenderer for the robot's meshes. No roscore."""
+
+import os
+
+import numpy as np
+import pybullet
+import pytest
+from conftest import JOINTS, make_sim
+from pybullet_utils import bullet_client
+
+from moverl_sim.camera import Camera, quaternion_to_rotation
+from moverl_sim.depth_scene import DepthScene, box_mesh, capsule_mesh, cylinder_mesh, sphere_mesh
+from moverl_sim.world import load_world
+
+pytestmark = pytest.mark.core
+
+HUMAN_WORLD = os.path.join(os.path.dirname(__file__), "..", "..", "..", "worlds", "human.yaml")
+
+
+# ---------------------------------------------------------------- the world's shapes, exactly
+def _local(obj, t, points):
+    """World points (n x 3) in an object's frame at motion time t."""
+    return (points - np.asarray(obj.position_at(t))) @ quaternion_to_rotation(obj.quaternion)
+
+
+def ray_depth(obj, t, origin, dirs):
+    """Ray parameter (z-depth for directions with optical z = 1) of each ray's first hit on the object; inf: none."""
+    R = quaternion_to_rotation(obj.quaternion)
+    o = (origin - np.asarray(obj.position_at(t))) @ R
+    d = dirs @ R
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if obj.shape == "box":
+            half = np.asarray(obj.size) / 2.0
+            t1, t2 = (-half - o) / d, (half - o) / d
+            near = np.nanmax(np.minimum(t1, t2), axis=1)
+            far = np.nanmin(np.maximum(t1, t2), axis=1)
+            return np.where((near <= far) & (near > 0), near, np.inf)
+        if obj.shape == "sphere":
+            r = obj.size[0]
+            b = (d * o).sum(1)
+            a = (d * d).sum(1)
+            disc = b * b - a * ((o * o).sum() - r * r)
+            hit = (-b - np.sqrt(disc)) / a
+            return np.where((disc >= 0) & (hit > 0), hit, np.inf)
+        h, r = obj.size
+        a = d[:, 0] ** 2 + d[:, 1] ** 2
+        b = o[0] * d[:, 0] + o[1] * d[:, 1]
+        disc = b * b - a * (o[0] ** 2 + o[1] ** 2 - r * r)
+        side = (-b - np.sqrt(disc)) / a
+        best = np.where((disc >= 0) & (side > 0) & (np.abs(o[2] + side * d[:, 2]) <= h / 2), side, np.inf)
+        for zc in (-h / 2, h / 2):
+            cap = (zc - o[2]) / d[:, 2]
+            on = (cap > 0) & ((o[0] + cap * d[:, 0]) ** 2 + (o[1] + cap * d[:, 1]) ** 2 <= r * r)
+            best = np.where(on & (cap < best), cap, best)
+        return best
+
+
+def signed_distance(obj, t, points):
+    p = _local(obj, t, points)
+    if obj.shape == "box":
+        q = np.abs(p) - np.asarray(obj.size) / 2.0
+    elif obj.shape == "sphere":
+        return np.linalg.norm(p, axis=1) - obj.size[0]
+    else:
+        h, r = obj.size
+        q = np.column_stack((np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - h / 2))
+    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+
+
+# ---------------------------------------------------------------- tests
+def _cylinder_sdf(p, r, h):
+    q = np.column_stack((np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - h / 2))
+    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+
+
+@pytest.mark.parametrize(
+    "mesh, radius, sdf",
+    [
+        (lambda: sphere_mesh(0.11), 0.11, lambda p: np.linalg.norm(p, axis=1) - 0.11),
+        (lambda: cylinder_mesh(0.165, 0.58), 0.165, lambda p: _cylinder_sdf(p, 0.165, 0.58)),
+        (
+            lambda: capsule_mesh(0.05, 0.3),
+            0.05,
+            lambda p: np.linalg.norm(p - np.clip(p * [0, 0, 1], -0.15, 0.15), axis=1) - 0.05,
+        ),
+    ],
+    ids=["sphere", "cylinder", "capsule"],
+)
+def test_curved_primitives_are_polyhedra_that_enclose_them_wound_outwards(mesh, radius, sdf):
+    """Every face lies on or outside the shape (a ray that hits the shape hits the polyhedron first, never behind),
+    its corners within 0.5 % of the radius, and every face is turned outwards (the rasterizer culls back faces)."""
+    v, tri = mesh()
+    a, b, c = (v[tri[:, i]] for i in range(3))
+    assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) > 0)  # outward
+    w = np.random.default_rng(0).dirichlet([1, 1, 1], size=64)  # points spread over every face
+    samples = np.einsum("sk,tkj->tsj", w, np.stack((a, b, c), axis=1)).reshape(-1, 3)
+    assert sdf(samples).min() >= -1e-9 * radius
+    assert sdf(v).max() <= 0.005 * radius
+
+
+def test_a_box_is_its_twelve_triangles_wound_outwards():
+    v, tri = box_mesh([0.2, 0.4, 0.6])
+    assert len(tri) == 12 and np.allclose(np.abs(v), [0.1, 0.2, 0.3])
+    a, b, c = (v[tri[:, i]] for i in range(3))
+    assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) > 0)
+
+
+@pytest.fixture(scope="module")
+def human_sim(panda_urdf):
+    world = load_world(HUMAN_WORLD)
+    s = make_sim(panda_urdf, world, camera_renderer="raster")
+    s.reset_robot([0.0, -0.6, 0.0, -2.2, 0.0, 1.6, 0.8][: len(JOINTS)])
+    yield s, world
+    s.close()
+
+
+@pytest.mark.parametrize("t", [0.0, 1.5, 4.2])
+def test_the_world_files_shapes_are_drawn_where_they_are_never_behind_or_beside(human_sim, t):
+    """The human world with the person at motion time t, each camera: where a pixel's ray hits a world object, the
+    image is no farther than that hit (nothing is seen through or behind a surface); every pixel that sees a world
+    object (not the robot) sees a point on an object's surface, at most 1.5 mm outside it (the enclosing polyhedra)."""
+    sim, world = human_sim
+    sim.place_obstacles(t)
+    robot = sim.robot
+    for spec in world.cameras:
+        cam = Camera(spec)
+        depth, seg = sim.render_segmented(cam)
+        depth, seg = depth.reshape(-1), seg.reshape(-1)
+        dirs = np.column_stack((cam._rays_x, cam._rays_y, np.ones_like(cam._rays_x))) @ cam.rotation.T
+        origin = np.asarray(cam.position)
+        exact = np.min([ray_depth(o, t, origin, dirs) for o in world.objects], axis=0)
+        hits = np.isfinite(exact) & (exact < cam.far)
+        assert hits.sum() > 1000
+        assert np.all(depth[hits] <= exact[hits] + 1e-5), cam.id
+        sees_world = (seg >= 0) & ((seg & ((1 << 24) - 1)) != robot)
+        points = origin + dirs[sees_world] * depth[sees_world][:, None]
+        sdf = np.min([signed_distance(o, t, points) for o in world.objects], axis=0)
+        assert sdf.min() >= -1e-4 and sdf.max() <= 1.5e-3, (cam.id, sdf.min(), sdf.max())
+        # And the person's pixels are the exact ones except at its rim: at most 2 % more (the polyhedra's rims).
+        assert sees_world.sum() <= 1.02 * hits.sum() + 50
+
+
+def test_the_robots_meshes_are_drawn_as_tinyrenderer_draws_them(human_sim):
+    """The same triangles (the simplified visual meshes) in both renderers: the pixels that see the robot, which link,
+    and at what depth agree but for the rims (each renderer's coverage rule)."""
+    sim, world = human_sim
+    sim.place_obstacles(0.0)
+    robot = sim.robot
+    mine, theirs, same_link, same_depth = 0, 0, [], []
+    for spec in world.cameras:
+        cam = Camera(spec)
+        depth, seg = sim.render_segmented(cam)
+        ref, ref_seg = cam.render_segmented(sim.client_id)
+        a, b = ((s >= 0) & ((s & 0xFFFFFF) == robot) for s in (seg, ref_seg))
+        mine, theirs = mine + a.sum(), theirs + b.sum()
+        both = a & b
+        same_link.append(seg[both] == ref_seg[both])
+        same_depth.append(np.abs(depth[both] - ref[both]) <= 1e-3)
+    both = np.concatenate(same_link)
+    assert theirs > 1000
+    assert len(both) >= 0.97 * max(mine, theirs)
+    assert np.mean(both) >= 0.98
+    assert np.mean(np.concatenate(same_depth)) >= 0.99
+
+
+def test_a_shape_it_does_not_draw_is_refused_naming_what_it_draws():
+    client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+    try:
+        client.createMultiBody(baseMass=0, baseVisualShapeIndex=client.createVisualShape(pybullet.GEOM_PLANE))
+        with pytest.raises(ValueError, match="does not draw geometry type 6; it draws box, sphere, cylinder, capsule"):
+            DepthScene.from_client(client._client)
+    finally:
+        client.disconnect()
+
+
+def test_the_simulator_refuses_an_unknown_renderer(panda_urdf, table_world):
+    with pytest.raises(ValueError, match="camera_renderer must be one of 'raster', 'tinyrenderer', got 'opengl'"):
+        make_sim(panda_urdf, table_world, camera_renderer="opengl")
+
+
+def test_either_renderer_gives_the_cameras_conventions(panda_urdf, table_world):
+    """The same camera conventions in both: float z-depth images of the camera's size, no return = far exactly."""
+    for renderer in ("raster", "tinyrenderer"):
+        sim = make_sim(panda_urdf, table_world, camera_renderer=renderer)
+        try:
+            sim.reset_robot([0.0, -0.6, 0.0, -2.2, 0.0, 1.6, 0.8][: len(JOINTS)])
+            for spec in table_world.cameras:
+                cam = Camera(spec)
+                depth = sim.render_depth(cam)
+                assert depth.shape == (cam.height, cam.width)
+                assert np.any(depth == np.float32(cam.far)) or np.all(depth < cam.far)
+                assert np.all((depth >= cam.near) & (depth <= cam.far))
+                pts = sim.render_points(cam)
+                assert pts.dtype == np.float32 and np.allclose(pts, cam.points_from_depth(depth))
+        finally:
+            sim.close()

@@ -252,7 +252,9 @@ void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) 
 void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    pending_[msg->header.frame_id] = msg;  // an older one still pending is replaced: the newest view is what counts
+    auto& slot = pending_[msg->header.frame_id];
+    if (!slot) ++outstanding_;  // an older one still pending is replaced: the newest view is what counts
+    slot = msg;
   }
   pending_cv_.notify_one();
 }
@@ -280,6 +282,11 @@ void OctomapMonitor::integrateLoop() {
       pending_.erase(pick);
     }
     integrate(msg);
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      --outstanding_;  // integrated or dropped: either way no longer on its way into the map
+    }
+    idle_cv_.notify_all();
   }
 }
 
@@ -380,11 +387,20 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     }
     return sensedMapAge(cameras, stamp.toSec(), epoch.toSec(), &deciding);
   };
+  const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(std::max(0.0, wait));
+  if (wait > 0.0) {
+    // Lockstep (real time sets stale_wait 0): simulated time stands still between steps, so the clouds rendered up to
+    // this state are all in, or on their way. Integrating them first makes the map as old as the cameras make it,
+    // not as old as this machine's integration lags (which would widen the margin and discard more moves on a
+    // faster simulator: the answers would depend on the machine).
+    std::unique_lock<std::mutex> pending(pending_mutex_);
+    idle_cv_.wait_until(pending, deadline, [&] { return stop_ || outstanding_ == 0; });
+  }
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
-  const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
   if (map_age > max_age_ && wait > 0.0) {
-    stamps_cv_.wait_for(lock, std::chrono::duration<double>(wait), [&] { return age() <= max_age_; });
+    stamps_cv_.wait_until(lock, deadline, [&] { return age() <= max_age_; });
     map_age = age();
   }
   const bool none = cameras_.empty() && frame_stamps_.empty();

@@ -52,7 +52,8 @@ class OctomapMonitor {
 
   /// \brief The predictive margins (m) of one check whose move starts at `stamp` and lasts `duration` s (infinite:
   ///        unknown), from the map's age at `stamp`: stamp minus the oldest of the cameras' last integrated clouds.
-  ///        While that age exceeds octomap/max_age, waits up to octomap/stale_wait (wall) s for newer clouds (in
+  ///        With octomap/stale_wait > 0 (lockstep) it first waits for the clouds received to be integrated; then,
+  ///        while that age exceeds octomap/max_age, for newer clouds: both within stale_wait (wall) s in all (in
   ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
   ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
   ///        Must not be called with the scene's mutex held (integration needs it).
@@ -125,6 +126,8 @@ class OctomapMonitor {
   std::mutex pending_mutex_;                       // guards pending_ and stop_; pending_cv_ wakes the integrator
   std::condition_variable pending_cv_;
   std::map<std::string, sensor_msgs::PointCloud2::ConstPtr> pending_;  // the newest unintegrated cloud per frame
+  int outstanding_ = 0;  // clouds pending or being integrated (guarded by pending_mutex_; idle_cv_ when it drops)
+  std::condition_variable idle_cv_;
   bool stop_ = false;
   std::thread integrator_;
 };

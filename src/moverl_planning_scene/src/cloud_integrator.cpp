@@ -69,8 +69,9 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   t.points = since(&at);
   mask_.assign(points_.size(), kPointObstacle);
   for (std::size_t c = 0; c < configurations.size(); ++c) {
+    // Each later configuration tests only the points the ones before left (the masks are ORed).
     checker_->robotPointMask(configurations[c].data(), points_, options_.self_filter_padding,
-                             c == 0 ? &mask_ : &mask_more_);
+                             c == 0 ? &mask_ : &mask_more_, c == 0 ? nullptr : &mask_);
     if (c > 0) {
       for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
     }

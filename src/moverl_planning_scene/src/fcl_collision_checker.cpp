@@ -413,8 +413,8 @@ bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeom
 }
 
 void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
-                                         std::vector<std::uint8_t>* mask) const {
-  linkPointMask(q, -1, points, padding, mask);
+                                         std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip) const {
+  linkPointMask(q, -1, points, padding, mask, skip);
 }
 
 void FclCollisionChecker::robotBoundingBoxes(const double* q, double padding,
@@ -458,8 +458,10 @@ double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vecto
 }  // namespace
 
 void FclCollisionChecker::linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
-                                        double padding, std::vector<std::uint8_t>* mask) const {
+                                        double padding, std::vector<std::uint8_t>* mask,
+                                        const std::vector<std::uint8_t>* skip) const {
   mask->assign(points.size(), 0);
+  if (skip != nullptr && skip->size() != points.size()) skip = nullptr;  // not the points' own: tests every point
   std::vector<Eigen::Isometry3d> poses;
   model_.computeLinkTransforms(q, &poses);
   const double pad = std::max(padding, 1e-6), pad2 = pad * pad;
@@ -521,7 +523,7 @@ void FclCollisionChecker::linkPointMask(const double* q, int link, const std::ve
   };
   for (std::size_t k = 0; k < points.size(); ++k) {
     const Eigen::Vector3d& p = points[k];
-    if (!reach.contains(p)) continue;
+    if (!reach.contains(p) || (skip != nullptr && (*skip)[k] != 0)) continue;
     for (const Shape& sh : shapes) {
       if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p)) {
         (*mask)[k] = 1;

@@ -428,6 +428,36 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
   EXPECT_GT(inside, total / 20);  // the points do reach into the shapes
 }
 
+// A skip mask leaves its points out (mask 0) and answers the others as without it: the self filter of several
+// configurations ORs each one's mask over the points the ones before left.
+TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  std::string error;
+  auto scene = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf), &error);
+  ASSERT_NE(scene, nullptr) << error;
+  const mps::FclCollisionChecker& checker = scene->checker();
+  const std::vector<double> q(scene->model().dof(), 0.3);
+  std::vector<Eigen::AlignedBox3d> boxes;
+  checker.robotBoundingBoxes(q.data(), 0.05, &boxes);
+  std::mt19937 rng(3);
+  std::vector<Vector3d> points;
+  for (const auto& b : boxes) {
+    std::uniform_real_distribution<double> x(b.min().x(), b.max().x()), y(b.min().y(), b.max().y()),
+        z(b.min().z(), b.max().z());
+    for (int k = 0; k < 300; ++k) points.emplace_back(x(rng), y(rng), z(rng));
+  }
+  std::vector<std::uint8_t> all, skip(points.size()), some;
+  for (std::size_t k = 0; k < skip.size(); ++k) skip[k] = k % 3 == 0;
+  checker.robotPointMask(q.data(), points, 0.01, &all);
+  checker.robotPointMask(q.data(), points, 0.01, &some, &skip);
+  std::size_t hits = 0;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    EXPECT_EQ(some[k], skip[k] ? 0 : all[k]) << k;
+    hits += all[k] != 0 && skip[k] == 0;
+  }
+  EXPECT_GT(hits, points.size() / 20);
+}
+
 // checkPath leaves out, for a whole segment, the shape pairs a plane at its midpoint separates by more than they can
 // move over half of it (FclCheckerOptions::cull_path_pairs), and so do state checks of a prepared segment's ends. They
 // must answer exactly as checking every pair at every state: over random segments short and long that meet the world

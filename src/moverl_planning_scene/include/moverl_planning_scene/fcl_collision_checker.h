@@ -118,8 +118,10 @@ class FclCollisionChecker : public CollisionChecker {
   static constexpr double kMaxMargin = 1.0;    ///< m: the largest margin (100 levels)
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of any robot link's collision shape in
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
+  /// \param skip (optional, one per point) points already known to be on the robot (nonzero): not tested, mask 0
+  ///        (the self filter of several configurations ORs their masks: each tests what the ones before left).
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
-                      std::vector<std::uint8_t>* mask) const;
+                      std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip = nullptr) const;
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of a static world object (no motion; cones
   ///        as their bounding cylinder). Reads the world: callers serialize it with setWorld.
   void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
@@ -132,7 +134,7 @@ class FclCollisionChecker : public CollisionChecker {
   void staticObjectBoxes(double padding, std::vector<Eigen::AlignedBox3d>* boxes) const;
   /// \brief As robotPointMask, for the collision shapes of one link only (link index; -1: every link).
   void linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
-                     std::vector<std::uint8_t>* mask) const;
+                     std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip = nullptr) const;
   /// \brief As linkPointMask, by FCL's sphere test for every shape (linkPointMask answers convex hulls from their
   ///        faces): the oracle its tests compare it with, slower.
   void linkPointMaskFcl(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,

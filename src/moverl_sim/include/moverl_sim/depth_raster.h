@@ -22,12 +22,11 @@ extern "C" {
 #endif
 
 /// Return codes of moverl_depth_raster.
-enum MoverlDepthRasterStatus
-{
+enum MoverlDepthRasterStatus {
   MOVERL_DEPTH_RASTER_OK = 0,
-  MOVERL_DEPTH_RASTER_BAD_IMAGE = -1,     ///< width or height < 1, focal <= 0, not 0 < near_clip < far_clip
-  MOVERL_DEPTH_RASTER_BAD_INDEX = -2,     ///< a triangle names a missing vertex, or a vertex a missing part
-  MOVERL_DEPTH_RASTER_BAD_COUNT = -3,     ///< a negative count, or a null array with a nonzero count
+  MOVERL_DEPTH_RASTER_BAD_IMAGE = -1,  ///< width or height < 1, focal <= 0, not 0 < near_clip < far_clip
+  MOVERL_DEPTH_RASTER_BAD_INDEX = -2,  ///< a triangle names a missing vertex, or a vertex a missing part
+  MOVERL_DEPTH_RASTER_BAD_COUNT = -3,  ///< a negative count, or a null array with a nonzero count
 };
 
 /// Renders the triangles into `depth` (height * width floats, row-major: pixel (u, v) at v * width + u), which it
@@ -39,10 +38,10 @@ enum MoverlDepthRasterStatus
 /// for a part whose triangles bound a closed surface wound outwards (its back faces are skipped). `triangles`:
 /// n_triangles x 3 vertex indices. `pixel_part` (nullable, height * width): the part of the nearest triangle at each
 /// pixel, -1 where none. Returns a MoverlDepthRasterStatus; on an error the images are left untouched.
-int moverl_depth_raster(int width, int height, double focal, double cx, double cy, double near_clip,
-                        double far_clip, int n_parts, const double* camera_from_part, const uint8_t* part_closed,
-                        int n_vertices, const float* vertices, const int32_t* vertex_part, int n_triangles,
-                        const int32_t* triangles, float* depth, int32_t* pixel_part);
+int moverl_depth_raster(int width, int height, double focal, double cx, double cy, double near_clip, double far_clip,
+                        int n_parts, const double* camera_from_part, const uint8_t* part_closed, int n_vertices,
+                        const float* vertices, const int32_t* vertex_part, int n_triangles, const int32_t* triangles,
+                        float* depth, int32_t* pixel_part);
 
 #ifdef __cplusplus
 }

@@ -49,6 +49,24 @@ std::unique_ptr<mps::RobotModel> pandaModel(std::string* error) {
   return mps::RobotModel::fromUrdf(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf).robot, error);
 }
 
+/// The Panda's model and its scene options as the repo ships them: a fatal failure when either is missing (callers
+/// wrap it in ASSERT_NO_FATAL_FAILURE).
+void loadPandaModel(std::unique_ptr<mps::RobotModel>* model, mps::PlanningSceneOptions* options) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  *options = mps::panda::options(kPandaUrdf);
+  std::string error;
+  *model = pandaModel(&error);
+  ASSERT_NE(*model, nullptr) << error;
+}
+
+/// The Panda's planning scene as the repo ships it (a fatal failure when it cannot be built).
+void loadPandaScene(std::unique_ptr<mps::PlanningScene>* scene) {
+  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
+  std::string error;
+  *scene = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf), &error);
+  ASSERT_NE(*scene, nullptr) << error;
+}
+
 /// pybullet_data's KUKA iiwa, its seven joints controlled, its meshes next to its URDF; nullptr with *error.
 std::unique_ptr<mps::RobotModel> iiwaModel(std::string* error) {
   const std::string data = pybulletData();
@@ -388,10 +406,8 @@ TEST(FclConvex, SupportEqualsThePointSetsOnEveryPandaMesh) {
 // Over random Panda configurations and points around the arm, both say the same, except for points within 1e-6 m of
 // the padding's boundary (where the two numerical methods may round either way).
 TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
-  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
-  std::string error;
-  auto scene = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf), &error);
-  ASSERT_NE(scene, nullptr) << error;
+  std::unique_ptr<mps::PlanningScene> scene;
+  ASSERT_NO_FATAL_FAILURE(loadPandaScene(&scene));
   const mps::FclCollisionChecker& checker = scene->checker();
   const auto& model = scene->model();
   std::mt19937 rng(7);
@@ -431,10 +447,8 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
 // A skip mask leaves its points out (mask 0) and answers the others as without it: the self filter of several
 // configurations ORs each one's mask over the points the ones before left.
 TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {
-  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
-  std::string error;
-  auto scene = mps::PlanningScene::create(mps::panda::readFile(kPandaUrdf), mps::panda::options(kPandaUrdf), &error);
-  ASSERT_NE(scene, nullptr) << error;
+  std::unique_ptr<mps::PlanningScene> scene;
+  ASSERT_NO_FATAL_FAILURE(loadPandaScene(&scene));
   const mps::FclCollisionChecker& checker = scene->checker();
   const std::vector<double> q(scene->model().dof(), 0.3);
   std::vector<Eigen::AlignedBox3d> boxes;
@@ -569,11 +583,9 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
 }
 
 TEST(PathCulling, ThePandaGetsTheSameAnswersAsFromEveryPairAtEveryState) {
-  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
-  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
-  std::string error;
-  auto model = pandaModel(&error);
-  ASSERT_NE(model, nullptr) << error;
+  std::unique_ptr<mps::RobotModel> model;
+  mps::PlanningSceneOptions o;
+  ASSERT_NO_FATAL_FAILURE(loadPandaModel(&model, &o));
   expectCullingChangesNoAnswer(*model, o.checker, {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}, 7);
 }
 
@@ -682,13 +694,12 @@ TEST(PathCulling, APrismaticJointBeyondItsLimitsIsNotCulled) {
 
 // A world object's pose must be a rigid transform: the culling's support values and FCL's shapes read its rotation.
 TEST(PathCulling, AnObstacleWhosePoseIsNotRigidIsRefused) {
-  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
-  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
-  std::string error;
-  auto model = pandaModel(&error);
-  ASSERT_NE(model, nullptr) << error;
+  std::unique_ptr<mps::RobotModel> model;
+  mps::PlanningSceneOptions o;
+  ASSERT_NO_FATAL_FAILURE(loadPandaModel(&model, &o));
   mps::FclCheckerOptions co = o.checker;
   co.acm_samples = 0;
+  std::string error;
   auto checker = mps::FclCollisionChecker::create(*model, co, &error);
   ASSERT_NE(checker, nullptr) << error;
   mps::WorldObject skewed = mps::panda::box("skewed", 0.1, 0.1, 0.1, 0.5, 0.0, 0.3);
@@ -768,11 +779,9 @@ void expectMotionBoundHolds(const mps::RobotModel& model, const mps::FclCheckerO
 }
 
 TEST(PathCulling, ThePandasPointsMoveNoFartherThanTheBound) {
-  ASSERT_FALSE(kPandaUrdf.empty()) << "pybullet_data's Panda URDF not found at configure time";
-  const mps::PlanningSceneOptions o = mps::panda::options(kPandaUrdf);
-  std::string error;
-  auto model = pandaModel(&error);
-  ASSERT_NE(model, nullptr) << error;
+  std::unique_ptr<mps::RobotModel> model;
+  mps::PlanningSceneOptions o;
+  ASSERT_NO_FATAL_FAILURE(loadPandaModel(&model, &o));
   expectMotionBoundHolds(*model, o.checker, 3);
 }
 

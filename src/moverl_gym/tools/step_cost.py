@@ -12,7 +12,8 @@ An id may carry launch arguments after commas, e.g. the person sensed by cameras
 
 With a sensed map, the planning scene's own account of its integration time (~octomap_status.integration_time of
 every cloud) is summed too: the shield process's CPU splits into integrating clouds and the rest (the checks); the
-simulator's is mostly rendering then.
+simulator's is mostly rendering then. The steps' verdicts are counted as well (info["verdict"]): a configuration
+whose steps discard more moves does less (no motion, no render) and looks faster than it is.
 
 --profile NAME (sim, shield, env, ...: a process of the graph, named as in the table) also samples that process
 while it is measured: py-spy (`pip install py-spy`, not part of the set-up) for a Python process, perf for a C++ one;
@@ -126,6 +127,7 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
     env_id, launch_args = parse_id(text)
     env = gym.make(env_id, launch_args=launch_args)
     integration = None  # ~octomap_status.integration_time of each cloud, while measuring (a sensed map only)
+    verdicts: dict[str, int] = {}  # the steps' verdicts while measuring (info["verdict"]): what the steps did
     measuring = threading.Event()
     if launch_args.get("obstacles", "objects") != "objects":
         import rospy
@@ -145,7 +147,9 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
 
         def run(n):
             for _ in range(n):
-                _, _, term, trunc, _ = env.step(env.action_space.sample())
+                _, _, term, trunc, info = env.step(env.action_space.sample())
+                if measuring.is_set():
+                    verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
                 if term or trunc:
                     env.reset()
 
@@ -191,6 +195,7 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
         "ms_per_step": per,
         "total_ms": sum(per.values()),
         "switches_per_step": switches,
+        "verdicts": verdicts,
     }
     if frames is not None:
         out["profile"] = {"process": profile, "frames": frames}
@@ -257,6 +262,12 @@ def main(argv=None) -> int:
         for key, label in (("clouds_per_step", "clouds per step"), ("integration_ms_per_step", "integration ms/step")):
             vals = [sum(r.get(key, 0.0) for r in results[i]) / len(results[i]) for i in args.ids]
             print(label.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
+    # What the steps did: a faster step that discards more moves is not a faster env (fewer motions, fewer renders).
+    print("\nthe steps' verdicts (info['verdict']), summed over reps:")
+    kinds = sorted({k for rs in results.values() for r in rs for k in r.get("verdicts", {})})
+    for k in kinds:
+        vals = [sum(r.get("verdicts", {}).get(k, 0) for r in results[i]) for i in args.ids]
+        print(k.ljust(24) + "".join(f"{v:28d}" for v in vals))
     # Each context switch is a thread put to sleep and woken: what a hand-off between threads costs on the step's path.
     print("\ncontext switches per env step (every thread of each process), mean over reps (under 0.05 left out):")
     print("process".ljust(24) + "".join(_column(i) for i in args.ids))

@@ -107,6 +107,7 @@ bool OctomapMonitor::init(std::string* error) {
     plan_horizon_ = requiredParam<double>(pnh_, "octomap/plan_horizon", kYaml);
     max_age_ = requiredParam<double>(pnh_, "octomap/max_age", kYaml);
     stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
+    lockstep_ = requiredParam<bool>(pnh_, "octomap/lockstep", kYaml);
     integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
   } catch (const std::exception& e) {
     *error = e.what();
@@ -252,9 +253,13 @@ void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) 
 void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    auto& slot = pending_[msg->header.frame_id];
-    if (!slot) ++outstanding_;  // an older one still pending is replaced: the newest view is what counts
-    slot = msg;
+    auto& queue = pending_[msg->header.frame_id];
+    if (lockstep_ || queue.empty()) {  // lockstep: every view, in order (a step's answers are the sim's, not the CPU's)
+      queue.push_back(msg);
+      ++outstanding_;
+    } else {
+      queue.back() = msg;  // real time: an older one still pending is replaced, the newest view is what counts
+    }
   }
   pending_cv_.notify_one();
 }
@@ -278,8 +283,9 @@ void OctomapMonitor::integrateLoop() {
           if (last(it->first) < last(pick->first)) pick = it;
         }
       }
-      msg = pick->second;
-      pending_.erase(pick);
+      msg = pick->second.front();
+      pick->second.pop_front();
+      if (pick->second.empty()) pending_.erase(pick);
     }
     integrate(msg);
     {
@@ -389,8 +395,8 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   };
   const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(std::max(0.0, wait));
-  if (wait > 0.0) {
-    // Lockstep (real time sets stale_wait 0): simulated time stands still between steps, so the clouds rendered up to
+  if (lockstep_ && wait > 0.0) {
+    // Lockstep: simulated time stands still between steps, so the clouds rendered up to
     // this state are all in, or on their way. Integrating them first makes the map as old as the cameras make it,
     // not as old as this machine's integration lags (which would widen the margin and discard more moves on a
     // faster simulator: the answers would depend on the machine).

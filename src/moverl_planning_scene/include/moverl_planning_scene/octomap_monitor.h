@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -52,7 +53,7 @@ class OctomapMonitor {
 
   /// \brief The predictive margins (m) of one check whose move starts at `stamp` and lasts `duration` s (infinite:
   ///        unknown), from the map's age at `stamp`: stamp minus the oldest of the cameras' last integrated clouds.
-  ///        With octomap/stale_wait > 0 (lockstep) it first waits for the clouds received to be integrated; then,
+  ///        In lockstep (octomap/lockstep) it first waits for the clouds received to be integrated; then,
   ///        while that age exceeds octomap/max_age, for newer clouds: both within stale_wait (wall) s in all (in
   ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
   ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
@@ -125,8 +126,10 @@ class OctomapMonitor {
   std::vector<std::string> cameras_;               // the frames of the cameras the world lists
   std::mutex pending_mutex_;                       // guards pending_ and stop_; pending_cv_ wakes the integrator
   std::condition_variable pending_cv_;
-  std::map<std::string, sensor_msgs::PointCloud2::ConstPtr> pending_;  // the newest unintegrated cloud per frame
-  int outstanding_ = 0;  // clouds pending or being integrated (guarded by pending_mutex_; idle_cv_ when it drops)
+  // Per frame the clouds not yet integrated: in lockstep every one in order, in real time only the newest.
+  std::map<std::string, std::deque<sensor_msgs::PointCloud2::ConstPtr>> pending_;
+  bool lockstep_ = false;  // octomap/lockstep (init reads it)
+  int outstanding_ = 0;    // clouds pending or being integrated (guarded by pending_mutex_; idle_cv_ when it drops)
   std::condition_variable idle_cv_;
   bool stop_ = false;
   std::thread integrator_;

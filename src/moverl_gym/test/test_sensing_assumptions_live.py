@@ -5,7 +5,8 @@
   second make no contact; the same descent without the hand still comes within 2 cm of the table (the fix does not
   refuse everything near the table);
 * a camera withheld from start-up (the simulator's mute_cameras): every step fails closed as unseen, the shield's
-  message and the scene's status name the camera, and nothing touches.
+  message and the scene's status name the camera, and nothing touches;
+* in lockstep every view is integrated (cameras at 30 Hz: none replaced by its camera's newer one).
 
 The worlds are worlds/human.yaml's (its person, cameras and sensing) with a hand added; the tool is the robot's links
 below its end-effector link (for the Panda: the gripper), positioned by PyBullet's inverse kinematics in this process.
@@ -163,4 +164,48 @@ def test_a_camera_withheld_from_start_up_fails_closed_naming_it(tmp_path):
         print(f"camera far withheld: {verdicts}, {contacts} contacts, {time.monotonic() - t0:.1f} s")
         assert contacts == 0
     finally:
+        env.close()
+
+
+def test_in_lockstep_every_view_is_integrated(tmp_path):
+    """Lockstep, cameras at 30 Hz (two views of a camera within one 50 ms step, a millisecond apart in wall time):
+    every cloud the simulator publishes is integrated, none replaced by its camera's newer one while it waited (in
+    real time the newest view replaces a pending one)."""
+    import rospy
+    from sensor_msgs.msg import PointCloud2
+
+    from moverl_msgs.msg import OctomapStatus
+
+    env = _env(world_file("human"), camera_rate=30.0)
+    published, integrated = [], []
+    subs = [
+        rospy.Subscriber("/sim/points", PointCloud2, lambda m: published.append((m.header.frame_id, m.header.stamp))),
+        rospy.Subscriber(
+            "/planning_scene/octomap_status",
+            OctomapStatus,
+            lambda m: integrated.append((m.sensor_frame, m.header.stamp)) if m.sensor_frame else None,
+        ),
+    ]
+    try:
+        inner = env.unwrapped
+        env.reset(options={"start": inner._home})
+        time.sleep(1.0)  # the subscribers connected; the reset's clouds in
+        rng = np.random.default_rng(2)
+        verdicts = {}
+        for _ in range(40):
+            _, _, term, trunc, info = env.step(rng.uniform(-1, 1, inner.action_space.shape))
+            verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+            if term or trunc:
+                env.reset()
+        deadline = time.monotonic() + 10.0
+        while set(published) - set(integrated) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        missing = set(published) - set(integrated)
+        print(f"{len(published)} clouds published, {len(set(integrated))} integrated; steps {verdicts}")
+        # A step lasts 50 ms of simulated time whatever its verdict: 1.5 renders per camera at 30 Hz.
+        assert len(published) >= 3 * 40, f"cameras at 30 Hz render at least once per camera per step: {verdicts}"
+        assert not missing, f"{len(missing)} of {len(published)} clouds never integrated: {sorted(missing)[:5]}"
+    finally:
+        for s in subs:
+            s.unregister()
         env.close()

@@ -10,7 +10,7 @@ from conftest import JOINTS, make_sim
 from pybullet_utils import bullet_client
 
 from moverl_sim.camera import Camera, quaternion_to_rotation
-from moverl_sim.depth_scene import DepthScene, box_mesh, capsule_mesh, cylinder_mesh, sphere_mesh
+from moverl_sim.depth_scene import DepthScene, box_mesh, capsule_mesh, cylinder_mesh, sphere_mesh, world_depth
 from moverl_sim.world import load_world
 
 pytestmark = pytest.mark.core
@@ -22,38 +22,6 @@ HUMAN_WORLD = os.path.join(os.path.dirname(__file__), "..", "..", "..", "worlds"
 def _local(obj, t, points):
     """World points (n x 3) in an object's frame at motion time t."""
     return (points - np.asarray(obj.position_at(t))) @ quaternion_to_rotation(obj.quaternion)
-
-
-def ray_depth(obj, t, origin, dirs):
-    """Ray parameter (z-depth for directions with optical z = 1) of each ray's first hit on the object; inf: none."""
-    R = quaternion_to_rotation(obj.quaternion)
-    o = (origin - np.asarray(obj.position_at(t))) @ R
-    d = dirs @ R
-    with np.errstate(divide="ignore", invalid="ignore"):
-        if obj.shape == "box":
-            half = np.asarray(obj.size) / 2.0
-            t1, t2 = (-half - o) / d, (half - o) / d
-            near = np.nanmax(np.minimum(t1, t2), axis=1)
-            far = np.nanmin(np.maximum(t1, t2), axis=1)
-            return np.where((near <= far) & (near > 0), near, np.inf)
-        if obj.shape == "sphere":
-            r = obj.size[0]
-            b = (d * o).sum(1)
-            a = (d * d).sum(1)
-            disc = b * b - a * ((o * o).sum() - r * r)
-            hit = (-b - np.sqrt(disc)) / a
-            return np.where((disc >= 0) & (hit > 0), hit, np.inf)
-        h, r = obj.size
-        a = d[:, 0] ** 2 + d[:, 1] ** 2
-        b = o[0] * d[:, 0] + o[1] * d[:, 1]
-        disc = b * b - a * (o[0] ** 2 + o[1] ** 2 - r * r)
-        side = (-b - np.sqrt(disc)) / a
-        best = np.where((disc >= 0) & (side > 0) & (np.abs(o[2] + side * d[:, 2]) <= h / 2), side, np.inf)
-        for zc in (-h / 2, h / 2):
-            cap = (zc - o[2]) / d[:, 2]
-            on = (cap > 0) & ((o[0] + cap * d[:, 0]) ** 2 + (o[1] + cap * d[:, 1]) ** 2 <= r * r)
-            best = np.where(on & (cap < best), cap, best)
-        return best
 
 
 def signed_distance(obj, t, points):
@@ -129,7 +97,7 @@ def test_the_world_files_shapes_are_drawn_where_they_are_never_behind_or_beside(
         depth, seg = depth.reshape(-1), seg.reshape(-1)
         dirs = np.column_stack((cam._rays_x, cam._rays_y, np.ones_like(cam._rays_x))) @ cam.rotation.T
         origin = np.asarray(cam.position)
-        exact = np.min([ray_depth(o, t, origin, dirs) for o in world.objects], axis=0)
+        exact = world_depth(world.objects, t, cam).reshape(-1)
         hits = np.isfinite(exact) & (exact < cam.far)
         assert hits.sum() > 1000
         assert np.all(depth[hits] <= exact[hits] + 1e-5), cam.id

@@ -27,7 +27,17 @@ import pybullet
 from .camera import Camera, quaternion_to_rotation
 from .meshes import SIMPLIFIABLE, read_mesh
 
-__all__ = ["DepthScene", "revolved", "box_mesh", "sphere_mesh", "cylinder_mesh", "capsule_mesh", "CURVE_SEGMENTS"]
+__all__ = [
+    "DepthScene",
+    "world_depth",
+    "ray_depth",
+    "revolved",
+    "box_mesh",
+    "sphere_mesh",
+    "cylinder_mesh",
+    "capsule_mesh",
+    "CURVE_SEGMENTS",
+]
 
 #: Segments around a curved primitive's axis, and stacks from pole to pole of a sphere (a capsule's caps share them).
 CURVE_SEGMENTS = 48
@@ -165,6 +175,50 @@ class _Body:
     links: list  # link indices with visual shapes
     link_parts: np.ndarray  # their part indices
     inertial: tuple  # the base's local inertial frame (position, orientation): the base's visuals are placed in it
+
+
+def ray_depth(obj, t, origin, dirs):
+    """Ray parameter of each ray's first hit on a world object (moverl_sim.world.WorldObject: box, sphere or
+    cylinder) at motion time t, rays from origin along dirs (n x 3); inf where it misses. With directions whose
+    optical z is 1, the parameter is the z-depth."""
+    R = quaternion_to_rotation(obj.quaternion)
+    o = (origin - np.asarray(obj.position_at(t))) @ R
+    d = dirs @ R
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if obj.shape == "box":
+            half = np.asarray(obj.size) / 2.0
+            t1, t2 = (-half - o) / d, (half - o) / d
+            near = np.nanmax(np.minimum(t1, t2), axis=1)
+            far = np.nanmin(np.maximum(t1, t2), axis=1)
+            return np.where((near <= far) & (near > 0), near, np.inf)
+        if obj.shape == "sphere":
+            r = obj.size[0]
+            b = (d * o).sum(1)
+            a = (d * d).sum(1)
+            disc = b * b - a * ((o * o).sum() - r * r)
+            hit = (-b - np.sqrt(disc)) / a
+            return np.where((disc >= 0) & (hit > 0), hit, np.inf)
+        h, r = obj.size
+        a = d[:, 0] ** 2 + d[:, 1] ** 2
+        b = o[0] * d[:, 0] + o[1] * d[:, 1]
+        disc = b * b - a * (o[0] ** 2 + o[1] ** 2 - r * r)
+        side = (-b - np.sqrt(disc)) / a
+        best = np.where((disc >= 0) & (side > 0) & (np.abs(o[2] + side * d[:, 2]) <= h / 2), side, np.inf)
+        for zc in (-h / 2, h / 2):
+            cap = (zc - o[2]) / d[:, 2]
+            on = (cap > 0) & ((o[0] + cap * d[:, 0]) ** 2 + (o[1] + cap * d[:, 1]) ** 2 <= r * r)
+            best = np.where(on & (cap < best), cap, best)
+        return best
+
+
+def world_depth(objects, t, camera: Camera):
+    """The exact z-depth image (height x width; inf: nothing) of a world file's objects at motion time t seen by
+    camera, ray-cast shape by shape (no robot, no clip planes): what a renderer's image of them should read."""
+    dirs = np.column_stack((camera._rays_x, camera._rays_y, np.ones_like(camera._rays_x))) @ camera.rotation.T
+    origin = np.asarray(camera.position)
+    hits = [ray_depth(o, t, origin, dirs) for o in objects]
+    depth = np.min(hits, axis=0) if hits else np.full(len(dirs), np.inf)
+    return depth.reshape(camera.height, camera.width)
 
 
 class DepthScene:

@@ -100,6 +100,7 @@ bool OctomapMonitor::init(std::string* error) {
     cloud_topic = requiredParam<std::string>(pnh_, "octomap/cloud_topic", kYaml);
     joint_topic = requiredParam<std::string>(pnh_, "octomap/joint_states_topic", kYaml);
     queue = requiredParam<int>(pnh_, "octomap/queue_size", kYaml);
+    queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
     startup_clouds = requiredParam<int>(pnh_, "octomap/startup_clouds", kYaml);
     startup_timeout = requiredParam<double>(pnh_, "octomap/startup_timeout", kYaml);
     yaml_speed_bound_ = requiredParam<double>(pnh_, "octomap/speed_bound", kYaml);
@@ -253,13 +254,16 @@ void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) 
 void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
+    // Lockstep: every view, in order (a step's answers are the simulation's, not the CPU's), up to queue_size per
+    // camera (a long move's backlog keeps its newest views: the map stays young). Real time: an older one still
+    // pending is replaced, the newest view is what counts.
     auto& queue = pending_[msg->header.frame_id];
-    if (lockstep_ || queue.empty()) {  // lockstep: every view, in order (a step's answers are the sim's, not the CPU's)
-      queue.push_back(msg);
-      ++outstanding_;
+    if (queue.size() >= (lockstep_ ? queue_depth_ : 1)) {
+      queue.pop_front();  // dropped unintegrated: its place in outstanding_ goes to msg
     } else {
-      queue.back() = msg;  // real time: an older one still pending is replaced, the newest view is what counts
+      ++outstanding_;
     }
+    queue.push_back(msg);
   }
   pending_cv_.notify_one();
 }

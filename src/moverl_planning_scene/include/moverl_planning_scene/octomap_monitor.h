@@ -126,10 +126,11 @@ class OctomapMonitor {
   std::vector<std::string> cameras_;               // the frames of the cameras the world lists
   std::mutex pending_mutex_;                       // guards pending_ and stop_; pending_cv_ wakes the integrator
   std::condition_variable pending_cv_;
-  // Per frame the clouds not yet integrated: in lockstep every one in order, in real time only the newest.
+  // Per frame the clouds not yet integrated: in lockstep in order (the newest queue_size), in real time the newest.
   std::map<std::string, std::deque<sensor_msgs::PointCloud2::ConstPtr>> pending_;
-  bool lockstep_ = false;  // octomap/lockstep (init reads it)
-  int outstanding_ = 0;    // clouds pending or being integrated (guarded by pending_mutex_; idle_cv_ when it drops)
+  bool lockstep_ = false;        // octomap/lockstep (init reads it)
+  std::size_t queue_depth_ = 1;  // octomap/queue_size: clouds kept per camera in lockstep
+  int outstanding_ = 0;  // clouds pending or being integrated (guarded by pending_mutex_; idle_cv_ when it drops)
   std::condition_variable idle_cv_;
   bool stop_ = false;
   std::thread integrator_;

@@ -79,6 +79,7 @@ OctomapMonitor::~OctomapMonitor() {
     stop_ = true;
   }
   pending_cv_.notify_all();
+  idle_cv_.notify_all();  // a check waiting for integration returns now
   if (integrator_.joinable()) integrator_.join();
   if (joint_spinner_) joint_spinner_->stop();
 }
@@ -260,6 +261,12 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     auto& queue = pending_[msg->header.frame_id];
     if (queue.size() >= (lockstep_ ? queue_depth_ : 1)) {
       queue.pop_front();  // dropped unintegrated: its place in outstanding_ goes to msg
+      if (lockstep_) {
+        ROS_WARN_THROTTLE(5.0,
+                          "planning_scene: lockstep: more than octomap/queue_size (%zu) views of '%s' waiting: "
+                          "the oldest is skipped (a long move's backlog; the map keeps the newest)",
+                          queue_depth_, msg->header.frame_id.c_str());
+      }
     } else {
       ++outstanding_;
     }
@@ -379,6 +386,22 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
+void OctomapMonitor::awaitPending(std::chrono::steady_clock::time_point deadline) {
+  // Lockstep: simulated time stands still between steps, so the clouds rendered up to this state are all in, or on
+  // their way. Integrating them first makes the map as old as the cameras make it, not as old as this machine's
+  // integration lags (which would widen the margin and discard more moves on a faster simulator: the answers would
+  // depend on the machine).
+  if (!lockstep_) return;
+  std::unique_lock<std::mutex> pending(pending_mutex_);
+  idle_cv_.wait_until(pending, deadline, [&] { return stop_ || outstanding_ == 0; });
+}
+
+void OctomapMonitor::awaitIntegration(double max_wait) {
+  const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
+  awaitPending(std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                      std::chrono::duration<double>(std::max(0.0, wait))));
+}
+
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
                              const ros::Time& epoch, double max_wait) {
   // Every camera the world lists counts, heard from or not (one never heard from leaves the map blind), and so does
@@ -398,15 +421,10 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     return sensedMapAge(cameras, stamp.toSec(), epoch.toSec(), &deciding);
   };
   const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(std::max(0.0, wait));
-  if (lockstep_ && wait > 0.0) {
-    // Lockstep: simulated time stands still between steps, so the clouds rendered up to
-    // this state are all in, or on their way. Integrating them first makes the map as old as the cameras make it,
-    // not as old as this machine's integration lags (which would widen the margin and discard more moves on a
-    // faster simulator: the answers would depend on the machine).
-    std::unique_lock<std::mutex> pending(pending_mutex_);
-    idle_cv_.wait_until(pending, deadline, [&] { return stop_ || outstanding_ == 0; });
-  }
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                             std::chrono::duration<double>(std::max(0.0, wait)));
+  awaitPending(deadline);
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
   if (map_age > max_age_ && wait > 0.0) {

@@ -290,6 +290,7 @@ bool SceneServer::unstampedMargin(bool plan, double* margin, std::string* why) {
   *margin = 0.0;
   if (!monitor_) return true;
   SensedMargins m;
+  monitor_->awaitIntegration();  // lockstep: the clouds received first, so that the newest stamp is the map's
   if (!monitor_->margins(monitor_->newestStamp(), plan ? std::numeric_limits<double>::infinity() : 0.0, &m, why)) {
     return false;
   }

@@ -184,6 +184,28 @@ TEST(DepthRaster, BackFacesAreSkippedOnlyInClosedParts) {
     }
 }
 
+TEST(DepthRaster, AClosedPartTheNearPlaneCutsOrThatHoldsTheCameraKeepsItsBackFaces) {
+  // A closed box (outward winding) from z -0.05 to 0.35 (the near plane at 0.1 cuts it), and one around the camera:
+  // with back faces culled neither would be drawn, and the camera would see the backdrop at 3 through them.
+  for (double z0 : {-0.05, -0.5}) {
+    Mesh m;
+    const double s = z0 < -0.1 ? 1.0 : 0.2, z1 = z0 < -0.1 ? 0.5 : 0.35;
+    int v[8];
+    for (int k = 0; k < 8; ++k) v[k] = m.add(k & 1 ? s : -s, k & 2 ? s : -s, k & 4 ? z1 : z0, 0);
+    // Outward normals (b - a) x (c - a): -z, +z, -y, +y, -x, +x faces.
+    const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    for (const auto& q : quads) {
+      m.tri(v[q[0]], v[q[1]], v[q[2]]);
+      m.tri(v[q[0]], v[q[2]], v[q[3]]);
+    }
+    square(m, 4.0, 3.0, 1);  // the backdrop
+    const uint8_t closed[2] = {1, 0};
+    const Result r = render(m, 2, {}, closed);
+    EXPECT_FLOAT_EQ(r.depth[23 * kW + 32], float(z1)) << "box from z " << z0;
+    EXPECT_EQ(r.part[23 * kW + 32], 0);
+  }
+}
+
 TEST(DepthRaster, BadInputIsRefusedAndLeavesTheImageAlone) {
   Mesh m;
   square(m, 0.3, 2.0, 0);

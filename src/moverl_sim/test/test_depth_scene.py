@@ -1,6 +1,7 @@
 """The depth cameras' own renderer (moverl_sim.depth_scene, the C++ rasterizer behind it) against the geometry it
 draws: the world file's shapes ray-cast exactly, and PyBullet's TinyRenderer for the robot's meshes. No roscore."""
 
+import dataclasses
 import os
 
 import numpy as np
@@ -148,7 +149,9 @@ def test_the_simulator_refuses_an_unknown_renderer(panda_urdf, table_world):
 
 
 def test_either_renderer_gives_the_cameras_conventions(panda_urdf, table_world):
-    """The same camera conventions in both: float z-depth images of the camera's size, no return = far exactly."""
+    """The same camera conventions in both: z-depth images of the camera's size within its clip range, the points
+    their back-projection, and a camera that sees nothing (looking up at the sky) reads exactly far everywhere."""
+    sky = Camera(dataclasses.replace(table_world.cameras[0], xyz=(0.0, 0.0, 3.0), target=(0.3, 0.0, 4.0)))
     for renderer in ("raster", "tinyrenderer"):
         sim = make_sim(panda_urdf, table_world, camera_renderer=renderer)
         try:
@@ -157,9 +160,21 @@ def test_either_renderer_gives_the_cameras_conventions(panda_urdf, table_world):
                 cam = Camera(spec)
                 depth = sim.render_depth(cam)
                 assert depth.shape == (cam.height, cam.width)
-                assert np.any(depth == np.float32(cam.far)) or np.all(depth < cam.far)
                 assert np.all((depth >= cam.near) & (depth <= cam.far))
+                assert np.mean(depth < cam.far) > 0.1, "the camera sees the table and the robot"
                 pts = sim.render_points(cam)
                 assert pts.dtype == np.float32 and np.allclose(pts, cam.points_from_depth(depth))
+            assert np.all(sim.render_depth(sky) == sky.far), renderer
         finally:
             sim.close()
+
+
+def test_the_scene_refuses_to_draw_a_world_it_was_not_built_for(panda_urdf, table_world):
+    sim = make_sim(panda_urdf, table_world, camera_renderer="raster")
+    try:
+        cam = Camera(table_world.cameras[0])
+        sim._p.createMultiBody(baseMass=0, baseVisualShapeIndex=sim._p.createVisualShape(pybullet.GEOM_SPHERE))
+        with pytest.raises(ValueError, match="bodies were added or removed since the depth scene was built"):
+            sim.render_depth(cam)
+    finally:
+        sim.close()

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <deque>
 #include <map>
@@ -65,6 +66,10 @@ class OctomapMonitor {
   ///        lasts at most this, if it is shorter than octomap/stale_wait. Negative: stale_wait.
   bool margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
                const ros::Time& epoch = ros::Time(), double max_wait = -1.0);
+  /// \brief In lockstep (octomap/lockstep), wait until the clouds received are integrated, within octomap/stale_wait
+  ///        (or max_wait, when >= 0 and shorter); at once in real time. margins() does it first; a query that reads
+  ///        newestStamp() for its margin calls it before.
+  void awaitIntegration(double max_wait = -1.0);
   /// \brief The newest integrated cloud's stamp (zero before the first).
   ros::Time newestStamp();
   /// \brief The world's sensing section (World.msg): its speed bound (m/s) replaces octomap/speed_bound (negative:
@@ -82,6 +87,7 @@ class OctomapMonitor {
   /// The integration thread: integrates the pending cloud of the camera whose last integrated cloud is oldest, so
   /// that no camera starves when integration falls behind (a shared queue dropped whichever cloud was oldest).
   void integrateLoop();
+  void awaitPending(std::chrono::steady_clock::time_point deadline);
   void integrate(const sensor_msgs::PointCloud2::ConstPtr& msg);
   bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void drop(const std::string& why);

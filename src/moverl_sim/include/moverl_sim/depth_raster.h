@@ -35,7 +35,8 @@ enum MoverlDepthRasterStatus {
 /// Vertices are given in the frames of rigid parts (a link, an object): `vertices` n_vertices x 3 floats,
 /// `vertex_part` the part of each vertex, and `camera_from_part` n_parts x 12 doubles, each part's pose in the
 /// camera's optical frame: a row-major rotation (9) then a translation (3); `part_closed` (nullable, n_parts): nonzero
-/// for a part whose triangles bound a closed surface wound outwards (its back faces are skipped). `triangles`:
+/// for a part whose triangles bound a closed surface wound outwards (its back faces are skipped, unless the near plane
+/// cuts the part, or the part holds the camera: it would vanish). `triangles`:
 /// n_triangles x 3 vertex indices. `pixel_part` (nullable, height * width): the part of the nearest triangle at each
 /// pixel, -1 where none. Returns a MoverlDepthRasterStatus; on an error the images are left untouched.
 int moverl_depth_raster(int width, int height, double focal, double cx, double cy, double near_clip, double far_clip,

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace {
@@ -135,12 +137,21 @@ extern "C" int moverl_depth_raster(int width, int height, double focal, double c
   // Every vertex into the camera frame once (vertices are shared by several triangles).
   std::vector<Point> cam(n_vertices);
   std::vector<Vertex> screen(n_vertices);
+  // Each part's nearest vertex: a closed part the near plane cuts (its front faces clipped away; so does a part that
+  // holds the camera, every face turned away) would vanish with its back faces culled, so it keeps them.
+  std::vector<double> nearest(static_cast<std::size_t>(n_parts), std::numeric_limits<double>::infinity());
   for (int i = 0; i < n_vertices; ++i) {
     const double* m = camera_from_part + 12 * vertex_part[i];
     const double x = vertices[3 * i], y = vertices[3 * i + 1], z = vertices[3 * i + 2];
     cam[i] = {m[0] * x + m[1] * y + m[2] * z + m[9], m[3] * x + m[4] * y + m[5] * z + m[10],
               m[6] * x + m[7] * y + m[8] * z + m[11]};
     if (cam[i].z >= near_clip) screen[i] = project(im, cam[i]);
+    double& n = nearest[static_cast<std::size_t>(vertex_part[i])];
+    n = std::min(n, cam[i].z);
+  }
+  std::vector<std::uint8_t> cull(static_cast<std::size_t>(n_parts), 0);
+  for (int k = 0; k < n_parts && part_closed; ++k) {
+    cull[static_cast<std::size_t>(k)] = part_closed[k] && nearest[static_cast<std::size_t>(k)] >= near_clip;
   }
   for (int t = 0; t < n_triangles; ++t) {
     const int32_t* tri = triangles + 3 * t;
@@ -149,9 +160,9 @@ extern "C" int moverl_depth_raster(int width, int height, double focal, double c
     const Point& c = cam[tri[2]];
     if (a.z >= far_clip && b.z >= far_clip && c.z >= far_clip) continue;  // wholly beyond the far plane
     const int32_t part = vertex_part[tri[0]];
-    if (part_closed && part_closed[part]) {
-      // A closed surface wound outwards: a face turned away from the camera (its normal along the ray to it) is
-      // hidden behind the part's front faces.
+    if (cull[static_cast<std::size_t>(part)]) {
+      // A closed surface wound outwards, wholly beyond the near plane: a face turned away from the camera (its
+      // normal along the ray to it) is hidden behind the part's front faces.
       const double ux = b.x - a.x, uy = b.y - a.y, uz = b.z - a.z, vx = c.x - a.x, vy = c.y - a.y, vz = c.z - a.z;
       if ((uy * vz - uz * vy) * a.x + (uz * vx - ux * vz) * a.y + (ux * vy - uy * vx) * a.z >= 0.0) continue;
     }

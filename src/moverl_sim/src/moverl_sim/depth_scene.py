@@ -232,6 +232,7 @@ class DepthScene:
         self._vertex_part = np.ascontiguousarray(vertex_part, dtype=np.int32)
         self._triangles = np.ascontiguousarray(triangles, dtype=np.int32)
         self._bodies = bodies
+        self._body_count = pybullet.getNumBodies(physicsClientId=client_id)  # a body added later is not drawn
         self._positions = np.zeros((len(parts), 3))
         self._quaternions = np.zeros((len(parts), 4))
 
@@ -297,7 +298,14 @@ class DepthScene:
     def render(self, camera: Camera, parts=False):
         """z-depth image (height x width float32, far = no return) of the scene now, seen by camera; with
         parts=True also which part each pixel sees (height x width int32, -1: none; self.parts names them)."""
+        if pybullet.getNumBodies(physicsClientId=self.client_id) != self._body_count:
+            raise ValueError(
+                "camera %s: bodies were added or removed since the depth scene was built: it would not draw them "
+                "(build the scene once the world is complete)" % camera.id
+            )
         self._poses()
+        if not (np.all(np.isfinite(self._positions)) and np.all(np.isfinite(self._quaternions))):
+            raise ValueError("camera %s: a body's pose is not finite: nothing drawn would be right" % camera.id)
         rc = camera.rotation  # optical axes in the world
         # camera_from_part = R_c^T [R_p | p - c]
         rot = np.einsum("ji,njk->nik", rc, quaternion_to_rotation(self._quaternions))

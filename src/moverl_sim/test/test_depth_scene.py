@@ -172,9 +172,38 @@ def test_either_renderer_gives_the_cameras_conventions(panda_urdf, table_world):
 def test_the_scene_refuses_to_draw_a_world_it_was_not_built_for(panda_urdf, table_world):
     sim = make_sim(panda_urdf, table_world, camera_renderer="raster")
     try:
+        assert sim.camera_renderer == "raster" and sim.camera_renderer_fallback is None
         cam = Camera(table_world.cameras[0])
         sim._p.createMultiBody(baseMass=0, baseVisualShapeIndex=sim._p.createVisualShape(pybullet.GEOM_SPHERE))
         with pytest.raises(ValueError, match="bodies were added or removed since the depth scene was built"):
             sim.render_depth(cam)
+    finally:
+        sim.close()
+
+
+def test_a_robot_with_a_mesh_it_cannot_read_falls_back_to_tinyrenderer(tmp_path, table_world):
+    """A URDF whose visual mesh is COLLADA (common in ROS packages; PyBullet reads it, the rasterizer does not): the
+    simulator is still built, its cameras drawn by TinyRenderer, and it says why (the node warns with it)."""
+    from moverl_sim.core import Simulator
+    from moverl_sim.settings import sim_settings
+
+    dae = os.path.join(
+        os.path.dirname(__file__), "..", "..", "moverl_planning_scene", "test", "fixtures", "geometry", "meshes"
+    )
+    urdf = tmp_path / "dae_visual.urdf"
+    box = '<geometry><box size="0.1 0.1 0.1"/></geometry>'
+    urdf.write_text(
+        f'<robot name="v"><link name="a"><visual>{box}</visual><collision>{box}</collision></link>'
+        '<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        f'<link name="b"><visual><geometry><mesh filename="{os.path.abspath(dae)}/blob.dae"/></geometry></visual>'
+        f"<collision>{box}</collision></link></robot>"
+    )
+    sim = Simulator(str(urdf), ["j"], "a", None, table_world, **{**sim_settings(), "camera_renderer": "raster"})
+    try:
+        assert sim.camera_renderer == "tinyrenderer"
+        assert "blob.dae" in sim.camera_renderer_fallback and "TinyRenderer" in sim.camera_renderer_fallback
+        cam = Camera(table_world.cameras[0])
+        assert np.array_equal(sim.render_depth(cam), cam.render_depth(sim.client_id))
     finally:
         sim.close()

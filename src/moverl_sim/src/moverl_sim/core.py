@@ -230,7 +230,9 @@ class Simulator:
         (its collision shapes); required, config/sim.yaml's robot_visuals (and simplified_faces).
     camera_renderer: what draws the depth cameras' images (render_depth): "raster" (moverl_sim.depth_scene: a
         depth-only rasterizer of the visual shapes, read once here) or "tinyrenderer" (PyBullet's); required,
-        config/sim.yaml's camera_renderer.
+        config/sim.yaml's camera_renderer. A world raster cannot draw (a visual mesh of another format than OBJ or
+        STL, e.g. COLLADA) falls back to TinyRenderer: self.camera_renderer says which draws, and
+        self.camera_renderer_fallback why (the node warns).
     """
 
     def __init__(
@@ -316,7 +318,15 @@ class Simulator:
                 self._setup_robot(str(urdf_path), list(joints), base_link, dict(fixed_joint_positions or {}))
                 self._setup_world()
                 self._setup_collision_filters()
-                self._depth_scene = DepthScene.from_client(p._client) if camera_renderer == "raster" else None
+                self._depth_scene = None
+                self.camera_renderer = camera_renderer  # what draws the cameras' images (after any fallback)
+                self.camera_renderer_fallback = None  # why raster fell back to TinyRenderer (None: it did not)
+                if camera_renderer == "raster":
+                    try:
+                        self._depth_scene = DepthScene.from_client(p._client)
+                    except ValueError as exc:  # a shape it does not draw (a COLLADA mesh): PyBullet's renderer does
+                        self.camera_renderer = "tinyrenderer"
+                        self.camera_renderer_fallback = "%s; PyBullet's TinyRenderer draws the cameras" % exc
             except UrdfError as exc:  # a mesh that cannot be read or simplified: the caller's ValueError
                 raise ValueError(str(exc)) from None
             finally:

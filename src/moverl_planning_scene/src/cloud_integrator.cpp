@@ -34,7 +34,11 @@ const char* integrationName(Integration integration) {
 
 CloudIntegrator::CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* checker, std::mutex* world_mutex,
                                  const CloudIntegratorOptions& options)
-    : map_(map), checker_(checker), world_mutex_(world_mutex), options_(options) {}
+    : map_(map),
+      checker_(checker),
+      world_mutex_(world_mutex),
+      options_(options),
+      pool_(std::make_unique<WorkerPool>(options.threads)) {}
 
 Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isometry3d& sensor_pose,
                                      const std::vector<std::vector<double>>& configurations, MapUpdate* update,
@@ -71,7 +75,7 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   for (std::size_t c = 0; c < configurations.size(); ++c) {
     // Each later configuration tests only the points the ones before left (the masks are ORed).
     checker_->robotPointMask(configurations[c].data(), points_, options_.self_filter_padding,
-                             c == 0 ? &mask_ : &mask_more_, c == 0 ? nullptr : &mask_);
+                             c == 0 ? &mask_ : &mask_more_, c == 0 ? nullptr : &mask_, pool_.get());
     if (c > 0) {
       for (std::size_t k = 0; k < mask_.size(); ++k) mask_[k] |= mask_more_[k];
     }
@@ -104,7 +108,7 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
       for (std::size_t k = 0; k < n; ++k) depth_[k] = sensor_xyz_[3 * k + 2];  // non-finite stays: no return
       pixel_mask_.assign(n, kPointObstacle);
       for (std::size_t k = 0; k < points_.size(); ++k) pixel_mask_[pixel_of_[k]] = mask_[k];
-      map_->computeUpdateProjective(points_, mask_, depth_, pixel_mask_, camera_, sensor_pose, update);
+      map_->computeUpdateProjective(points_, mask_, depth_, pixel_mask_, camera_, sensor_pose, update, pool_.get());
       used = Integration::kProjective;
     }
     if (used != Integration::kProjective && why != nullptr) *why = reason;

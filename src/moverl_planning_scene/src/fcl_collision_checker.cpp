@@ -7,6 +7,7 @@
 
 #include "fcl_checker_internal.h"
 #include "moverl_planning_scene/fcl_convex.h"
+#include "moverl_planning_scene/worker_pool.h"
 
 #include <unistd.h>
 #include <algorithm>
@@ -413,8 +414,9 @@ bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeom
 }
 
 void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
-                                         std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip) const {
-  linkPointMask(q, -1, points, padding, mask, skip);
+                                         std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip,
+                                         WorkerPool* pool) const {
+  pointMask(q, -1, points, padding, mask, skip, pool);
 }
 
 void FclCollisionChecker::robotBoundingBoxes(const double* q, double padding,
@@ -460,6 +462,12 @@ double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vecto
 void FclCollisionChecker::linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
                                         double padding, std::vector<std::uint8_t>* mask,
                                         const std::vector<std::uint8_t>* skip) const {
+  pointMask(q, link, points, padding, mask, skip, nullptr);
+}
+
+void FclCollisionChecker::pointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
+                                    double padding, std::vector<std::uint8_t>* mask,
+                                    const std::vector<std::uint8_t>* skip, WorkerPool* pool) const {
   mask->assign(points.size(), 0);
   if (skip != nullptr && skip->size() != points.size()) skip = nullptr;  // not the points' own: tests every point
   std::vector<Eigen::Isometry3d> poses;
@@ -497,9 +505,8 @@ void FclCollisionChecker::linkPointMask(const double* q, int link, const std::ve
   }
   // Within pad of a convex hull: inside every face's plane, or, outside, within pad of a face it lies in front of
   // (the nearest point of a convex polytope to a point outside lies on such a face); farther than pad beyond any
-  // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes).
-  std::vector<int> front;
-  auto within = [&](const Shape& sh, const Eigen::Vector3d& p) {
+  // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes). front: the caller's scratch.
+  auto within = [&](const Shape& sh, const Eigen::Vector3d& p, std::vector<int>& front) {
     if (sh.planes.empty()) {
       Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
       at.translation() = p;
@@ -521,16 +528,30 @@ void FclCollisionChecker::linkPointMask(const double* q, int link, const std::ve
     }
     return front.empty();
   };
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    const Eigen::Vector3d& p = points[k];
-    if (!reach.contains(p) || (skip != nullptr && (*skip)[k] != 0)) continue;
-    for (const Shape& sh : shapes) {
-      if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p)) {
-        (*mask)[k] = 1;
-        break;
+  auto test = [&](std::size_t begin, std::size_t end) {
+    std::vector<int> front;
+    for (std::size_t k = begin; k < end; ++k) {
+      const Eigen::Vector3d& p = points[k];
+      if (!reach.contains(p) || (skip != nullptr && (*skip)[k] != 0)) continue;
+      for (const Shape& sh : shapes) {
+        if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p, front)) {
+          (*mask)[k] = 1;
+          break;
+        }
       }
     }
+  };
+  if (pool == nullptr || pool->threads() == 1) {
+    test(0, points.size());
+    return;
   }
+  // Parts of the cloud on the pool's threads, more parts than threads (the robot's points bunch in a part of the
+  // image); the shapes above placed once for all.
+  const std::size_t parts = 4 * static_cast<std::size_t>(pool->threads());
+  const std::size_t part = (points.size() + parts - 1) / parts;
+  pool->run(parts, [&](std::size_t i, int) {
+    test(std::min(points.size(), i * part), std::min(points.size(), (i + 1) * part));
+  });
 }
 
 void FclCollisionChecker::linkPointMaskFcl(const double* q, int link, const std::vector<Eigen::Vector3d>& points,

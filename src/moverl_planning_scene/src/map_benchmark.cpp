@@ -10,11 +10,13 @@
  * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
  * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda.
  *
- * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--check] [--identity]
+ * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--check] [--identity]
  *   (synthetic: default worlds/human.yaml, 60 clouds, cameras in turn, --size overrides the cameras' images)
  *   --check: exit 1 when either integration sees free a cell whose centre lies inside the synthetic person (a cell
  *   holding part of an obstacle; the static table's cells are the fixture filter's to clear, and are not counted).
- *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated) into
+ *   --threads N: threads that integrate a cloud (default: config/planning_scene.yaml's octomap/integration_threads).
+ *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated, on one
+ *   thread) into
  *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets).
  */
 #include <yaml-cpp/yaml.h>
@@ -196,7 +198,7 @@ void report(const char* what, std::vector<double> t) {
 int usage(const char* why) {
   std::fprintf(stderr,
                "error: %s\nusage: map_benchmark [world.yaml with cameras:] [clouds > 0] [--size WxH] "
-               "[--recording DIR] [--check]\n",
+               "[--recording DIR] [--threads N] [--check] [--identity]\n",
                why);
   return 2;
 }
@@ -205,7 +207,7 @@ int usage(const char* why) {
 
 int main(int argc, char** argv) {
   std::string world = MOVERL_CONFIG_DIR "/../worlds/human.yaml", recording;
-  int clouds_wanted = 60, width = 0, height = 0;
+  int clouds_wanted = 60, width = 0, height = 0, threads = 0;
   bool check = false, identity = false;
   std::vector<std::string> positional;
   for (int i = 1; i < argc; ++i) {
@@ -214,16 +216,19 @@ int main(int argc, char** argv) {
       check = true;
     } else if (a == "--identity") {
       identity = true;
-    } else if (a == "--size" || a == "--recording") {
+    } else if (a == "--size" || a == "--recording" || a == "--threads") {
       if (i + 1 >= argc) return usage((a + " needs a value").c_str());
       const std::string v = argv[++i];
       if (a == "--recording") {
         recording = v;
+      } else if (a == "--threads") {
+        threads = std::atoi(v.c_str());
+        if (threads < 1) return usage("--threads takes a number >= 1");
       } else if (std::sscanf(v.c_str(), "%dx%d", &width, &height) != 2 || width < 2 || height < 2) {
         return usage("--size takes WxH, both >= 2 (e.g. 640x480)");
       }
     } else if (a.rfind("--", 0) == 0) {
-      return usage(("unknown option " + a + " (--size, --recording, --check, --identity)").c_str());
+      return usage(("unknown option " + a + " (--size, --recording, --threads, --check, --identity)").c_str());
     } else {
       positional.push_back(a);
     }
@@ -299,6 +304,7 @@ int main(int argc, char** argv) {
     mps::readOccupancyMapTunables(*tunables, &mo);
     io.self_filter_padding = tunables->require<double>("octomap/self_filter_padding");
     io.static_filter_padding = tunables->require<double>("octomap/static_filter_padding");
+    io.threads = threads > 0 ? threads : tunables->require<int>("octomap/integration_threads");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
@@ -344,11 +350,15 @@ int main(int argc, char** argv) {
     every_block.skip_unchanged_blocks = false;
     reference_map = mps::OccupancyMap::create(every_block, &error);
     io.integration = mps::Integration::kProjective;
+    io.threads = 1;
     reference = std::make_unique<mps::CloudIntegrator>(reference_map.get(), &scene->checker(), nullptr, io);
   }
-  std::printf("%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static%s)\n",
-              source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach,
-              mo.unknown_occupied ? ", known free: unknown_occupied" : "");
+  std::printf(
+      "%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static%s); %d "
+      "thread%s\n",
+      source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach,
+      mo.unknown_occupied ? ", known free: unknown_occupied" : "", runs[0].integrator->threads(),
+      runs[0].integrator->threads() == 1 ? "" : "s");
   std::vector<std::string> first_seen;
   std::size_t ray_only_person = 0, ray_only_max = 0, ray_only_clouds = 0, proj_only_sum = 0, proj_only_max = 0,
               compared = 0;

@@ -5,6 +5,8 @@
 #include <limits>
 #include <type_traits>
 
+#include "moverl_planning_scene/worker_pool.h"
+
 namespace moverl_planning_scene {
 namespace {
 
@@ -180,6 +182,13 @@ struct OccupancyMap::View {
   std::vector<std::uint64_t> super_all_none;            ///< ... of a view that saw no cell free in its blocks
   std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
   std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
+};
+
+/// Cache-line aligned: the workers' counters must not share a line.
+struct alignas(64) OccupancyMap::Scratch {
+  std::vector<std::uint64_t> misses;
+  std::size_t free_cells = 0, reused = 0;
+  Footprint f;
 };
 
 OccupancyMap::~OccupancyMap() = default;
@@ -432,7 +441,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
 void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& points,
                                            const std::vector<std::uint8_t>& robot_mask, const std::vector<float>& depth,
                                            const std::vector<std::uint8_t>& pixel_mask, const PinholeCamera& fitted,
-                                           const Eigen::Isometry3d& fitted_pose, MapUpdate* out) {
+                                           const Eigen::Isometry3d& fitted_pose, MapUpdate* out, WorkerPool* pool) {
   ++epoch_;
   const int w = fitted.width, h = fitted.height;
   // 1-2. End cells and hits, as computeUpdate's.
@@ -665,141 +674,181 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const double r2 = 0.25 * res * res;  // the squared radius of a cell's inscribed sphere
   // How far a cell reaches in depth beyond its centre: half the sum of its edges' depth components.
   const double half_depth = 0.5 * (std::fabs(axis[0].z()) + std::fabs(axis[1].z()) + std::fabs(axis[2].z()));
-  std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3], at[3];
-  Footprint f;
-  std::size_t reused = 0;
-  for (s[0] = 0; s[0] < supers_[0]; ++s[0]) {
-    for (s[1] = 0; s[1] < supers_[1]; ++s[1]) {
-      for (s[2] = 0; s[2] < supers_[2]; ++s[2]) {
-        const std::int64_t si = (s[0] * supers_[1] + s[1]) * supers_[2] + s[2];
-        if (super_dirty_[si] == 0) continue;  // all clamped free
-        for (int i = 0; i < 3; ++i) {
-          sa[i] = s[i] << kSuperShift;
-          sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
-        }
-        const Footprint& fs = cached(&view->super_fp, &view->super_fp_id, si, sa, sb);
-        if (hidden(fs)) {
-          view->super_none[si] = epoch_;
-          continue;
-        }
-        // A superblock whose blocks the last view saw nothing free in and whose inputs did not change (as a block's
-        // below, over its own rectangle's tiles, which hold its blocks'): left as it is, blocks and all.
-        if (last != 0 && view->super_all_none[si] == last && super_dirtied_[si] < last &&
-            super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
-          view->super_all_none[si] = epoch_;
-          for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
-            for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
-              for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-                reused += block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] != 0 ? 1 : 0;
-              }
-            }
+  // The superblocks holding cells not clamped free, each a task for the workers (they write disjoint cells, blocks
+  // and superblocks; a cell's bit in seen_ shares its word with other superblocks' cells: set atomically). Each task's
+  // misses go to its worker's list and are joined in the superblocks' order: the update is the same, in the same
+  // order, whatever the number of workers.
+  tasks_.clear();
+  for (std::int64_t si = 0; si < static_cast<std::int64_t>(super_dirty_.size()); ++si) {
+    if (super_dirty_[si] != 0) tasks_.push_back(si);
+  }
+  const int workers = pool == nullptr ? 1 : pool->threads();
+  if (static_cast<int>(scratch_.size()) < workers) scratch_.resize(static_cast<std::size_t>(workers));
+  for (int k = 0; k < workers; ++k) {
+    scratch_[k].misses.clear();
+    scratch_[k].free_cells = 0;
+    scratch_[k].reused = 0;
+  }
+  task_misses_.resize(tasks_.size());
+  auto superblock = [&](std::size_t task, int worker) {
+    Scratch& sc = scratch_[static_cast<std::size_t>(worker)];
+    const std::size_t misses_before = sc.misses.size();
+    const std::int64_t si = tasks_[task];
+    auto see = [&](std::int64_t k) {
+      __atomic_fetch_or(&seen_[static_cast<std::size_t>(k >> 6)], std::uint64_t{1} << (k & 63), __ATOMIC_RELAXED);
+      ++sc.free_cells;
+      if (!testBit(clamped_, k)) sc.misses.push_back(static_cast<std::uint64_t>(k));
+    };
+    auto seen = [&](std::int64_t k) {
+      return ((__atomic_load_n(&seen_[static_cast<std::size_t>(k >> 6)], __ATOMIC_RELAXED) >> (k & 63)) & 1u) != 0;
+    };
+    std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3], at[3];
+    s[2] = si % supers_[2];
+    s[1] = (si / supers_[2]) % supers_[1];
+    s[0] = si / (supers_[1] * supers_[2]);
+    Footprint& f = sc.f;
+    for (int i = 0; i < 3; ++i) {
+      sa[i] = s[i] << kSuperShift;
+      sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
+    }
+    task_misses_[task] = {worker, misses_before, misses_before};
+    const Footprint& fs = cached(&view->super_fp, &view->super_fp_id, si, sa, sb);
+    if (hidden(fs)) {
+      view->super_none[si] = epoch_;
+      return;
+    }
+    // A superblock whose blocks the last view saw nothing free in and whose inputs did not change (as a block's
+    // below, over its own rectangle's tiles, which hold its blocks'): left as it is, blocks and all.
+    if (last != 0 && view->super_all_none[si] == last && super_dirtied_[si] < last &&
+        super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
+      view->super_all_none[si] = epoch_;
+      for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
+        for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
+          for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
+            sc.reused += block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] != 0 ? 1 : 0;
           }
-          continue;
         }
-        bool all_none = true;  // the last view saw no cell of its blocks free
-        for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
-          for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
-            for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-              const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
-              if (block_dirty_[bi] == 0) continue;
-              for (int i = 0; i < 3; ++i) {
-                ba[i] = bl[i] << kBlockShift;
-                bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
-              }
-              const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
-              if (hidden(fb)) {
-                view->block_none[bi] = epoch_;
-                continue;
-              }
-              if (last != 0 &&
-                  (view->block_none[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
-                  block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
-                view->block_none[bi] = epoch_;  // as the last view left it
-                ++reused;
-                continue;
-              }
-              const std::size_t seen_before = free_cells;
-              // A block wholly in front of what every pixel that may see it saw (robot pixels aside): each of its
-              // cells passes the rectangle test; a pixel crossing the cell and seeing past it is what is left.
-              const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
-              // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
-              const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
-              for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
-                for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
-                  const std::int64_t row = (at[0] * size_[1] + at[1]) * size_[2];
-                  Eigen::Vector3d c =
-                      c0 + static_cast<double>(at[0] - ba[0]) * axis[0] + static_cast<double>(at[1] - ba[1]) * axis[1];
-                  for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
-                    const std::int64_t k = row + at[2];
-                    if (testBit(hit_, k) || testBit(seen_, k) || testBit(clamped_, k)) continue;
-                    // Seen free: some pixel's ray crosses the cell and sees past all of it (a cell between the rays
-                    // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
-                    // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
-                    // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
-                    // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
-                    // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
-                    if (!(c.z() > half_depth)) continue;
-                    const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
-                    const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
-                    const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
-                    bool crossed = false;  // a pixel's ray crosses the cell and sees past it
-                    if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
-                      // The pixel nearest the centre's projection: when its ray surely crosses the cell (it passes
-                      // within the inscribed sphere), a surface it sees short of the far side settles the cell.
-                      const int u = static_cast<int>(uf), v = static_cast<int>(vf);
-                      const std::size_t p = static_cast<std::size_t>(v) * w + u;
-                      const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
-                      if (c.cross(ray).squaredNorm() <= r2 * ray.squaredNorm()) {
-                        if (past_depth_[p] < zmax) continue;
-                        crossed = free_depth_[p] >= zmax;
-                      }
-                    }
-                    if (crossed && in_front) {
-                      see(k);
-                      continue;
-                    }
-                    footprint(at, at, &f);
-                    if (f.state != 0 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax)) {
-                      continue;
-                    }
-                    if (!crossed) {
-                      // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
-                      // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
-                      const Eigen::Vector3d s0 = c - 0.5 * (axis[0] + axis[1] + axis[2]);
-                      const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
-                      for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
-                        for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
-                          if (free_depth_[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
-                          const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
-                          double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
-                          for (int i = 0; i < 3 && t0 <= t1; ++i) {
-                            const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
-                            if (std::fabs(dd) < 1e-15) {
-                              if (o[i] > 0.0 || o[i] < -e) t1 = -1.0;  // parallel, outside the slab
-                              continue;
-                            }
-                            double ta = o[i] / dd, tb = (o[i] + e) / dd;
-                            if (ta > tb) std::swap(ta, tb);
-                            t0 = std::max(t0, ta);
-                            t1 = std::min(t1, tb);
-                          }
-                          crossed = t0 <= t1;
-                        }
-                      }
-                      if (!crossed) continue;
-                    }
-                    see(k);
+      }
+      return;
+    }
+    bool all_none = true;  // the last view saw no cell of its blocks free
+    for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
+      for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
+        for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
+          const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
+          if (block_dirty_[bi] == 0) continue;
+          for (int i = 0; i < 3; ++i) {
+            ba[i] = bl[i] << kBlockShift;
+            bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
+          }
+          const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
+          if (hidden(fb)) {
+            view->block_none[bi] = epoch_;
+            continue;
+          }
+          if (last != 0 &&
+              (view->block_none[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
+              block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
+            view->block_none[bi] = epoch_;  // as the last view left it
+            ++sc.reused;
+            continue;
+          }
+          const std::size_t seen_before = sc.free_cells;
+          // A block wholly in front of what every pixel that may see it saw (robot pixels aside): each of its
+          // cells passes the rectangle test; a pixel crossing the cell and seeing past it is what is left.
+          const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
+          // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
+          const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
+          for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
+            for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
+              const std::int64_t row = (at[0] * size_[1] + at[1]) * size_[2];
+              Eigen::Vector3d c =
+                  c0 + static_cast<double>(at[0] - ba[0]) * axis[0] + static_cast<double>(at[1] - ba[1]) * axis[1];
+              for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
+                const std::int64_t k = row + at[2];
+                if (testBit(hit_, k) || seen(k) || testBit(clamped_, k)) continue;
+                // Seen free: some pixel's ray crosses the cell and sees past all of it (a cell between the rays
+                // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
+                // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
+                // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
+                // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
+                // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
+                if (!(c.z() > half_depth)) continue;
+                const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
+                const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
+                const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
+                bool crossed = false;  // a pixel's ray crosses the cell and sees past it
+                if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
+                  // The pixel nearest the centre's projection: when its ray surely crosses the cell (it passes
+                  // within the inscribed sphere), a surface it sees short of the far side settles the cell.
+                  const int u = static_cast<int>(uf), v = static_cast<int>(vf);
+                  const std::size_t p = static_cast<std::size_t>(v) * w + u;
+                  const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                  if (c.cross(ray).squaredNorm() <= r2 * ray.squaredNorm()) {
+                    if (past_depth_[p] < zmax) continue;
+                    crossed = free_depth_[p] >= zmax;
                   }
                 }
+                if (crossed && in_front) {
+                  see(k);
+                  continue;
+                }
+                footprint(at, at, &f);
+                if (f.state != 0 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax)) {
+                  continue;
+                }
+                if (!crossed) {
+                  // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
+                  // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
+                  const Eigen::Vector3d s0 = c - 0.5 * (axis[0] + axis[1] + axis[2]);
+                  const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
+                  for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
+                    for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
+                      if (free_depth_[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
+                      const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                      double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
+                      for (int i = 0; i < 3 && t0 <= t1; ++i) {
+                        const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
+                        if (std::fabs(dd) < 1e-15) {
+                          if (o[i] > 0.0 || o[i] < -e) t1 = -1.0;  // parallel, outside the slab
+                          continue;
+                        }
+                        double ta = o[i] / dd, tb = (o[i] + e) / dd;
+                        if (ta > tb) std::swap(ta, tb);
+                        t0 = std::max(t0, ta);
+                        t1 = std::min(t1, tb);
+                      }
+                      crossed = t0 <= t1;
+                    }
+                  }
+                  if (!crossed) continue;
+                }
+                see(k);
               }
-              view->block_none[bi] = free_cells == seen_before ? epoch_ : 0;
-              all_none = all_none && free_cells == seen_before;
             }
           }
+          view->block_none[bi] = sc.free_cells == seen_before ? epoch_ : 0;
+          all_none = all_none && sc.free_cells == seen_before;
         }
-        view->super_all_none[si] = all_none ? epoch_ : 0;
       }
     }
+    view->super_all_none[si] = all_none ? epoch_ : 0;
+    task_misses_[task].end = sc.misses.size();
+  };
+  if (pool != nullptr) {
+    pool->run(tasks_.size(), superblock);
+  } else {
+    for (std::size_t t = 0; t < tasks_.size(); ++t) superblock(t, 0);
+  }
+  std::size_t reused = 0;
+  for (int k = 0; k < workers; ++k) {
+    free_cells += scratch_[k].free_cells;
+    reused += scratch_[k].reused;
+  }
+  for (const TaskMisses& t : task_misses_) {
+    const std::vector<std::uint64_t>& m = scratch_[static_cast<std::size_t>(t.worker)].misses;
+    out->misses.insert(out->misses.end(), m.begin() + static_cast<std::ptrdiff_t>(t.begin),
+                       m.begin() + static_cast<std::ptrdiff_t>(t.end));
   }
   // This view, for the camera's next one.
   view->last = epoch_;

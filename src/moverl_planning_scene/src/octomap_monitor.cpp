@@ -87,7 +87,7 @@ OctomapMonitor::~OctomapMonitor() {
 bool OctomapMonitor::init(std::string* error) {
   OccupancyMapOptions mo;
   std::string cloud_topic, joint_topic;
-  int queue = 0, startup_clouds = 0;
+  int queue = 0, startup_clouds = 0, threads = 0;
   std::string integration;
   double startup_timeout = 0.0;
   try {
@@ -111,6 +111,7 @@ bool OctomapMonitor::init(std::string* error) {
     stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
     lockstep_ = requiredParam<bool>(pnh_, "octomap/lockstep", kYaml);
     integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
+    threads = requiredParam<int>(pnh_, "octomap/integration_threads", kYaml);
   } catch (const std::exception& e) {
     *error = e.what();
     return false;
@@ -127,6 +128,10 @@ bool OctomapMonitor::init(std::string* error) {
     }
   }
   if (!parseIntegration(integration, &integration_, error)) return false;
+  if (threads < 1) {
+    *error = "octomap/integration_threads must be >= 1, not " + std::to_string(threads);
+    return false;
+  }
   if (!(max_age_ > 0.0)) {  // inf: no age limit
     *error = "octomap/max_age must be > 0 (.inf: no limit)";
     return false;
@@ -149,6 +154,7 @@ bool OctomapMonitor::init(std::string* error) {
   io.static_filter_padding = static_filter_padding_;
   io.filter_static = filter_static_;
   io.integration = integration_;
+  io.threads = threads;
   cloud_integrator_ = std::make_unique<CloudIntegrator>(map_.get(), &scene_->checker(), scene_mutex_, io);
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);

@@ -28,6 +28,7 @@
 #include "moverl_planning_scene/fcl_convex.h"
 #include "moverl_planning_scene/mesh_loader.h"
 #include "moverl_planning_scene/robot_model.h"
+#include "moverl_planning_scene/worker_pool.h"
 #include "panda_support.h"
 
 namespace mps = moverl_planning_scene;
@@ -460,10 +461,16 @@ TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {
         z(b.min().z(), b.max().z());
     for (int k = 0; k < 300; ++k) points.emplace_back(x(rng), y(rng), z(rng));
   }
-  std::vector<std::uint8_t> all, skip(points.size()), some;
+  std::vector<std::uint8_t> all, skip(points.size()), some, on_pool, some_on_pool;
   for (std::size_t k = 0; k < skip.size(); ++k) skip[k] = k % 3 == 0;
   checker.robotPointMask(q.data(), points, 0.01, &all);
   checker.robotPointMask(q.data(), points, 0.01, &some, &skip);
+  // The points in parts on a pool's threads: the same masks.
+  mps::WorkerPool pool(3);
+  checker.robotPointMask(q.data(), points, 0.01, &on_pool, nullptr, &pool);
+  checker.robotPointMask(q.data(), points, 0.01, &some_on_pool, &skip, &pool);
+  EXPECT_EQ(on_pool, all);
+  EXPECT_EQ(some_on_pool, some);
   std::size_t hits = 0;
   for (std::size_t k = 0; k < points.size(); ++k) {
     EXPECT_EQ(some[k], skip[k] ? 0 : all[k]) << k;

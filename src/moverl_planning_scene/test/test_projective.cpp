@@ -9,10 +9,12 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <stdexcept>
 
 #include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/pinhole_camera.h"
+#include "moverl_planning_scene/worker_pool.h"
 #include "panda_support.h"
 
 namespace mps = moverl_planning_scene;
@@ -322,54 +324,76 @@ TEST(Projective, CellsJustInFrontOfTheCameraAreSeenAndNoneBesideIt) {
   }
 }
 
+/// View n of a changing scene: two fixed cameras that overlap (intrinsics jittered as fitPinhole's are), one that
+/// moves now and then, one that moves every view (more cameras than the map remembers: the least recently seen make
+/// way, and their records are reused), a ball that walks, a static one, robot pixels that move, a patch without
+/// returns that comes and goes, and now and then a cloud to integrate by ray casting (ray_cast).
+struct SceneView {
+  mps::PinholeCamera camera;
+  Eigen::Isometry3d pose;
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::uint8_t> point_mask, pixel_mask;
+  std::vector<float> depth;
+  bool ray_cast = false;
+};
+
+SceneView sceneView(int n) {
+  const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
+  SceneView s;
+  const int which = n % 4;
+  s.pose = lookingAlongX(which == 0   ? Eigen::Vector3d(0.0, 0.0, 0.0)
+                         : which == 1 ? Eigen::Vector3d(0.0, 0.4, 0.2)
+                         : which == 2 ? Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0)
+                                      : Eigen::Vector3d(0.0, -0.5 + 0.01 * n, 0.1));
+  s.camera = kCamera;
+  s.camera.fx += 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
+  const double t = 0.15 * n;
+  const Eigen::Vector3d walking(1.1, 0.35 * std::sin(t), 0.0);
+  const Eigen::Vector3d a = s.pose.inverse() * walking, b = s.pose.inverse() * fixed_ball;
+  const bool robot_here = which == 0;
+  const int robot_u0 = 10 + (n / 6) % 20;  // robot pixels (a link in front) that move every other view of A
+  auto robot = [&](int u, int v) { return robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35; };
+  auto depth = [&](int u, int v) {
+    if (robot(u, v)) return 0.7;
+    if (which == 1 && (n / 9) % 2 == 1 && u > 60 && v < 15) return std::numeric_limits<double>::quiet_NaN();
+    return std::min(sphereOrWall(s.camera, u, v, a, 0.12, 2.0), sphereOrWall(s.camera, u, v, b, 0.1, 2.0));
+  };
+  const auto xyz = image(s.camera, depth);
+  for (int v = 0; v < s.camera.height; ++v) {
+    for (int u = 0; u < s.camera.width; ++u) {
+      s.pixel_mask.push_back(robot(u, v) ? mps::kPointOnRobot : mps::kPointObstacle);
+      if (std::isfinite(xyz[3 * (v * s.camera.width + u) + 2])) s.point_mask.push_back(s.pixel_mask.back());
+    }
+  }
+  s.points = mapPoints(xyz, s.pose);
+  s.depth = depths(xyz);
+  s.ray_cast = n % 17 == 16;
+  return s;
+}
+
+/// Integrate view s into map (by ray casting or projection, as s says) on `pool` (nullptr: the calling thread).
+void integrate(mps::OccupancyMap* map, const SceneView& s, mps::MapUpdate* u, mps::WorkerPool* pool = nullptr) {
+  if (s.ray_cast) {
+    map->computeUpdate(s.points, s.point_mask, s.pose.translation(), u);
+  } else {
+    map->computeUpdateProjective(s.points, s.point_mask, s.depth, s.pixel_mask, s.camera, s.pose, u, pool);
+  }
+}
+
 TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
-  // maps, one with it and one evaluating every block, take the same views: two fixed cameras that overlap (intrinsics
-  // jittered as fitPinhole's are), one that moves now and then, one that moves every view (more cameras than the map
-  // remembers: the least recently seen make way, and their records are reused), a ball that walks, a static one, robot
-  // pixels that move, a patch without returns that comes and goes, a cloud integrated by ray casting now and then, and
-  // the unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
-  const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
+  // maps, one with it and one evaluating every block, take the same views (sceneView: cameras fixed and moving, more
+  // than the map remembers, a ball walking, robot pixels, dropouts, ray casting now and then), and the
+  // unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
   std::size_t reused = 0;
   for (bool unknown_occupied : {false, true}) {
     auto skipping = makeMap(unknown_occupied, true), every = makeMap(unknown_occupied, false);
     ASSERT_TRUE(skipping && every);
     for (int n = 0; n < 120; ++n) {
-      const int which = n % 4;
-      Eigen::Isometry3d pose = lookingAlongX(which == 0   ? Eigen::Vector3d(0.0, 0.0, 0.0)
-                                             : which == 1 ? Eigen::Vector3d(0.0, 0.4, 0.2)
-                                             : which == 2 ? Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0)
-                                                          : Eigen::Vector3d(0.0, -0.5 + 0.01 * n, 0.1));
-      mps::PinholeCamera camera = kCamera;
-      camera.fx += 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
-      const double t = 0.15 * n;
-      const Eigen::Vector3d walking(1.1, 0.35 * std::sin(t), 0.0);
-      const Eigen::Vector3d a = pose.inverse() * walking, b = pose.inverse() * fixed_ball;
-      const bool robot_here = which == 0;
-      const int robot_u0 = 10 + (n / 6) % 20;  // robot pixels (a link in front) that move every other view of A
-      auto depth = [&](int u, int v) {
-        if (robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35) return 0.7;
-        if (which == 1 && (n / 9) % 2 == 1 && u > 60 && v < 15) return std::numeric_limits<double>::quiet_NaN();
-        return std::min(sphereOrWall(camera, u, v, a, 0.12, 2.0), sphereOrWall(camera, u, v, b, 0.1, 2.0));
-      };
-      const auto xyz = image(camera, depth);
-      std::vector<std::uint8_t> pixel_mask, point_mask;
-      for (int v = 0; v < camera.height; ++v) {
-        for (int u = 0; u < camera.width; ++u) {
-          const bool robot = robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35;
-          pixel_mask.push_back(robot ? mps::kPointOnRobot : mps::kPointObstacle);
-          if (std::isfinite(xyz[3 * (v * camera.width + u) + 2])) point_mask.push_back(pixel_mask.back());
-        }
-      }
-      const auto points = mapPoints(xyz, pose);
+      const SceneView s = sceneView(n);
       mps::MapUpdate us, ue;
-      if (n % 17 == 16) {  // a cloud integrated by ray casting (a fallback): the views' records must stay right
-        skipping->computeUpdate(points, point_mask, pose.translation(), &us);
-        every->computeUpdate(points, point_mask, pose.translation(), &ue);
-      } else {
-        skipping->computeUpdateProjective(points, point_mask, depths(xyz), pixel_mask, camera, pose, &us);
-        every->computeUpdateProjective(points, point_mask, depths(xyz), pixel_mask, camera, pose, &ue);
-      }
+      integrate(skipping.get(), s, &us);
+      integrate(every.get(), s, &ue);
       reused += us.stats.reused_blocks;
       EXPECT_EQ(ue.stats.reused_blocks, 0u);
       for (auto* cells : {&us.hits, &us.misses, &ue.hits, &ue.misses}) std::sort(cells->begin(), cells->end());
@@ -388,6 +412,37 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
     }
   }
   EXPECT_GT(reused, 1000u);  // it did skip
+}
+
+TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
+  // The projective update's superblocks shared out between a pool's threads: the same hits and misses in the same
+  // order, the same counts, as on the calling thread alone, view after view (the views' records too: a block a worker
+  // left wrongly would show in a later view), with skipping on and off.
+  mps::WorkerPool two(2), three(3);
+  std::size_t misses = 0;
+  for (bool skip : {true, false}) {
+    auto alone = makeMap(true, skip), on_two = makeMap(true, skip), on_three = makeMap(true, skip);
+    ASSERT_TRUE(alone && on_two && on_three);
+    for (int n = 0; n < 80; ++n) {
+      const SceneView s = sceneView(n);
+      mps::MapUpdate ua, u2, u3;
+      integrate(alone.get(), s, &ua);
+      integrate(on_two.get(), s, &u2, &two);
+      integrate(on_three.get(), s, &u3, &three);
+      for (const mps::MapUpdate* u : {&u2, &u3}) {
+        ASSERT_EQ(u->hits, ua.hits) << "view " << n;
+        ASSERT_EQ(u->misses, ua.misses) << "view " << n;
+        EXPECT_EQ(u->stats.free_cells, ua.stats.free_cells);
+        EXPECT_EQ(u->stats.reused_blocks, ua.stats.reused_blocks);
+        EXPECT_EQ(u->stats.changed_cells, ua.stats.changed_cells);
+      }
+      misses += ua.misses.size();
+      alone->apply(ua);
+      on_two->apply(u2);
+      on_three->apply(u3);
+    }
+  }
+  EXPECT_GT(misses, 10000u);  // there was work to share
 }
 
 TEST(Projective, ACellThePointsStopHittingIsLookedAtAgainThoughTheDepthsStay) {
@@ -432,6 +487,9 @@ TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   io.integration = mps::Integration::kProjective;
   io.self_filter_padding = 0.01;
   io.static_filter_padding = 0.003;
+  io.threads = 0;
+  EXPECT_THROW(mps::CloudIntegrator(map.get(), &scene->checker(), nullptr, io), std::invalid_argument);
+  io.threads = 2;
   mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
   const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
   const auto xyz = image(kCamera, [](int, int) { return 2.0; });

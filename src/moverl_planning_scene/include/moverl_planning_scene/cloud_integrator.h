@@ -11,6 +11,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -19,6 +20,7 @@
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/pinhole_camera.h"
 #include "moverl_planning_scene/unset.h"
+#include "moverl_planning_scene/worker_pool.h"
 
 namespace moverl_planning_scene {
 
@@ -49,6 +51,7 @@ struct CloudIntegratorOptions {
   double static_filter_padding = kUnset;               ///< octomap/static_filter_padding
   bool filter_static = false;                          ///< mark the static objects' points (obstacles: sensed)
   Integration integration = Integration::kRayCasting;  ///< the node sets octomap/integration's
+  int threads = 0;  ///< octomap/integration_threads: threads that integrate a cloud, the caller's included (>= 1)
 };
 
 /// \brief Where one cloud's time went (s, wall clock of the calling thread).
@@ -64,6 +67,7 @@ struct CloudTiming {
 class CloudIntegrator {
  public:
   /// \param world_mutex held while reading the checker's world (static filter); nullptr: none needed
+  /// Throws std::invalid_argument when options.threads < 1.
   CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* checker, std::mutex* world_mutex,
                   const CloudIntegratorOptions& options);
 
@@ -78,6 +82,8 @@ class CloudIntegrator {
   /// \brief The static objects changed (a new world, a cleared map): the next cloud turns their unobserved cells
   ///        free again (unknown_occupied). Call from the thread that calls compute.
   void staticObjectsChanged() { static_known_free_ = true; }
+  /// \brief The threads that integrate a cloud (options.threads).
+  int threads() const { return pool_->threads(); }
   /// \brief The intrinsics the last projective update used.
   const PinholeCamera& camera() const { return camera_; }
 
@@ -86,6 +92,7 @@ class CloudIntegrator {
   const FclCollisionChecker* checker_;
   std::mutex* world_mutex_;
   CloudIntegratorOptions options_;
+  std::unique_ptr<WorkerPool> pool_;  ///< options_.threads: the self filter's points and the projective update
   PinholeCamera camera_;
   std::vector<float> sensor_xyz_, depth_;
   std::vector<Eigen::Vector3d> points_;

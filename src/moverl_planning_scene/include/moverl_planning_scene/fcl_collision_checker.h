@@ -120,8 +120,10 @@ class FclCollisionChecker : public CollisionChecker {
   ///        configuration q (static links included). Reads only constant data: safe to call while checks run.
   /// \param skip (optional, one per point) points already known to be on the robot (nonzero): not tested, mask 0
   ///        (the self filter of several configurations ORs their masks: each tests what the ones before left).
+  /// \param pool (optional) parts of the points tested on its threads at once (the same mask).
   void robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,
-                      std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip = nullptr) const;
+                      std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip = nullptr,
+                      WorkerPool* pool = nullptr) const;
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of a static world object (no motion; cones
   ///        as their bounding cylinder). Reads the world: callers serialize it with setWorld.
   void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
@@ -186,6 +188,9 @@ class FclCollisionChecker : public CollisionChecker {
   void computeAcm();
   bool geomPairCollides(const Geom& a, const Geom& b, bool compute_depth, double* depth, bool padded) const;
   bool linkPairCollides(int la, int lb, bool padded);
+  /// linkPointMask's and robotPointMask's test (pool: parts of the points on its threads).
+  void pointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points, double padding,
+                 std::vector<std::uint8_t>* mask, const std::vector<std::uint8_t>* skip, WorkerPool* pool) const;
   /// Distance (m) between two links' padded shapes at the current transforms; 0 when they touch.
   double linkPairDistance(int la, int lb);
   /// Gap (m) between two links' padded bounding spheres at the current transforms (a lower bound of the distance).

@@ -59,6 +59,8 @@
 
 namespace moverl_planning_scene {
 
+class WorkerPool;
+
 /// \brief Tunables of the occupancy map. Their values live in config/planning_scene.yaml's octomap: section (tunables.h
 ///        reads them); unset ones (NaN) are rejected by create().
 struct OccupancyMapOptions {
@@ -145,10 +147,13 @@ class OccupancyMap {
   ///        the optical frame, row-major (non-finite or <= 0: no return); pixel_mask: empty, or what each pixel's point
   ///        is (robot_mask's values per pixel: a robot pixel hides nothing beside it); sensor_pose: the optical frame
   ///        in the map frame. Costs the cells that are not yet clamped free in view, not the beams: a grid cell is
-  ///        projected into the image instead of every pixel's beam being walked through the grid.
+  ///        projected into the image instead of every pixel's beam being walked through the grid. pool: the threads
+  ///        that project the cells (superblocks as tasks); nullptr: the calling thread alone. The update is the same,
+  ///        in the same order, whatever the pool (gtest Projective.AnyNumberOfWorkersGivesTheSameUpdates).
   void computeUpdateProjective(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
                                const std::vector<float>& depth, const std::vector<std::uint8_t>& pixel_mask,
-                               const PinholeCamera& camera, const Eigen::Isometry3d& sensor_pose, MapUpdate* out);
+                               const PinholeCamera& camera, const Eigen::Isometry3d& sensor_pose, MapUpdate* out,
+                               WorkerPool* pool = nullptr);
   /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as cell ids from
   ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
   ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
@@ -206,6 +211,13 @@ class OccupancyMap {
  private:
   /// What computeUpdateProjective keeps of one camera's last view (skip_unchanged_blocks); defined in the .cpp.
   struct View;
+  /// computeUpdateProjective's per-worker scratch (its misses, counts, a footprint); defined in the .cpp.
+  struct Scratch;
+  /// Where a task's (a superblock's) misses are: that worker's scratch, [begin, end).
+  struct TaskMisses {
+    int worker = 0;
+    std::size_t begin = 0, end = 0;
+  };
 
   OccupancyMap() = default;
   /// The cell of a coordinate (octomap's key convention), or -1 outside the map.
@@ -285,6 +297,10 @@ class OccupancyMap {
   std::vector<std::int64_t> end_blocks_, end_supers_;
   std::vector<float> changed_;                   ///< per pixel: 1 where the depths differ from the camera's last view
   std::vector<std::vector<float>> changed_max_;  ///< its max pyramid
+  // computeUpdateProjective's tasks (the superblocks not all clamped free), its workers' scratch, each task's misses.
+  std::vector<std::int64_t> tasks_;
+  std::vector<Scratch> scratch_;
+  std::vector<TaskMisses> task_misses_;
 };
 
 }  // namespace moverl_planning_scene

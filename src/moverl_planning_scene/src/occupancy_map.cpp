@@ -48,6 +48,17 @@ constexpr bool onlyFixtureEnds(std::uint8_t end) { return end == kFixture; }
 /// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
 /// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
 /// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
+/// std::floor and std::ceil of a moderate x (|x| < 2^52), exact, without libm's call (the baseline x86-64 build has no
+/// rounding instruction, and these run for every cell projected).
+inline double floorOf(double x) {
+  const double t = static_cast<double>(static_cast<std::int64_t>(x));
+  return t > x ? t - 1.0 : t;
+}
+inline double ceilOf(double x) {
+  const double t = static_cast<double>(static_cast<std::int64_t>(x));
+  return t < x ? t + 1.0 : t;
+}
+
 struct Footprint {
   int state = 1;
   double zmin = 0.0, zmax = 0.0;
@@ -115,6 +126,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   std::unique_ptr<OccupancyMap> m(new OccupancyMap());
   m->options_ = o;
   m->inv_resolution_ = 1.0 / o.resolution;
+  m->max_range2_ = o.max_range * o.max_range;
   std::int64_t cells = 1;
   for (int i = 0; i < 3; ++i) {
     const double lo = std::floor(o.bounds.min()[i] * m->inv_resolution_);
@@ -207,21 +219,19 @@ std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
 
 std::size_t OccupancyMap::slot(std::int64_t c) const {
   // Fibonacci hashing, then linear probing to c's slot or the first empty one.
-  const std::size_t mask = slot_key_.size() - 1;
+  const std::size_t mask = slots_.size() - 1;
   std::size_t at =
       static_cast<std::size_t>((static_cast<std::uint64_t>(c) * 0x9e3779b97f4a7c15ULL) >> (64 - slot_bits_));
-  while (slot_key_[at] != c && slot_key_[at] != -1) at = (at + 1) & mask;
+  while (slots_[at].key != c && slots_[at].key != -1) at = (at + 1) & mask;
   return at;
 }
 
 void OccupancyMap::growSlots() {
   slot_bits_ = std::max(12, slot_bits_ + 1);
-  slot_key_.assign(std::size_t{1} << slot_bits_, -1);
-  slot_index_.assign(slot_key_.size(), 0);
+  slots_.assign(std::size_t{1} << slot_bits_, Slot());
   for (std::size_t n = 0; n < order_.size(); ++n) {
     const std::size_t at = slot(order_[n]);
-    slot_key_[at] = order_[n];
-    slot_index_[at] = static_cast<std::uint32_t>(n);
+    slots_[at] = {order_[n], static_cast<std::uint32_t>(n)};
     order_slot_[n] = at;
   }
 }
@@ -237,9 +247,9 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   // 1. End points (beyond max_range: cut there, free space only), grouped by cell: one beam per end cell (step 3),
   //    to the centroid of the cell's points (order_end_ sums them, order_count_ counts them). order_flags_ holds the
   //    flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels cast
-  //    neighbouring beams one after another: cache). The cells are found in a small hash table (slot_key_), not in
+  //    neighbouring beams one after another: cache). The cells are found in a small hash table (slots_), not in
   //    a per-cell array: a cloud's end cells are scattered over the grid, and each would miss the cache.
-  for (std::size_t at : order_slot_) slot_key_[at] = -1;  // the last cloud's (by place: a probe needs the chain)
+  for (std::size_t at : order_slot_) slots_[at].key = -1;  // the last cloud's (by place: a probe needs the chain)
   order_slot_.clear();
   order_.clear();
   order_flags_.clear();
@@ -254,11 +264,10 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       continue;
     }
     const Eigen::Vector3d d = p - origin;
-    const double range = d.norm();
     Eigen::Vector3d end = p;
     std::uint8_t flag = kHit;
-    if (range > options_.max_range) {
-      end = origin + d * (options_.max_range / range);
+    if (d.squaredNorm() > max_range2_) {
+      end = origin + d * (options_.max_range / d.norm());
       flag = 0;
       ++out->stats.beyond_range;
     } else if (masked && robot_mask[k] == kPointOnFixture) {
@@ -280,14 +289,13 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       order_flags_[last_index] |= flag;
       continue;
     }
-    if (2 * (order_.size() + 1) > slot_key_.size()) growSlots();
+    if (2 * (order_.size() + 1) > slots_.size()) growSlots();
     const std::size_t at = slot(c);
-    std::uint32_t n = slot_index_[at];
+    std::uint32_t n = slots_[at].index;
     last_cell = c;
-    if (slot_key_[at] != c) {
+    if (slots_[at].key != c) {
       n = static_cast<std::uint32_t>(order_.size());
-      slot_key_[at] = c;
-      slot_index_[at] = n;
+      slots_[at] = {c, n};
       order_slot_.push_back(at);
       order_.push_back(c);
       order_flags_.push_back(0);
@@ -596,11 +604,25 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     }
     build(&changed_max_, changed_, false);
   }
+  // Each pixel column's and row's ray direction (optical frame, z = 1): x and y.
+  ray_x_.resize(static_cast<std::size_t>(w));
+  ray_y_.resize(static_cast<std::size_t>(h));
+  for (int u = 0; u < w; ++u) ray_x_[u] = (u - camera.cx) / camera.fx;
+  for (int v = 0; v < h; ++v) ray_y_[v] = (v - camera.cy) / camera.fy;
   const Eigen::Matrix3d rt = sensor_pose.linear().transpose();
   const Eigen::Vector3d tr = sensor_pose.translation();
   const double res = options_.resolution;
   const Eigen::Vector3d axis[3] = {rt.col(0) * res, rt.col(1) * res, rt.col(2) * res};  // one cell along x, y, z
   constexpr double kNear = 1e-6;
+  // The pixels whose centres lie within [umin, umax] x [vmin, vmax], clipped to the image: f's rectangle (state 1 when
+  // none). The bounds are clamped to the image's neighbourhood first (floorOf and ceilOf take moderate values).
+  auto rectangle = [&](double umin, double umax, double vmin, double vmax, Footprint* f) {
+    f->u0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(umin, -1.0), static_cast<double>(w)))));
+    f->u1 = static_cast<int>(std::min(w - 1.0, floorOf(std::min(std::max(umax, -1.0), static_cast<double>(w)))));
+    f->v0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(vmin, -1.0), static_cast<double>(h)))));
+    f->v1 = static_cast<int>(std::min(h - 1.0, floorOf(std::min(std::max(vmax, -1.0), static_cast<double>(h)))));
+    f->state = f->u0 > f->u1 || f->v0 > f->v1 ? 1 : 0;
+  };
   auto footprint = [&](const std::int64_t* a, const std::int64_t* b, Footprint* f) {
     // Cells [a, b] (inclusive): the box from a's low corner to b's high corner, in the optical frame.
     const Eigen::Vector3d lo((a[0] + offset_[0]) * res, (a[1] + offset_[1]) * res, (a[2] + offset_[2]) * res);
@@ -645,11 +667,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       vmin = std::min(vmin, v);
       vmax = std::max(vmax, v);
     }
-    f->u0 = static_cast<int>(std::max(0.0, std::ceil(umin)));
-    f->u1 = static_cast<int>(std::min(w - 1.0, std::floor(umax)));
-    f->v0 = static_cast<int>(std::max(0.0, std::ceil(vmin)));
-    f->v1 = static_cast<int>(std::min(h - 1.0, std::floor(vmax)));
-    f->state = f->u0 > f->u1 || f->v0 > f->v1 ? 1 : 0;
+    rectangle(umin, umax, vmin, vmax, f);
   };
   // A block's or superblock's footprint, computed once per camera (it depends on the pose and intrinsics only).
   auto cached = [&](std::vector<Footprint>* fps, std::vector<std::uint64_t>* ids, std::int64_t index,
@@ -674,6 +692,31 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const double r2 = 0.25 * res * res;  // the squared radius of a cell's inscribed sphere
   // How far a cell reaches in depth beyond its centre: half the sum of its edges' depth components.
   const double half_depth = 0.5 * (std::fabs(axis[0].z()) + std::fabs(axis[1].z()) + std::fabs(axis[2].z()));
+  // A cell's footprint from its centre c (optical frame): as footprint's of the cell, with the corners c +- half
+  // edges, one division each (a cell across the camera's plane, or nearer than kNear, sees nothing: state 2 or 1, both
+  // "not seen" to the loop below).
+  Eigen::Vector3d corner[8];
+  for (int k = 0; k < 8; ++k) {
+    corner[k] = 0.5 * ((k & 1 ? 1.0 : -1.0) * axis[0] + (k & 2 ? 1.0 : -1.0) * axis[1] + (k & 4 ? 1.0 : -1.0) * axis[2]);
+  }
+  auto cellFootprint = [&](const Eigen::Vector3d& c, Footprint* f) {
+    f->zmin = c.z() - half_depth;
+    f->zmax = c.z() + half_depth;
+    if (f->zmin <= kNear) {
+      f->state = f->zmax <= kNear ? 1 : 2;
+      return;
+    }
+    double umin = std::numeric_limits<double>::infinity(), umax = -umin, vmin = umin, vmax = -umin;
+    for (const Eigen::Vector3d& k : corner) {
+      const Eigen::Vector3d p = c + k;
+      const double inv = 1.0 / p.z(), u = camera.fx * p.x() * inv + camera.cx, v = camera.fy * p.y() * inv + camera.cy;
+      umin = std::min(umin, u);
+      umax = std::max(umax, u);
+      vmin = std::min(vmin, v);
+      vmax = std::max(vmax, v);
+    }
+    rectangle(umin, umax, vmin, vmax, f);
+  };
   // The superblocks holding cells not clamped free, each a task for the workers (they write disjoint cells, blocks
   // and superblocks; a cell's bit in seen_ shares its word with other superblocks' cells: set atomically). Each task's
   // misses go to its worker's list and are joined in the superblocks' order: the update is the same, in the same
@@ -783,7 +826,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   // within the inscribed sphere), a surface it sees short of the far side settles the cell.
                   const int u = static_cast<int>(uf), v = static_cast<int>(vf);
                   const std::size_t p = static_cast<std::size_t>(v) * w + u;
-                  const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                  const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
                   if (c.cross(ray).squaredNorm() <= r2 * ray.squaredNorm()) {
                     if (past_depth_[p] < zmax) continue;
                     crossed = free_depth_[p] >= zmax;
@@ -793,7 +836,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   see(k);
                   continue;
                 }
-                footprint(at, at, &f);
+                cellFootprint(c, &f);
                 if (f.state != 0 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax)) {
                   continue;
                 }
@@ -805,7 +848,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
                     for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
                       if (free_depth_[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
-                      const Eigen::Vector3d ray((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
+                      const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
                       double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
                       for (int i = 0; i < 3 && t0 <= t1; ++i) {
                         const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res

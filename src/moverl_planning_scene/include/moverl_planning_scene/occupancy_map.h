@@ -222,9 +222,14 @@ class OccupancyMap {
   OccupancyMap() = default;
   /// The cell of a coordinate (octomap's key convention), or -1 outside the map.
   std::int64_t cellOf(const Eigen::Vector3d& p) const;
-  /// Grid index of a coordinate along axis i (may lie outside [0, size)).
+  /// Grid index of a coordinate along axis i (may lie outside [0, size); a coordinate beyond +-1e15 cells, or NaN,
+  /// lies outside). floor without libm's call (the baseline x86-64 build has no rounding instruction; every point of
+  /// every cloud comes here).
   std::int64_t indexOf(double x, int i) const {
-    return static_cast<std::int64_t>(std::floor(x * inv_resolution_)) - offset_[i];
+    const double s = x * inv_resolution_;
+    if (!(s > -1e15 && s < 1e15)) return (s > 0.0 ? std::int64_t{1} : std::int64_t{-1}) << 52;
+    const auto t = static_cast<std::int64_t>(s);
+    return t - (static_cast<double>(t) > s ? 1 : 0) - offset_[i];
   }
   /// Centre of grid cell (i, j, k).
   Eigen::Vector3d centre(std::int64_t i, std::int64_t j, std::int64_t k) const {
@@ -252,6 +257,7 @@ class OccupancyMap {
 
   OccupancyMapOptions options_;
   double inv_resolution_ = 0.0;
+  double max_range2_ = 0.0;  ///< options_.max_range squared
   std::int64_t offset_[3] = {0, 0, 0};  ///< floor(x / resolution) of the grid's cell 0, per axis
   std::int64_t size_[3] = {0, 0, 0};
   std::vector<float> value_;                ///< log-odds of each cell; NaN: never observed
@@ -261,9 +267,13 @@ class OccupancyMap {
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
   /// computeUpdate's scratch: the end cells' index in order_, an open-addressing table keyed by cell id (-1: empty),
-  /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many).
-  std::vector<std::int64_t> slot_key_;
-  std::vector<std::uint32_t> slot_index_;
+  /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many). Key and index
+  /// side by side: a look-up touches one cache line.
+  struct Slot {
+    std::int64_t key = -1;
+    std::uint32_t index = 0;
+  };
+  std::vector<Slot> slots_;
   std::vector<std::size_t> order_slot_;  ///< where each end cell of order_ is in that table
   int slot_bits_ = 0;
   std::vector<std::uint64_t> observed_;  ///< a bit per cell: hit or seen free at least once since the last clear
@@ -298,6 +308,7 @@ class OccupancyMap {
   std::vector<float> changed_;                   ///< per pixel: 1 where the depths differ from the camera's last view
   std::vector<std::vector<float>> changed_max_;  ///< its max pyramid
   // computeUpdateProjective's tasks (the superblocks not all clamped free), its workers' scratch, each task's misses.
+  std::vector<double> ray_x_, ray_y_;  ///< its camera's ray direction per pixel column and row (z = 1)
   std::vector<std::int64_t> tasks_;
   std::vector<Scratch> scratch_;
   std::vector<TaskMisses> task_misses_;

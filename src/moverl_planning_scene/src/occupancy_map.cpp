@@ -697,7 +697,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // "not seen" to the loop below).
   Eigen::Vector3d corner[8];
   for (int k = 0; k < 8; ++k) {
-    corner[k] = 0.5 * ((k & 1 ? 1.0 : -1.0) * axis[0] + (k & 2 ? 1.0 : -1.0) * axis[1] + (k & 4 ? 1.0 : -1.0) * axis[2]);
+    corner[k] =
+        0.5 * ((k & 1 ? 1.0 : -1.0) * axis[0] + (k & 2 ? 1.0 : -1.0) * axis[1] + (k & 4 ? 1.0 : -1.0) * axis[2]);
   }
   auto cellFootprint = [&](const Eigen::Vector3d& c, Footprint* f) {
     f->zmin = c.z() - half_depth;

@@ -257,7 +257,7 @@ class OccupancyMap {
 
   OccupancyMapOptions options_;
   double inv_resolution_ = 0.0;
-  double max_range2_ = 0.0;  ///< options_.max_range squared
+  double max_range2_ = 0.0;             ///< options_.max_range squared
   std::int64_t offset_[3] = {0, 0, 0};  ///< floor(x / resolution) of the grid's cell 0, per axis
   std::int64_t size_[3] = {0, 0, 0};
   std::vector<float> value_;                ///< log-odds of each cell; NaN: never observed

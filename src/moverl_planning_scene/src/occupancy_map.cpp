@@ -16,6 +16,7 @@ float logodds(double p) { return static_cast<float>(std::log(p / (1.0 - p))); }
 
 /// The dense grid's largest size (cells): 4 bytes each, and a few bits.
 constexpr std::int64_t kMaxCells = 64 * 1024 * 1024;
+static_assert(kMaxCells < (std::int64_t{1} << 31), "collectEndCells' table keys cells by int32");
 /// Cells per block (4^3) and superblock (16^3) edge, as shifts.
 constexpr int kBlockShift = 2, kSuperShift = 4;
 
@@ -222,7 +223,7 @@ std::size_t OccupancyMap::slot(std::int64_t c) const {
   const std::size_t mask = slots_.size() - 1;
   std::size_t at =
       static_cast<std::size_t>((static_cast<std::uint64_t>(c) * 0x9e3779b97f4a7c15ULL) >> (64 - slot_bits_));
-  while (slots_[at].key != c && slots_[at].key != -1) at = (at + 1) & mask;
+  while (slots_[at].key != c && slots_[at].key != -1) at = (at + 1) & mask;  // (key: int32, c < kMaxCells)
   return at;
 }
 
@@ -231,7 +232,7 @@ void OccupancyMap::growSlots() {
   slots_.assign(std::size_t{1} << slot_bits_, Slot());
   for (std::size_t n = 0; n < order_.size(); ++n) {
     const std::size_t at = slot(order_[n]);
-    slots_[at] = {order_[n], static_cast<std::uint32_t>(n)};
+    slots_[at] = {static_cast<std::int32_t>(order_[n]), static_cast<std::uint32_t>(n)};
     order_slot_[n] = at;
   }
 }
@@ -295,7 +296,7 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
     last_cell = c;
     if (slots_[at].key != c) {
       n = static_cast<std::uint32_t>(order_.size());
-      slots_[at] = {c, n};
+      slots_[at] = {static_cast<std::int32_t>(c), n};
       order_slot_.push_back(at);
       order_.push_back(c);
       order_flags_.push_back(0);
@@ -970,9 +971,13 @@ void OccupancyMap::apply(const MapUpdate& update) {
     for (std::uint64_t key : *cells) {
       const auto c = static_cast<std::int64_t>(key);
       if (c < 0 || c >= static_cast<std::int64_t>(value_.size())) continue;
-      const bool was = testBit(observed_, c) && value_[c] >= threshold_;
+      const bool observed = testBit(observed_, c);
+      const bool was = observed && value_[c] >= threshold_;
       setValue(c, updated(value_[c], u));
-      setBit(&observed_, c);
+      if (!observed) {
+        setBit(&observed_, c);
+        ++observed_cells_;
+      }
       const bool now = value_[c] >= threshold_;
       if (now != was) countSeen(c, now ? 1 : -1);
     }
@@ -981,6 +986,7 @@ void OccupancyMap::apply(const MapUpdate& update) {
 
 void OccupancyMap::clear() {
   std::fill(observed_.begin(), observed_.end(), 0);
+  observed_cells_ = 0;
   fillUnobserved(options_.unknown_occupied);
 }
 
@@ -1062,9 +1068,7 @@ void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<E
 
 std::size_t OccupancyMap::unobservedCount() const {
   if (!options_.unknown_occupied) return 0;
-  std::size_t seen = 0;
-  for (std::uint64_t w : observed_) seen += static_cast<std::size_t>(__builtin_popcountll(w));
-  return value_.size() - seen;
+  return value_.size() - observed_cells_;
 }
 
 bool OccupancyMap::occupied(const Eigen::Vector3d& p) const {

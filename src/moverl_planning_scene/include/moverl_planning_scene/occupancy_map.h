@@ -268,15 +268,17 @@ class OccupancyMap {
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
   /// computeUpdate's scratch: the end cells' index in order_, an open-addressing table keyed by cell id (-1: empty),
   /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many). Key and index
-  /// side by side: a look-up touches one cache line.
+  /// side by side in 8 bytes (the map has fewer than 2^31 cells): a look-up touches one cache line, and a 160x120
+  /// cloud's table stays within a core's L2 cache (its new end cells are random look-ups).
   struct Slot {
-    std::int64_t key = -1;
+    std::int32_t key = -1;
     std::uint32_t index = 0;
   };
   std::vector<Slot> slots_;
   std::vector<std::size_t> order_slot_;  ///< where each end cell of order_ is in that table
   int slot_bits_ = 0;
   std::vector<std::uint64_t> observed_;  ///< a bit per cell: hit or seen free at least once since the last clear
+  std::size_t observed_cells_ = 0;       ///< how many bits of observed_ are set
   std::vector<std::uint64_t> occupied_;  ///< a bit per cell: log-odds >= the threshold
   std::vector<std::uint64_t> clamped_;   ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
   // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.

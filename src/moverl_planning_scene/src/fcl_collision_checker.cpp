@@ -506,7 +506,23 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
   // Within pad of a convex hull: inside every face's plane, or, outside, within pad of a face it lies in front of
   // (the nearest point of a convex polytope to a point outside lies on such a face); farther than pad beyond any
   // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes). front: the caller's scratch.
-  auto within = [&](const Shape& sh, const Eigen::Vector3d& p, std::vector<int>& front) {
+  // What a hull's answer for one point tells of the points near it (a cloud's next points lie near its last): a point
+  // within pad of the hull whose distance to it is at most d makes every point within pad - d of it within pad too; a
+  // point farther than pad, at least D away, makes every point within D - pad of it farther too (the distance to a
+  // set changes no faster than the point moves). Each radius is kept 1e-9 m short (rounding).
+  struct Memo {
+    Eigen::Vector3d in = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()), out = in;
+    double in2 = -1.0, out2 = -1.0;  ///< squared radii (negative: none)
+  };
+  auto remember = [](Eigen::Vector3d* at, double* r2, const Eigen::Vector3d& p, double radius) {
+    radius -= 1e-9;
+    *at = p;
+    *r2 = radius > 0.0 ? radius * radius : -1.0;
+  };
+  // Within pad of a convex hull: inside every face's plane, or, outside, within pad of a face it lies in front of
+  // (the nearest point of a convex polytope to a point outside lies on such a face); farther than pad beyond any
+  // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes). front: the caller's scratch.
+  auto within = [&](const Shape& sh, const Eigen::Vector3d& p, std::vector<int>& front, Memo& memo) {
     if (sh.planes.empty()) {
       Eigen::Isometry3d at = Eigen::Isometry3d::Identity();
       at.translation() = p;
@@ -514,27 +530,45 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
       fcl::collide(probe.get(), at, sh.g->geom.get(), sh.tf, req, res);
       return res.isCollision();
     }
+    if ((p - memo.in).squaredNorm() <= memo.in2) return true;
+    if ((p - memo.out).squaredNorm() <= memo.out2) return false;
     front.clear();
+    double most = -std::numeric_limits<double>::infinity();  // the largest plane distance: inside when <= 0
     for (std::size_t f = 0; f < sh.planes.size(); ++f) {
       const double e = sh.planes[f].head<3>().dot(p) - sh.planes[f][3];
-      if (e > pad) return false;
+      if (e > pad) {
+        remember(&memo.out, &memo.out2, p, e - pad);  // at least e away
+        return false;
+      }
+      most = std::max(most, e);
       if (e > 0.0) front.push_back(static_cast<int>(f));
     }
+    if (front.empty()) {
+      remember(&memo.in, &memo.in2, p, pad - most);  // inside, at least -most deep
+      return true;
+    }
+    double nearest2 = std::numeric_limits<double>::infinity();
     for (int f : front) {
       const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
-      if (pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]) <= pad2) {
+      const double d2 = pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
+      if (d2 <= pad2) {
+        remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
         return true;
       }
+      nearest2 = std::min(nearest2, d2);
     }
-    return front.empty();
+    remember(&memo.out, &memo.out2, p, std::sqrt(nearest2) - pad);  // the nearest point lies on a front face
+    return false;
   };
   auto test = [&](std::size_t begin, std::size_t end) {
     std::vector<int> front;
+    std::vector<Memo> memos(shapes.size());
     for (std::size_t k = begin; k < end; ++k) {
       const Eigen::Vector3d& p = points[k];
       if (!reach.contains(p) || (skip != nullptr && (*skip)[k] != 0)) continue;
-      for (const Shape& sh : shapes) {
-        if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p, front)) {
+      for (std::size_t i = 0; i < shapes.size(); ++i) {
+        const Shape& sh = shapes[i];
+        if ((p - sh.center).squaredNorm() <= sh.r2 && within(sh, p, front, memos[i])) {
           (*mask)[k] = 1;
           break;
         }

@@ -212,12 +212,6 @@ void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* su
   *super = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
 }
 
-std::int64_t OccupancyMap::cellOf(const Eigen::Vector3d& p) const {
-  const std::int64_t i = indexOf(p.x(), 0), j = indexOf(p.y(), 1), k = indexOf(p.z(), 2);
-  if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
-  return (i * size_[1] + j) * size_[2] + k;
-}
-
 std::size_t OccupancyMap::slot(std::int64_t c) const {
   // Fibonacci hashing, then linear probing to c's slot or the first empty one.
   const std::size_t mask = slots_.size() - 1;

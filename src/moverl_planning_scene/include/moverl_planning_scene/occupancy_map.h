@@ -221,7 +221,11 @@ class OccupancyMap {
 
   OccupancyMap() = default;
   /// The cell of a coordinate (octomap's key convention), or -1 outside the map.
-  std::int64_t cellOf(const Eigen::Vector3d& p) const;
+  std::int64_t cellOf(const Eigen::Vector3d& p) const {
+    const std::int64_t i = indexOf(p.x(), 0), j = indexOf(p.y(), 1), k = indexOf(p.z(), 2);
+    if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
+    return (i * size_[1] + j) * size_[2] + k;
+  }
   /// Grid index of a coordinate along axis i (may lie outside [0, size); a coordinate beyond +-1e15 cells, or NaN,
   /// lies outside). floor without libm's call (the baseline x86-64 build has no rounding instruction; every point of
   /// every cloud comes here).

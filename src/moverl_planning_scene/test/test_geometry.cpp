@@ -445,6 +445,43 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
   EXPECT_GT(inside, total / 20);  // the points do reach into the shapes
 }
 
+// A dense cloud (a camera's neighbouring points lie millimetres apart): the self filter answers a point from its
+// neighbour's answer where the neighbour's distance to the hull settles it. Lines of points 1 mm apart through every
+// shape and its padding: the same answers as FCL's sphere test, except within 1e-6 m of the padding's boundary.
+TEST(SelfFilter, DenseCloudsAnswerAsFcl) {
+  std::unique_ptr<mps::PlanningScene> scene;
+  ASSERT_NO_FATAL_FAILURE(loadPandaScene(&scene));
+  const mps::FclCollisionChecker& checker = scene->checker();
+  const std::vector<double> q = {0.2, -0.5, 0.1, -2.0, 0.3, 1.8, 0.6};
+  ASSERT_EQ(q.size(), scene->model().dof());
+  std::vector<Eigen::AlignedBox3d> boxes;
+  checker.robotBoundingBoxes(q.data(), 0.02, &boxes);
+  std::mt19937 rng(11);
+  std::vector<Vector3d> points;
+  for (const auto& b : boxes) {
+    std::uniform_real_distribution<double> y(b.min().y(), b.max().y()), z(b.min().z(), b.max().z());
+    for (int line = 0; line < 12; ++line) {  // along x, as an image row
+      const double yy = y(rng), zz = z(rng);
+      for (double x = b.min().x(); x <= b.max().x(); x += 0.001) points.emplace_back(x, yy, zz);
+    }
+  }
+  for (double pad : {0.004, 0.01}) {
+    std::vector<std::uint8_t> fast, below, above;
+    checker.robotPointMask(q.data(), points, pad, &fast);
+    checker.linkPointMaskFcl(q.data(), -1, points, pad - 1e-6, &below);
+    checker.linkPointMaskFcl(q.data(), -1, points, pad + 1e-6, &above);
+    std::size_t inside = 0, outside = 0, wrong = 0;
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      inside += below[k];
+      outside += above[k] == 0;
+      if ((fast[k] == 0 && below[k] == 1) || (fast[k] == 1 && above[k] == 0)) ++wrong;
+    }
+    EXPECT_EQ(wrong, 0u) << "padding " << pad;
+    EXPECT_GT(inside, points.size() / 10) << "padding " << pad;  // both answers are common along the lines
+    EXPECT_GT(outside, points.size() / 10) << "padding " << pad;
+  }
+}
+
 // A skip mask leaves its points out (mask 0) and answers the others as without it: the self filter of several
 // configurations ORs each one's mask over the points the ones before left.
 TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {

@@ -46,9 +46,6 @@ constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4;
 // beam): both integrations count it as seen free.
 constexpr bool onlyFixtureEnds(std::uint8_t end) { return end == kFixture; }
 
-/// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
-/// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
-/// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
 /// std::floor and std::ceil of a moderate x (|x| < 2^52), exact, without libm's call (the baseline x86-64 build has no
 /// rounding instruction, and these run for every cell projected).
 inline double floorOf(double x) {
@@ -60,6 +57,9 @@ inline double ceilOf(double x) {
   return t < x ? t + 1.0 : t;
 }
 
+/// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
+/// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
+/// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
 struct Footprint {
   int state = 1;
   double zmin = 0.0, zmax = 0.0;

@@ -128,9 +128,9 @@ struct MapUpdate {
 /// \brief Occupancy grid in the robot base frame.
 ///        computeUpdate, addKnownFree and unobservedCells read the map and may run concurrently with collision checks
 ///        (anyOccupied), but not with apply, clear or setUnknownOccupied; those modify the map and must be serialized
-///        with every reader by the caller. One thread integrates clouds (computeUpdate uses the map's scratch space,
-///        and computeUpdateProjective keeps each camera's last view between calls; apply, clear and setUnknownOccupied
-///        write the counters it reads them with).
+///        with every reader by the caller. One thread integrates clouds (computeUpdate uses the map's scratch space;
+///        computeUpdateProjective may share its cells out to a WorkerPool's threads within the call, and keeps each
+///        camera's last view between calls; apply, clear and setUnknownOccupied write the counters it reads them with).
 class OccupancyMap {
  public:
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).

@@ -57,6 +57,12 @@ inline double ceilOf(double x) {
   return t < x ? t + 1.0 : t;
 }
 
+/// A ray sees a cell free only where it passes through it: inside the cell's slabs over more than this fraction of a
+/// cell (a ray along a face, or through an edge or a corner, only touches the cell; with a camera on a cell boundary,
+/// as in an axis-aligned set-up, whole columns of pixels do). And a pixel whose centre projects within kEdgePx of a
+/// box's rectangle is in it (the corners' projections round either way).
+constexpr double kInside = 1e-6, kEdgePx = 1e-6;
+
 /// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
 /// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
 /// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
@@ -612,6 +618,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // The pixels whose centres lie within [umin, umax] x [vmin, vmax], clipped to the image: f's rectangle (state 1 when
   // none). The bounds are clamped to the image's neighbourhood first (floorOf and ceilOf take moderate values).
   auto rectangle = [&](double umin, double umax, double vmin, double vmax, Footprint* f) {
+    // A pixel whose centre lies on the rectangle's edge is in it, whatever the rounding of the corners' projections
+    // (its ray may touch the box: it must see past it too).
+    umin -= kEdgePx;
+    vmin -= kEdgePx;
+    umax += kEdgePx;
+    vmax += kEdgePx;
     f->u0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(umin, -1.0), static_cast<double>(w)))));
     f->u1 = static_cast<int>(std::min(w - 1.0, floorOf(std::min(std::max(umax, -1.0), static_cast<double>(w)))));
     f->v0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(vmin, -1.0), static_cast<double>(h)))));
@@ -684,7 +696,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   auto hidden = [&](const Footprint& f) {
     return f.state == 1 || (f.state == 0 && f.zmin > over(max_depth_, false, f.u0, f.u1, f.v0, f.v1));
   };
-  const double r2 = 0.25 * res * res;  // the squared radius of a cell's inscribed sphere
+  // The squared radius of a cell's inscribed sphere, kInside of a cell smaller: a ray that passes within it enters
+  // the cell (one tangent to the sphere where it meets a face would only touch that face).
+  const double r2 = 0.25 * res * res * (1.0 - 4.0 * kInside);
   // How far a cell reaches in depth beyond its centre: half the sum of its edges' depth components.
   const double half_depth = 0.5 * (std::fabs(axis[0].z()) + std::fabs(axis[1].z()) + std::fabs(axis[2].z()));
   // A cell's footprint from its centre c (optical frame): as footprint's of the cell, with the corners c +- half
@@ -806,7 +820,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
                 const std::int64_t k = row + at[2];
                 if (testBit(hit_, k) || seen(k) || testBit(clamped_, k)) continue;
-                // Seen free: some pixel's ray crosses the cell and sees past all of it (a cell between the rays
+                // Seen free: some pixel's ray passes through the cell and sees past all of it (a cell between the rays
                 // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
                 // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
                 // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
@@ -823,7 +837,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   const int u = static_cast<int>(uf), v = static_cast<int>(vf);
                   const std::size_t p = static_cast<std::size_t>(v) * w + u;
                   const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
-                  if (c.cross(ray).squaredNorm() <= r2 * ray.squaredNorm()) {
+                  if (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm()) {
                     if (past_depth_[p] < zmax) continue;
                     crossed = free_depth_[p] >= zmax;
                   }
@@ -849,7 +863,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                       for (int i = 0; i < 3 && t0 <= t1; ++i) {
                         const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
                         if (std::fabs(dd) < 1e-15) {
-                          if (o[i] > 0.0 || o[i] < -e) t1 = -1.0;  // parallel, outside the slab
+                          // parallel: inside the slab by kInside of a cell, or not (one along a face only touches)
+                          if (!(o[i] < -kInside * e && o[i] > -e + kInside * e)) t1 = -1.0;
                           continue;
                         }
                         double ta = o[i] / dd, tb = (o[i] + e) / dd;
@@ -857,7 +872,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                         t0 = std::max(t0, ta);
                         t1 = std::min(t1, tb);
                       }
-                      crossed = t0 <= t1;
+                      crossed = t1 - t0 > kInside * res;  // through the cell, not touching an edge or corner
                     }
                   }
                   if (!crossed) continue;

@@ -60,17 +60,25 @@ struct WorkerPool::Impl {
 
 WorkerPool::WorkerPool(int threads) : threads_(threads), impl_(new Impl) {
   if (threads < 1) throw std::invalid_argument("WorkerPool: threads must be >= 1, not " + std::to_string(threads));
-  for (int w = 1; w < threads; ++w) impl_->threads.emplace_back([this, w] { impl_->loop(w); });
+  try {
+    for (int w = 1; w < threads; ++w) impl_->threads.emplace_back([this, w] { impl_->loop(w); });
+  } catch (...) {  // a thread could not be started: stop the ones that were
+    stop();
+    throw;
+  }
 }
 
-WorkerPool::~WorkerPool() {
+void WorkerPool::stop() {
   {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     impl_->stop = true;
   }
   impl_->start.notify_all();
   for (std::thread& t : impl_->threads) t.join();
+  impl_->threads.clear();
 }
+
+WorkerPool::~WorkerPool() { stop(); }
 
 void WorkerPool::run(std::size_t tasks, const std::function<void(std::size_t, int)>& task) {
   if (impl_->running.exchange(true)) throw std::logic_error("WorkerPool::run: one batch at a time");

@@ -380,6 +380,31 @@ void integrate(mps::OccupancyMap* map, const SceneView& s, mps::MapUpdate* u, mp
   }
 }
 
+TEST(Projective, ARayThatOnlyTouchesACellDoesNotSeeIt) {
+  // A camera on a cell boundary whose middle column of pixels looks along the boundary plane (cx on a pixel centre,
+  // the optical centre at y = 0 of the map, a plane between two columns of cells): those rays run along the cells'
+  // faces without entering them. Beyond fx * resolution (1 m) the next columns' rays pass outside the two cells beside
+  // the plane, so nothing enters them: they are between the rays of a sparse image, and must stay unseen (a thin
+  // thing inside them, off the plane, would not be seen). Nearer, the next columns' rays cross them.
+  const mps::PinholeCamera camera{81, 61, 50.0, 52.0, 40.0, 30.0};
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const auto wall = image(camera, [](int, int) { return 2.0; });
+  for (bool skip : {true, false}) {
+    auto map = makeMap(false, skip);
+    mps::MapUpdate u;
+    map->computeUpdateProjective(mapPoints(wall, pose), {}, depths(wall), {}, camera, pose, &u);
+    std::size_t beside_far = 0, beside_near = 0;
+    for (std::uint64_t key : u.misses) {
+      const Eigen::Vector3d c = map->cellCentre(key);
+      if (std::fabs(std::fabs(c.y()) - 0.01) > 1e-9) continue;  // the two columns of cells beside y = 0
+      if (c.x() > 1.05 && c.x() < 1.9) ++beside_far;
+      if (c.x() > 0.3 && c.x() < 0.9) ++beside_near;
+    }
+    EXPECT_EQ(beside_far, 0u) << "skip " << skip;
+    EXPECT_GT(beside_near, 100u) << "skip " << skip;  // crossed by the next columns' rays
+  }
+}
+
 TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
   // maps, one with it and one evaluating every block, take the same views (sceneView: cameras fixed and moving, more
@@ -419,7 +444,7 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
   // order, the same counts, as on the calling thread alone, view after view (the views' records too: a block a worker
   // left wrongly would show in a later view), with skipping on and off.
   mps::WorkerPool two(2), three(3);
-  std::size_t misses = 0;
+  std::size_t misses = 0, known_free = 0;
   for (bool skip : {true, false}) {
     auto alone = makeMap(true, skip), on_two = makeMap(true, skip), on_three = makeMap(true, skip);
     ASSERT_TRUE(alone && on_two && on_three);
@@ -429,7 +454,18 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
       integrate(alone.get(), s, &ua);
       integrate(on_two.get(), s, &u2, &two);
       integrate(on_three.get(), s, &u3, &three);
+      // The cells the update marked seen (the workers set their bits in shared words) are what addKnownFree leaves
+      // out: the unobserved cells around the walking ball, offered to it, come out the same.
+      const Eigen::AlignedBox3d around(Eigen::Vector3d(0.8, -0.5, -0.3), Eigen::Vector3d(1.4, 0.5, 0.3));
+      std::vector<Eigen::Vector3d> centres;
+      std::vector<std::uint64_t> keys;
+      for (const auto& [map, u] :
+           {std::make_pair(alone.get(), &ua), std::make_pair(on_two.get(), &u2), std::make_pair(on_three.get(), &u3)}) {
+        map->unobservedCells(around, &centres, &keys);
+        map->addKnownFree(keys, u);
+      }
       for (const mps::MapUpdate* u : {&u2, &u3}) {
+        EXPECT_EQ(u->stats.known_free, ua.stats.known_free);
         ASSERT_EQ(u->hits, ua.hits) << "view " << n;
         ASSERT_EQ(u->misses, ua.misses) << "view " << n;
         EXPECT_EQ(u->stats.free_cells, ua.stats.free_cells);
@@ -437,12 +473,14 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
         EXPECT_EQ(u->stats.changed_cells, ua.stats.changed_cells);
       }
       misses += ua.misses.size();
+      known_free += ua.stats.known_free;
       alone->apply(ua);
       on_two->apply(u2);
       on_three->apply(u3);
     }
   }
   EXPECT_GT(misses, 10000u);  // there was work to share
+  EXPECT_GT(known_free, 1000u);
 }
 
 TEST(Projective, ACellThePointsStopHittingIsLookedAtAgainThoughTheDepthsStay) {

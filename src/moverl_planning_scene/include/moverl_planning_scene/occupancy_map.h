@@ -17,8 +17,9 @@
  *
  * Projective update (computeUpdateProjective, for an organized cloud that fits a pinhole camera): the same hits, and
  * instead of walking beams, each cell not yet clamped free (superblocks and blocks first, against min and max depth
- * pyramids of the image) is seen free when some pixel's ray crosses it and sees past all of it, and every pixel whose
- * ray may cross it (the bounding rectangle of its corners' projections), robot pixels aside, sees past all of it too.
+ * pyramids of the image) is seen free when some pixel's ray passes through it (not merely touching a face, an edge or a
+ * corner) and sees past all of it, and every pixel whose ray may meet it (the bounding rectangle of its corners'
+ * projections), robot pixels aside, sees past all of it too.
  * It never sees free a cell where a pixel that may cross it saw a surface short of the cell's far side; ray casting's
  * beams to the end cells' centroids can graze such cells. A fixed camera sees mostly the same image view after view:
  * a block whose inputs did not change since the camera's last view (the depths over the tiles its rectangle reads, the
@@ -231,7 +232,8 @@ class OccupancyMap {
   /// every cloud comes here).
   std::int64_t indexOf(double x, int i) const {
     const double s = x * inv_resolution_;
-    if (!(s > -1e15 && s < 1e15)) return (s > 0.0 ? std::int64_t{1} : std::int64_t{-1}) << 52;
+    constexpr std::int64_t kFar = std::int64_t{1} << 52;
+    if (!(s > -1e15 && s < 1e15)) return s > 0.0 ? kFar : -kFar;
     const auto t = static_cast<std::int64_t>(s);
     return t - (static_cast<double>(t) > s ? 1 : 0) - offset_[i];
   }

@@ -35,6 +35,8 @@ class WorkerPool {
 
  private:
   struct Impl;
+  /// Stop and join the threads started (the destructor; a constructor that could not start them all).
+  void stop();
   int threads_;
   std::unique_ptr<Impl> impl_;
 };

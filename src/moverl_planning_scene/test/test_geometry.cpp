@@ -465,9 +465,12 @@ TEST(SelfFilter, DenseCloudsAnswerAsFcl) {
       for (double x = b.min().x(); x <= b.max().x(); x += 0.001) points.emplace_back(x, yy, zz);
     }
   }
+  mps::WorkerPool pool(3);
   for (double pad : {0.004, 0.01}) {
-    std::vector<std::uint8_t> fast, below, above;
+    std::vector<std::uint8_t> fast, on_pool, below, above;
     checker.robotPointMask(q.data(), points, pad, &fast);
+    checker.robotPointMask(q.data(), points, pad, &on_pool, nullptr, &pool);  // in parts: each part's own answers
+    EXPECT_EQ(on_pool, fast) << "padding " << pad;
     checker.linkPointMaskFcl(q.data(), -1, points, pad - 1e-6, &below);
     checker.linkPointMaskFcl(q.data(), -1, points, pad + 1e-6, &above);
     std::size_t inside = 0, outside = 0, wrong = 0;

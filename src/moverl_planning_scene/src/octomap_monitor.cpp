@@ -19,6 +19,8 @@ namespace moverl_planning_scene {
 
 namespace {
 const char* const kYaml = "load config/planning_scene.yaml";
+/// The cloud subscriber's transport queue: this many times octomap/queue_size (room for as many cameras' views).
+constexpr int kCloudTransportQueue = 16;
 }  // namespace
 
 // PointCloud2ConstIterator checks none of this.
@@ -163,14 +165,20 @@ bool OctomapMonitor::init(std::string* error) {
   joints_ = scene_->model().jointNames();
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh_);
-  status_pub_ = pnh_.advertise<moverl_msgs::OctomapStatus>("octomap_status", 1, /*latch=*/true);
+  // One status per integrated cloud, and a listener may count them (step_cost.py sums every cloud's integration
+  // time): clouds integrated back to back (lockstep's queue, two threads) must not replace each other's status in the
+  // outgoing queue, as a queue of 1 let them.
+  status_pub_ = pnh_.advertise<moverl_msgs::OctomapStatus>("octomap_status", 64, /*latch=*/true);
   marker_pub_ = pnh_.advertise<visualization_msgs::Marker>("octomap_markers", 1, /*latch=*/true);
   clear_srv_ = pnh_.advertiseService("clear_octomap", &OctomapMonitor::clear, this);
   ros::SubscribeOptions js = ros::SubscribeOptions::create<sensor_msgs::JointState>(
       joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(),
       &joint_queue_);
+  // The transport's queue holds the clouds until onCloud takes them (at once: it only queues them per camera, where
+  // octomap/queue_size applies). roscpp drops the oldest silently when it is full: deep enough for a burst of every
+  // camera's views (a lockstep step at 30 Hz publishes them a millisecond apart while both cores integrate).
   ros::SubscribeOptions pc = ros::SubscribeOptions::create<sensor_msgs::PointCloud2>(
-      cloud_topic, static_cast<uint32_t>(std::max(1, queue)),
+      cloud_topic, static_cast<uint32_t>(kCloudTransportQueue * std::max(1, queue)),
       [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); }, ros::VoidPtr(), &sensor_queue_);
   joint_sub_ = nh_.subscribe(js);
   cloud_sub_ = nh_.subscribe(pc);

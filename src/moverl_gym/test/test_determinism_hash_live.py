@@ -29,13 +29,25 @@ pytestmark = pytest.mark.live
 
 STEPS = 400
 SEED = 0
+# The hashes each host this project's CI runs on gives: the same verdicts, but observations that differ in their last
+# bits between two VM hosts' CPUs (2026-11-27: the code at e386380, which had passed with the first, gives the second
+# on the slower host, before and after that day's changes). A change of behaviour changes both.
 EXPECTED = {
     # verdicts: safe 384, discarded_self 12, discarded_pose 4
-    "MoveRL/PandaReachTable-v0": "070570e9e2e9cfba6e55e46aee8e121b506001f2beee4dcf70bc234576b793ed",
+    "MoveRL/PandaReachTable-v0": (
+        "070570e9e2e9cfba6e55e46aee8e121b506001f2beee4dcf70bc234576b793ed",
+        "f7fa3018300623d621d7245d5599e8afa2e2dc94a26326a192bd23eb35241269",
+    ),
     # verdicts: safe 384, discarded_self 12, discarded_pose 4 (the person walks the far side of the table)
-    "MoveRL/PandaReachHuman-v0": "bc257d179d4f5dc114913726a9780e26193d79bd6f09e4131b7eb1df877f2c18",
+    "MoveRL/PandaReachHuman-v0": (
+        "bc257d179d4f5dc114913726a9780e26193d79bd6f09e4131b7eb1df877f2c18",
+        "6e155aa869aa10ea356b81b4e2eb2cbc56938396bc33ba81df20e457eef3b94e",
+    ),
     # verdicts: safe 351, truncated 24, discarded_pose 12, discarded_self 12, discarded_path 1
-    "MoveRL/PandaReachCase-v0": "b461c83acc562226bc7bbd575ae92a6ee5bd4828188ab782d9984696d58c97ef",
+    "MoveRL/PandaReachCase-v0": (
+        "b461c83acc562226bc7bbd575ae92a6ee5bd4828188ab782d9984696d58c97ef",
+        "043c63bbbb4028075cbd07ee160b5de0f88621927f2f09ca72bb1ac9f3d502f6",
+    ),
 }
 LAUNCH_ARGS = {"MoveRL/PandaReachCase-v0": {"strategy": "last_safe"}}
 
@@ -72,7 +84,7 @@ def rollout(env_id: str, steps: int = STEPS, seed: int = SEED):
 def test_determinism_hash(env_id):
     digest, _, verdicts = rollout(env_id)
     print(f"\n{env_id}: {digest} {verdicts}")
-    assert digest == EXPECTED[env_id], (
+    assert digest in EXPECTED[env_id], (
         f"{env_id}: {STEPS} seeded steps hash {digest}, recorded {EXPECTED[env_id]} (verdicts {verdicts}): "
         "observations, rewards or verdicts changed"
     )

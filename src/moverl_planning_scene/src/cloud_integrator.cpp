@@ -47,29 +47,42 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   CloudTiming t;
   Clock::time_point at = Clock::now();
   if (why != nullptr) why->clear();
-  // The points in the sensor frame (contiguous x y z, one per pixel: the pinhole fit and the depth image), and the
-  // ones with a return in the map frame.
+  // The points in the sensor frame (contiguous x y z, one per pixel: the pinhole fit), their depths (non-finite: no
+  // return), and the ones with a return in the map frame, in pixel order. Parts of the rows, then of the points, on
+  // the pool.
   const std::size_t n = static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
   sensor_xyz_.resize(3 * n);
-  points_.clear();
-  points_.reserve(n);
-  pixel_of_.clear();
-  pixel_of_.reserve(n);
-  for (int v = 0; v < height; ++v) {
-    const std::uint8_t* row = cloud.data + static_cast<std::size_t>(v) * cloud.row_step;
-    for (int u = 0; u < width; ++u) {
-      const std::size_t pixel = static_cast<std::size_t>(v) * width + u;
-      float* s = &sensor_xyz_[3 * pixel];
-      const std::uint8_t* point = row + static_cast<std::size_t>(u) * cloud.point_step;
-      std::memcpy(s, point + cloud.x, sizeof(float));
-      std::memcpy(s + 1, point + cloud.y, sizeof(float));
-      std::memcpy(s + 2, point + cloud.z, sizeof(float));
-      if (std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2])) {  // NaN marks no return in some drivers
-        points_.push_back(sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]));
-        pixel_of_.push_back(static_cast<std::uint32_t>(pixel));
+  depth_.resize(n);
+  has_return_.resize(n);
+  const std::size_t rows = static_cast<std::size_t>(std::max(0, height));
+  const std::size_t rows_per_part = WorkerPool::kCheapPart / std::max<std::size_t>(1, std::max(0, width));
+  WorkerPool::runParts(pool_.get(), rows, rows_per_part, [&](std::size_t v0, std::size_t v1, int) {
+    for (std::size_t v = v0; v < v1; ++v) {
+      const std::uint8_t* row = cloud.data + v * cloud.row_step;
+      for (int u = 0; u < width; ++u) {
+        const std::size_t pixel = v * width + u;
+        float* s = &sensor_xyz_[3 * pixel];
+        const std::uint8_t* point = row + static_cast<std::size_t>(u) * cloud.point_step;
+        std::memcpy(s, point + cloud.x, sizeof(float));
+        std::memcpy(s + 1, point + cloud.y, sizeof(float));
+        std::memcpy(s + 2, point + cloud.z, sizeof(float));
+        depth_[pixel] = s[2];
+        // NaN marks no return in some drivers
+        has_return_[pixel] = std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2]) ? 1 : 0;
       }
     }
+  });
+  pixel_of_.clear();
+  for (std::size_t pixel = 0; pixel < n; ++pixel) {
+    if (has_return_[pixel] != 0) pixel_of_.push_back(static_cast<std::uint32_t>(pixel));
   }
+  points_.resize(pixel_of_.size());
+  WorkerPool::runParts(pool_.get(), points_.size(), WorkerPool::kCheapPart, [&](std::size_t k0, std::size_t k1, int) {
+    for (std::size_t k = k0; k < k1; ++k) {
+      const float* s = &sensor_xyz_[3 * static_cast<std::size_t>(pixel_of_[k])];
+      points_[k] = sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]);
+    }
+  });
   t.points = since(&at);
   mask_.assign(points_.size(), kPointObstacle);
   for (std::size_t c = 0; c < configurations.size(); ++c) {
@@ -87,7 +100,7 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
     {
       std::unique_lock<std::mutex> lock;
       if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);
-      checker_->staticObjectPointMask(points_, options_.static_filter_padding, &mask_more_);
+      checker_->staticObjectPointMask(points_, options_.static_filter_padding, &mask_more_, pool_.get());
     }
     for (std::size_t k = 0; k < mask_.size(); ++k) {
       if (mask_[k] == kPointObstacle && mask_more_[k] != 0) mask_[k] = kPointOnFixture;
@@ -104,10 +117,11 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
       reason = "an unorganized cloud (height 1)";
     } else if (fitPinhole(sensor_xyz_.data(), width, height, stride, kPinholeTolerancePx, &camera_, &residual,
                           &reason)) {
-      depth_.resize(n);
-      for (std::size_t k = 0; k < n; ++k) depth_[k] = sensor_xyz_[3 * k + 2];  // non-finite stays: no return
       pixel_mask_.assign(n, kPointObstacle);
-      for (std::size_t k = 0; k < points_.size(); ++k) pixel_mask_[pixel_of_[k]] = mask_[k];
+      WorkerPool::runParts(pool_.get(), points_.size(), WorkerPool::kCheapPart,
+                           [&](std::size_t k0, std::size_t k1, int) {
+                             for (std::size_t k = k0; k < k1; ++k) pixel_mask_[pixel_of_[k]] = mask_[k];
+                           });
       map_->computeUpdateProjective(points_, mask_, depth_, pixel_mask_, camera_, sensor_pose, update, pool_.get());
       used = Integration::kProjective;
     }

@@ -575,17 +575,11 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
       }
     }
   };
-  if (pool == nullptr || pool->threads() == 1) {
-    test(0, points.size());
-    return;
-  }
-  // Parts of the cloud on the pool's threads, more parts than threads (the robot's points bunch in a part of the
-  // image); the shapes above placed once for all.
-  const std::size_t parts = 4 * static_cast<std::size_t>(pool->threads());
-  const std::size_t part = (points.size() + parts - 1) / parts;
-  pool->run(parts, [&](std::size_t i, int) {
-    test(std::min(points.size(), i * part), std::min(points.size(), (i + 1) * part));
-  });
+  // Parts of the cloud on the pool's threads (a point's test against the link shapes is worth a thread's wake-up
+  // from about a thousand points); the shapes above placed once for all.
+  constexpr std::size_t kSelfFilterPart = 1024;
+  WorkerPool::runParts(pool, points.size(), kSelfFilterPart,
+                       [&](std::size_t begin, std::size_t end, int) { test(begin, end); });
 }
 
 void FclCollisionChecker::linkPointMaskFcl(const double* q, int link, const std::vector<Eigen::Vector3d>& points,

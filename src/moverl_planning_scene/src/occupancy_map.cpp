@@ -42,6 +42,7 @@ bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::
 
 // The flags of the points that end in a cell (order_flags_).
 constexpr std::uint8_t kHit = 1, kRobot = 2, kFixture = 4;
+constexpr std::uint8_t kInvalidPoint = 0xff;  // collectEndCells' flags of a non-finite point (no cell)
 // A cell where only fixture points end was seen down to the fixture's surface (anything above it would have stopped a
 // beam): both integrations count it as seen free.
 constexpr bool onlyFixtureEnds(std::uint8_t end) { return end == kFixture; }
@@ -239,17 +240,48 @@ void OccupancyMap::growSlots() {
 
 void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                                    const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
-                                   MapUpdate* out) {
+                                   MapUpdate* out, bool centroids, WorkerPool* pool) {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
   // 1. End points (beyond max_range: cut there, free space only), grouped by cell: one beam per end cell (step 3),
-  //    to the centroid of the cell's points (order_end_ sums them, order_count_ counts them). order_flags_ holds the
-  //    flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels cast
-  //    neighbouring beams one after another: cache). The cells are found in a small hash table (slots_), not in
+  //    to the centroid of the cell's points (centroids: order_end_ sums them, order_count_ counts them). order_flags_
+  //    holds the flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels
+  //    cast neighbouring beams one after another: cache). The cells are found in a small hash table (slots_), not in
   //    a per-cell array: a cloud's end cells are scattered over the grid, and each would miss the cache.
+  //    Each point's cell and flags first (point_cell_, point_flags_: kInvalidPoint for a non-finite one), in parts on
+  //    the pool; then the table, in the points' order.
+  point_cell_.resize(points.size());
+  point_flags_.resize(points.size());
+  auto end_of = [&](const Eigen::Vector3d& p, std::uint8_t flags) -> Eigen::Vector3d {
+    return flags == 0 ? Eigen::Vector3d(origin + (p - origin) * (options_.max_range / (p - origin).norm())) : p;
+  };
+  WorkerPool::runParts(pool, points.size(), WorkerPool::kCheapPart, [&](std::size_t begin, std::size_t end, int) {
+    for (std::size_t k = begin; k < end; ++k) {
+      const Eigen::Vector3d& p = points[k];
+      if (!p.allFinite()) {
+        point_flags_[k] = kInvalidPoint;
+        continue;
+      }
+      std::uint8_t flag = kHit;
+      if ((p - origin).squaredNorm() > max_range2_) {
+        flag = 0;
+      } else if (masked && robot_mask[k] == kPointOnFixture) {
+        flag = kFixture;
+      } else if (masked && robot_mask[k] != kPointObstacle) {
+        flag = kRobot;
+      }
+      point_flags_[k] = flag;
+      // The end point's cell from float coordinates, as octomap's keys of point3d (a point on a cell boundary in
+      // double may lie across it in float). volatile: g++ -O3 was seen to skip the rounding to float otherwise.
+      const Eigen::Vector3d e = end_of(p, flag);
+      const volatile float fx = static_cast<float>(e.x()), fy = static_cast<float>(e.y()),
+                           fz = static_cast<float>(e.z());
+      point_cell_[k] = static_cast<std::int32_t>(cellOf(Eigen::Vector3d(fx, fy, fz)));  // -1 outside (kMaxCells)
+    }
+  });
   for (std::size_t at : order_slot_) slots_[at].key = -1;  // the last cloud's (by place: a probe needs the chain)
   order_slot_.clear();
   order_.clear();
@@ -259,35 +291,22 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   std::int64_t last_cell = -1;
   std::uint32_t last_index = 0;
   for (std::size_t k = 0; k < points.size(); ++k) {
-    const Eigen::Vector3d& p = points[k];
-    if (!p.allFinite()) {
+    const std::uint8_t flag = point_flags_[k];
+    if (flag == kInvalidPoint) {
       ++out->stats.invalid;
       continue;
     }
-    const Eigen::Vector3d d = p - origin;
-    Eigen::Vector3d end = p;
-    std::uint8_t flag = kHit;
-    if (d.squaredNorm() > max_range2_) {
-      end = origin + d * (options_.max_range / d.norm());
-      flag = 0;
-      ++out->stats.beyond_range;
-    } else if (masked && robot_mask[k] == kPointOnFixture) {
-      flag = kFixture;
-      ++out->stats.fixture;
-    } else if (masked && robot_mask[k] != kPointObstacle) {
-      flag = kRobot;
-      ++out->stats.robot;
-    }
-    // The end point's cell from float coordinates, as octomap's keys of point3d (a point on a cell boundary in
-    // double may lie across it in float). volatile: g++ -O3 was seen to skip the rounding to float otherwise.
-    const volatile float fx = static_cast<float>(end.x()), fy = static_cast<float>(end.y()),
-                         fz = static_cast<float>(end.z());
-    const std::int64_t c = cellOf(Eigen::Vector3d(fx, fy, fz));
+    out->stats.beyond_range += flag == 0 ? 1 : 0;
+    out->stats.fixture += flag == kFixture ? 1 : 0;
+    out->stats.robot += flag == kRobot ? 1 : 0;
+    const std::int64_t c = point_cell_[k];
     if (c < 0) continue;
     if (c == last_cell) {  // the previous point's cell (neighbouring pixels): no look-up
-      order_end_[last_index] += end;
-      ++order_count_[last_index];
       order_flags_[last_index] |= flag;
+      if (centroids) {
+        order_end_[last_index] += end_of(points[k], flag);
+        ++order_count_[last_index];
+      }
       continue;
     }
     if (2 * (order_.size() + 1) > slots_.size()) growSlots();
@@ -300,13 +319,17 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       order_slot_.push_back(at);
       order_.push_back(c);
       order_flags_.push_back(0);
-      order_end_.push_back(Eigen::Vector3d::Zero());
-      order_count_.push_back(0);
+      if (centroids) {
+        order_end_.push_back(Eigen::Vector3d::Zero());
+        order_count_.push_back(0);
+      }
     }
     last_index = n;
-    order_end_[n] += end;
-    ++order_count_[n];
     order_flags_[n] |= flag;
+    if (centroids) {
+      order_end_[n] += end_of(points[k], flag);
+      ++order_count_[n];
+    }
   }
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
   std::fill(seen_.begin(), seen_.end(), 0);
@@ -329,7 +352,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
                                  const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
                                  MapUpdate* out) {
   ++epoch_;
-  collectEndCells(points, robot_mask, origin, out);
+  collectEndCells(points, robot_mask, origin, out, true, nullptr);
   // 3. Beams from the origin to the centroid of each end cell's points (octomap's discretized insertion casts to the
   //    cell's centre: with a sparse cloud of a static scene the same centres are hit every view, and a cell that no
   //    centre's beam crosses is never seen free again once a person left it, although a point's own line of sight
@@ -454,7 +477,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   ++epoch_;
   const int w = fitted.width, h = fitted.height;
   // 1-2. End cells and hits, as computeUpdate's.
-  collectEndCells(points, robot_mask, fitted_pose.translation(), out);
+  collectEndCells(points, robot_mask, fitted_pose.translation(), out, false, pool);
   if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(fitted.fx > 0) || !(fitted.fy > 0)) {
     // A caller's error: nothing is seen free (the hits still count).
     out->stats.changed_cells = out->hits.size();
@@ -525,11 +548,19 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   //    A pixel on the robot (pixel_mask) does not stop a cell from being seen free by the other pixels (as a beam of
   //    ray casting that passes a cell beside a link sees it free, whatever the link hides of it: the robot's blind
   //    zone), but it never sees a cell free itself: a cell whose only crossing rays end on the robot stays as it was.
-  //    past_depth_ holds those depths (the min pyramid: robot pixels at their reach).
+  //    past_depth holds those depths (the min pyramid: robot pixels at their reach).
+  //    Pyramids of the smallest and largest of those depths over tiles of 2^L x 2^L pixels; their level 0 (the pixels)
+  //    is past_depth and free_depth.
   const std::size_t pixels = depth.size();
   const bool masked_pixels = pixel_mask.size() == pixels;
-  free_depth_.resize(pixels);
-  past_depth_.resize(pixels);
+  int levels = 1;
+  for (int lw = w, lh = h; lw > 1 || lh > 1; lw = (lw + 1) / 2, lh = (lh + 1) / 2) ++levels;
+  for (auto* pyramid : {&min_depth_, &max_depth_, &changed_max_}) {
+    pyramid->resize(static_cast<std::size_t>(levels));
+    (*pyramid)[0].resize(pixels);
+  }
+  std::vector<float>& free_depth = max_depth_[0];
+  std::vector<float>& past_depth = min_depth_[0];
   if (view->reach.size() != pixels || view->last == 0) {  // a camera new here, or after a clear
     view->reach.resize(pixels);
     for (int v = 0; v < h; ++v) {
@@ -541,40 +572,35 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       }
     }
   }
-  for (std::size_t k = 0; k < pixels; ++k) {
-    const float z = depth[k], reach = view->reach[k];
-    free_depth_[k] = std::isfinite(z) && z > 0.0f ? std::min(z, reach) : 0.0f;
-    past_depth_[k] = masked_pixels && pixel_mask[k] == kPointOnRobot ? reach : free_depth_[k];
-  }
-  // Pyramids of the smallest and largest of those depths over tiles of 2^L x 2^L pixels (level 0: the pixels).
-  auto build = [&](std::vector<std::vector<float>>* pyramid, const std::vector<float>& base, bool smallest) {
-    pyramid->resize(1);
-    (*pyramid)[0] = base;
+  WorkerPool::runParts(pool, pixels, WorkerPool::kCheapPart, [&](std::size_t begin, std::size_t end, int) {
+    for (std::size_t k = begin; k < end; ++k) {
+      const float z = depth[k], reach = view->reach[k];
+      free_depth[k] = std::isfinite(z) && z > 0.0f ? std::min(z, reach) : 0.0f;
+      past_depth[k] = masked_pixels && pixel_mask[k] == kPointOnRobot ? reach : free_depth[k];
+    }
+  });
+  // A pyramid's levels from its level 0: each tile the smallest (largest) of the 2 x 2 below it (clipped at the edges).
+  auto build = [&](std::vector<std::vector<float>>* pyramid, bool smallest) {
     int lw = w, lh = h;
-    while (lw > 1 || lh > 1) {
+    for (std::size_t level = 1; level < pyramid->size(); ++level) {
       const int nw = (lw + 1) / 2, nh = (lh + 1) / 2;
-      const std::vector<float>& f = pyramid->back();
-      std::vector<float> n(static_cast<std::size_t>(nw) * nh);
+      const std::vector<float>& f = (*pyramid)[level - 1];
+      std::vector<float>& n = (*pyramid)[level];
+      n.resize(static_cast<std::size_t>(nw) * nh);
       for (int y = 0; y < nh; ++y) {
+        const float* r0 = &f[static_cast<std::size_t>(2 * y) * lw];
+        const float* r1 = &f[static_cast<std::size_t>(std::min(2 * y + 1, lh - 1)) * lw];
+        float* out = &n[static_cast<std::size_t>(y) * nw];
         for (int x = 0; x < nw; ++x) {
-          float m = f[static_cast<std::size_t>(2 * y) * lw + 2 * x];
-          for (int dy = 0; dy < 2; ++dy) {
-            for (int dx = 0; dx < 2; ++dx) {
-              const int yy = std::min(2 * y + dy, lh - 1), xx = std::min(2 * x + dx, lw - 1);
-              const float q = f[static_cast<std::size_t>(yy) * lw + xx];
-              m = smallest ? std::min(m, q) : std::max(m, q);
-            }
-          }
-          n[static_cast<std::size_t>(y) * nw + x] = m;
+          const int x0 = 2 * x, x1 = std::min(2 * x + 1, lw - 1);
+          out[x] = smallest ? std::min(std::min(r0[x0], r0[x1]), std::min(r1[x0], r1[x1]))
+                            : std::max(std::max(r0[x0], r0[x1]), std::max(r1[x0], r1[x1]));
         }
       }
-      pyramid->push_back(std::move(n));
       lw = nw;
       lh = nh;
     }
   };
-  build(&min_depth_, past_depth_, true);
-  build(&max_depth_, free_depth_, false);
   // The smallest (largest) free depth over the pixels [u0, u1] x [v0, v1], from at most 16 tiles of the coarsest level
   // that needs no more: over a superset of the rectangle (smaller, larger: conservative both ways).
   auto over = [&](const std::vector<std::vector<float>>& pyramid, bool smallest, int u0, int u1, int v0, int v1) {
@@ -598,12 +624,25 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // these changed and that view saw none of its cells free, this one sees none either; a block that turned dirty
   // since (block_dirtied_) is looked at again. Skipping a block can only leave cells as they are (no miss is added).
   const std::uint64_t last = options_.skip_unchanged_blocks ? view->last : 0;
-  if (last != 0) {
-    changed_.resize(pixels);
-    for (std::size_t k = 0; k < pixels; ++k) {
-      changed_[k] = free_depth_[k] != view->free_depth[k] || past_depth_[k] != view->past_depth[k] ? 1.0f : 0.0f;
+  // The pyramids, each a task on the pool.
+  auto pyramid = [&](std::size_t task, int) {
+    if (task == 0) {
+      build(&min_depth_, true);
+    } else if (task == 1) {
+      build(&max_depth_, false);
+    } else {
+      std::vector<float>& changed = changed_max_[0];
+      for (std::size_t k = 0; k < pixels; ++k) {
+        changed[k] = free_depth[k] != view->free_depth[k] || past_depth[k] != view->past_depth[k] ? 1.0f : 0.0f;
+      }
+      build(&changed_max_, false);
     }
-    build(&changed_max_, changed_, false);
+  };
+  const std::size_t pyramids = last != 0 ? 3 : 2;
+  if (pool != nullptr) {
+    pool->run(pyramids, pyramid);
+  } else {
+    for (std::size_t t = 0; t < pyramids; ++t) pyramid(t, 0);
   }
   // Each pixel column's and row's ray direction (optical frame, z = 1): x and y.
   ray_x_.resize(static_cast<std::size_t>(w));
@@ -838,8 +877,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   const std::size_t p = static_cast<std::size_t>(v) * w + u;
                   const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
                   if (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm()) {
-                    if (past_depth_[p] < zmax) continue;
-                    crossed = free_depth_[p] >= zmax;
+                    if (past_depth[p] < zmax) continue;
+                    crossed = free_depth[p] >= zmax;
                   }
                 }
                 if (crossed && in_front) {
@@ -857,7 +896,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
                   for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
                     for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
-                      if (free_depth_[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
+                      if (free_depth[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
                       const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
                       double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
                       for (int i = 0; i < 3 && t0 <= t1; ++i) {
@@ -906,8 +945,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   }
   // This view, for the camera's next one.
   view->last = epoch_;
-  view->free_depth.swap(free_depth_);
-  view->past_depth.swap(past_depth_);
+  view->free_depth.swap(free_depth);
+  view->past_depth.swap(past_depth);
   auto keep = [](std::vector<std::uint64_t>* now, std::vector<std::int64_t>* now_listed,
                  std::vector<std::uint64_t>* kept, std::vector<std::int64_t>* kept_listed) {
     for (std::int64_t b : *kept_listed) (*kept)[b] = 0;

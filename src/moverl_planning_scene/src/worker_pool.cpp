@@ -1,5 +1,6 @@
 #include "moverl_planning_scene/worker_pool.h"
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -79,6 +80,19 @@ void WorkerPool::stop() {
 }
 
 WorkerPool::~WorkerPool() { stop(); }
+
+void WorkerPool::runParts(WorkerPool* pool, std::size_t n, std::size_t min_part,
+                          const std::function<void(std::size_t, std::size_t, int)>& part) {
+  const std::size_t parts =
+      pool == nullptr ? 1
+                      : std::min(4 * static_cast<std::size_t>(pool->threads()), n / std::max<std::size_t>(1, min_part));
+  if (parts <= 1) {
+    part(0, n, 0);
+    return;
+  }
+  // Part i: [i n / parts, (i + 1) n / parts), at least floor(n / parts) >= min_part long.
+  pool->run(parts, [&](std::size_t i, int worker) { part(i * n / parts, (i + 1) * n / parts, worker); });
+}
 
 void WorkerPool::run(std::size_t tasks, const std::function<void(std::size_t, int)>& task) {
   if (impl_->running.exchange(true)) throw std::logic_error("WorkerPool::run: one batch at a time");

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <utility>
+#include <vector>
 
 #include <fcl/geometry/bvh/BVH_model.h>
 #include <fcl/geometry/shape/box.h>
@@ -17,6 +19,7 @@
 #include <fcl/narrowphase/collision.h>
 
 #include "fcl_checker_internal.h"
+#include "moverl_planning_scene/worker_pool.h"
 
 namespace moverl_planning_scene {
 namespace {
@@ -168,34 +171,38 @@ double FclCollisionChecker::obstacleRadius(std::size_t i) const { return world_.
 Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { return world_.at(i).pose.translation(); }
 
 void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
-                                                std::vector<std::uint8_t>* mask) const {
+                                                std::vector<std::uint8_t>* mask, WorkerPool* pool) const {
   mask->assign(points.size(), 0);
+  std::vector<std::pair<const WorldObject*, Eigen::Isometry3d>> fixed;  // each static object, and its frame's inverse
   for (const Obstacle& ob : world_) {
-    const WorldObject& o = ob.source;
-    if (o.motion.moving()) continue;
-    const Eigen::Isometry3d inv = o.pose.inverse();
-    const auto& d = o.dimensions;
-    for (std::size_t k = 0; k < points.size(); ++k) {
-      if ((*mask)[k] != 0) continue;
-      const Eigen::Vector3d p = inv * points[k];  // in the object's frame (centred)
-      bool in = false;
-      switch (o.type) {
-        case ShapeType::kBox:
-          in = (p.cwiseAbs() - 0.5 * Eigen::Vector3d(d[0], d[1], d[2])).maxCoeff() <= padding;
-          break;
-        case ShapeType::kSphere:
-          in = p.norm() <= d[0] + padding;
-          break;
-        case ShapeType::kCylinder:
-        case ShapeType::kCone:  // (its bounding cylinder)
-          in = std::fabs(p.z()) <= 0.5 * d[0] + padding && p.head<2>().norm() <= d[1] + padding;
-          break;
-        default:
-          break;
-      }
-      if (in) (*mask)[k] = 1;
-    }
+    if (!ob.source.motion.moving()) fixed.emplace_back(&ob.source, ob.source.pose.inverse());
   }
+  WorkerPool::runParts(pool, points.size(), WorkerPool::kCheapPart, [&](std::size_t begin, std::size_t end, int) {
+    for (const auto& [object, inv] : fixed) {
+      const WorldObject& o = *object;
+      const auto& d = o.dimensions;
+      for (std::size_t k = begin; k < end; ++k) {
+        if ((*mask)[k] != 0) continue;
+        const Eigen::Vector3d p = inv * points[k];  // in the object's frame (centred)
+        bool in = false;
+        switch (o.type) {
+          case ShapeType::kBox:
+            in = (p.cwiseAbs() - 0.5 * Eigen::Vector3d(d[0], d[1], d[2])).maxCoeff() <= padding;
+            break;
+          case ShapeType::kSphere:
+            in = p.norm() <= d[0] + padding;
+            break;
+          case ShapeType::kCylinder:
+          case ShapeType::kCone:  // (its bounding cylinder)
+            in = std::fabs(p.z()) <= 0.5 * d[0] + padding && p.head<2>().norm() <= d[1] + padding;
+            break;
+          default:
+            break;
+        }
+        if (in) (*mask)[k] = 1;
+      }
+    }
+  });
 }
 
 void FclCollisionChecker::staticObjectBoxes(double padding, std::vector<Eigen::AlignedBox3d>* boxes) const {

@@ -8,6 +8,7 @@
 
 #include <unistd.h>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -15,6 +16,7 @@
 #include <random>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include <fcl/geometry/shape/box.h>
 #include <fcl/geometry/shape/capsule.h>
@@ -517,6 +519,68 @@ TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {
     hits += all[k] != 0 && skip[k] == 0;
   }
   EXPECT_GT(hits, points.size() / 20);
+}
+
+// The static filter marks the points within its padding of each static world object (a box as its box grown by the
+// padding along its axes, a cone as its bounding cylinder), never of a moving one; in parts on a pool's threads the
+// mask is the same.
+TEST(StaticFilter, MarksPointsNearTheStaticObjectsAndTheSameOnAPool) {
+  std::unique_ptr<mps::PlanningScene> scene;
+  ASSERT_NO_FATAL_FAILURE(loadPandaScene(&scene));
+  std::string error;
+  auto checker = mps::FclCollisionChecker::create(scene->model(), scene->checker().options(), &error);
+  ASSERT_NE(checker, nullptr) << error;
+  auto shape = [](const std::string& id, mps::ShapeType type, std::vector<double> dims, const Vector3d& at,
+                  double turn) {
+    mps::WorldObject o;
+    o.id = id;
+    o.type = type;
+    o.dimensions = std::move(dims);
+    o.pose.translation() = at;
+    o.pose.linear() = Eigen::AngleAxisd(turn, Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+    return o;
+  };
+  std::vector<mps::WorldObject> world = {
+      shape("box", mps::ShapeType::kBox, {0.4, 0.2, 0.1}, Vector3d(0.5, 0.0, 0.1), 0.5),
+      shape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.4, 0.3), 0.0),
+      shape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.4, 0.2), 0.6),
+      shape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.2, 0.4, 0.25), -0.9),
+      shape("swinging", mps::ShapeType::kSphere, {0.1}, Vector3d(0.0, 0.0, 0.6), 0.0),
+  };
+  world.back().motion.type = mps::ObstacleMotion::Type::kOscillate;
+  world.back().motion.axis = Vector3d::UnitY();
+  world.back().motion.amplitude = 0.3;
+  world.back().motion.period = 4.0;
+  ASSERT_TRUE(checker->setWorld(world, &error)) << error;
+  const double pad = 0.01;
+  // Each static object's centre, a point just within its padding and one just beyond (along its local x: the box's
+  // face, the ball's surface, the post's and the cone's side), the moving ball's centre; then many random points.
+  std::vector<Vector3d> points;
+  std::vector<int> expected;
+  const double reach_x[4] = {0.2, 0.08, 0.05, 0.1};
+  for (int i = 0; i < 4; ++i) {
+    const Eigen::Isometry3d& pose = world[i].pose;
+    for (const auto& [x, in] : {std::make_pair(0.0, 1), std::make_pair(reach_x[i] + pad - 1e-4, 1),
+                                std::make_pair(reach_x[i] + pad + 1e-4, 0)}) {
+      points.push_back(pose * Vector3d(x, 0.0, 0.0));
+      expected.push_back(in);
+    }
+  }
+  points.push_back(world.back().pose.translation());
+  expected.push_back(0);
+  const std::size_t known = points.size();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> x(-0.1, 0.9), y(-0.6, 0.6), z(-0.1, 0.7);
+  for (int k = 0; k < 100000; ++k) points.emplace_back(x(rng), y(rng), z(rng));
+  std::vector<std::uint8_t> alone, on_pool;
+  checker->staticObjectPointMask(points, pad, &alone);
+  mps::WorkerPool pool(3);
+  checker->staticObjectPointMask(points, pad, &on_pool, &pool);
+  for (std::size_t k = 0; k < known; ++k) EXPECT_EQ(alone[k], expected[k]) << "point " << k;
+  EXPECT_EQ(on_pool, alone);
+  const auto marked = std::count(alone.begin() + known, alone.end(), 1);
+  EXPECT_GT(marked, 1000);  // the random points do meet the objects
+  EXPECT_LT(marked, 50000);
 }
 
 // checkPath leaves out, for a whole segment, the shape pairs a plane at its midpoint separates by more than they can

@@ -337,7 +337,7 @@ struct SceneView {
   bool ray_cast = false;
 };
 
-SceneView sceneView(int n) {
+SceneView sceneView(int n, int scale = 1) {
   const Eigen::Vector3d fixed_ball(1.5, -0.3, 0.2);
   SceneView s;
   const int which = n % 4;
@@ -345,17 +345,28 @@ SceneView sceneView(int n) {
                          : which == 1 ? Eigen::Vector3d(0.0, 0.4, 0.2)
                          : which == 2 ? Eigen::Vector3d(0.0, -0.3 + 0.02 * (n / 15), 0.0)
                                       : Eigen::Vector3d(0.0, -0.5 + 0.01 * n, 0.1));
-  s.camera = kCamera;
-  s.camera.fx += 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
+  s.camera = kCamera;  // scale times as many pixels each way, the same field of view
+  s.camera.width *= scale;
+  s.camera.height *= scale;
+  s.camera.fx = s.camera.fx * scale + 1e-9 * (n % 5);  // a fixed camera's fits differ in the last digits
+  s.camera.fy *= scale;
+  s.camera.cx = (s.camera.cx + 0.5) * scale - 0.5;
+  s.camera.cy = (s.camera.cy + 0.5) * scale - 0.5;
   const double t = 0.15 * n;
   const Eigen::Vector3d walking(1.1, 0.35 * std::sin(t), 0.0);
   const Eigen::Vector3d a = s.pose.inverse() * walking, b = s.pose.inverse() * fixed_ball;
   const bool robot_here = which == 0;
   const int robot_u0 = 10 + (n / 6) % 20;  // robot pixels (a link in front) that move every other view of A
-  auto robot = [&](int u, int v) { return robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35; };
+  auto robot = [&](int u, int v) {
+    u /= scale;
+    v /= scale;
+    return robot_here && u >= robot_u0 && u < robot_u0 + 12 && v > 35;
+  };
   auto depth = [&](int u, int v) {
     if (robot(u, v)) return 0.7;
-    if (which == 1 && (n / 9) % 2 == 1 && u > 60 && v < 15) return std::numeric_limits<double>::quiet_NaN();
+    if (which == 1 && (n / 9) % 2 == 1 && u / scale > 60 && v / scale < 15) {
+      return std::numeric_limits<double>::quiet_NaN();
+    }
     return std::min(sphereOrWall(s.camera, u, v, a, 0.12, 2.0), sphereOrWall(s.camera, u, v, b, 0.1, 2.0));
   };
   const auto xyz = image(s.camera, depth);
@@ -442,14 +453,16 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
 TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
   // The projective update's superblocks shared out between a pool's threads: the same hits and misses in the same
   // order, the same counts, as on the calling thread alone, view after view (the views' records too: a block a worker
-  // left wrongly would show in a later view), with skipping on and off.
+  // left wrongly would show in a later view), with skipping on and off. On images large enough (scale 4: 320 x 240),
+  // the points' end cells and the pixels' depths are worked out in parts on the pool too.
   mps::WorkerPool two(2), three(3);
   std::size_t misses = 0, known_free = 0;
-  for (bool skip : {true, false}) {
+  for (const auto& [skip, scale] : {std::make_pair(true, 1), std::make_pair(false, 1), std::make_pair(true, 4)}) {
     auto alone = makeMap(true, skip), on_two = makeMap(true, skip), on_three = makeMap(true, skip);
     ASSERT_TRUE(alone && on_two && on_three);
-    for (int n = 0; n < 80; ++n) {
-      const SceneView s = sceneView(n);
+    for (int n = 0; n < (scale == 1 ? 80 : 24); ++n) {
+      const SceneView s = sceneView(n, scale);
+      ASSERT_EQ(s.points.size() >= 2 * mps::WorkerPool::kCheapPart, scale > 1);
       mps::MapUpdate ua, u2, u3;
       integrate(alone.get(), s, &ua);
       integrate(on_two.get(), s, &u2, &two);
@@ -471,6 +484,10 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
         EXPECT_EQ(u->stats.free_cells, ua.stats.free_cells);
         EXPECT_EQ(u->stats.reused_blocks, ua.stats.reused_blocks);
         EXPECT_EQ(u->stats.changed_cells, ua.stats.changed_cells);
+        EXPECT_EQ(u->stats.hit_cells, ua.stats.hit_cells);
+        EXPECT_EQ(u->stats.robot, ua.stats.robot);
+        EXPECT_EQ(u->stats.beyond_range, ua.stats.beyond_range);
+        EXPECT_EQ(u->stats.invalid, ua.stats.invalid);
       }
       misses += ua.misses.size();
       known_free += ua.stats.known_free;

@@ -1,16 +1,19 @@
 /**
  * \file test_worker_pool.cpp
  * \brief WorkerPool without a roscore: every task once, worker ids a task's scratch can trust, a task's exception
- *        back to the caller, one batch at a time.
+ *        back to the caller, one batch at a time; runParts' parts.
  */
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <future>
 #include <mutex>
 #include <stdexcept>
+#include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "moverl_planning_scene/worker_pool.h"
@@ -39,6 +42,42 @@ TEST(WorkerPool, RunsEveryTaskOnceWithAWorkerOfItsOwn) {
         for (std::size_t t = 0; t < tasks; ++t) ASSERT_EQ(runs[t].load(), 1) << "task " << t << ", " << threads;
         EXPECT_EQ(overlaps.load(), 0);
         EXPECT_EQ(bad_worker.load(), 0);
+      }
+    }
+  }
+}
+
+TEST(WorkerPool, RunPartsCoversTheRangeOnceInPartsOfAtLeastTheSmallest) {
+  mps::WorkerPool two(2), three(3);
+  for (mps::WorkerPool* pool : {static_cast<mps::WorkerPool*>(nullptr), &two, &three}) {
+    const std::size_t threads = pool == nullptr ? 1 : static_cast<std::size_t>(pool->threads());
+    for (std::size_t n : {0u, 1u, 999u, 16383u, 16384u, 40000u, 100003u}) {
+      for (std::size_t min_part : {0u, 1u, 1000u, 16384u}) {
+        std::mutex m;
+        std::vector<std::pair<std::size_t, std::size_t>> parts;
+        mps::WorkerPool::runParts(pool, n, min_part, [&](std::size_t begin, std::size_t end, int worker) {
+          std::lock_guard<std::mutex> lock(m);
+          EXPECT_GE(worker, 0);
+          EXPECT_LT(static_cast<std::size_t>(worker), threads);
+          parts.emplace_back(begin, end);
+        });
+        std::sort(parts.begin(), parts.end());
+        const std::string what = std::to_string(n) + " in parts of " + std::to_string(min_part) + ", " +
+                                 std::to_string(threads) + " threads";
+        std::size_t at = 0;
+        for (const auto& [begin, end] : parts) {
+          EXPECT_EQ(begin, at) << what;
+          EXPECT_LE(begin, end) << what;
+          if (parts.size() > 1) {
+            EXPECT_GE(end - begin, std::max<std::size_t>(1, min_part)) << what;
+          }
+          at = end;
+        }
+        EXPECT_EQ(at, n) << what;
+        EXPECT_LE(parts.size(), 4 * threads) << what;
+        // Shared whenever there are two parts' worth: a pool of one or none runs it whole on the caller.
+        const bool shared = threads > 1 && n >= 2 * std::max<std::size_t>(1, min_part);
+        EXPECT_EQ(parts.size() > 1, shared) << what;
       }
     }
   }

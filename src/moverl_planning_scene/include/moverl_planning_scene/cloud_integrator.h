@@ -92,11 +92,12 @@ class CloudIntegrator {
   const FclCollisionChecker* checker_;
   std::mutex* world_mutex_;
   CloudIntegratorOptions options_;
-  std::unique_ptr<WorkerPool> pool_;  ///< options_.threads: the self filter's points and the projective update
+  std::unique_ptr<WorkerPool> pool_;  ///< options_.threads: the points, their filters and the projective update
   PinholeCamera camera_;
   std::vector<float> sensor_xyz_, depth_;
   std::vector<Eigen::Vector3d> points_;
-  std::vector<std::uint32_t> pixel_of_;  ///< the pixel of each of points_
+  std::vector<std::uint32_t> pixel_of_;   ///< the pixel of each of points_
+  std::vector<std::uint8_t> has_return_;  ///< per pixel: 1 where its point is finite
   std::vector<std::uint8_t> mask_, mask_more_, pixel_mask_;
   /// Unknown-is-occupied: turns free in *update the unobserved cells that reach into the robot's padding (in the
   /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it

@@ -126,8 +126,9 @@ class FclCollisionChecker : public CollisionChecker {
                       WorkerPool* pool = nullptr) const;
   /// \brief mask[k] = 1 when points[k] (base frame) lies within `padding` of a static world object (no motion; cones
   ///        as their bounding cylinder). Reads the world: callers serialize it with setWorld.
+  /// \param pool (optional) parts of the points tested on its threads at once (the same mask).
   void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
-                             std::vector<std::uint8_t>* mask) const;
+                             std::vector<std::uint8_t>* mask, WorkerPool* pool = nullptr) const;
   /// \brief Axis-aligned boxes (base frame) around the bounding sphere of each robot collision shape in configuration
   ///        q, grown by `padding`: where robotPointMask can return 1.
   void robotBoundingBoxes(const double* q, double padding, std::vector<Eigen::AlignedBox3d>* boxes) const;

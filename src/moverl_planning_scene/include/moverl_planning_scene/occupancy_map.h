@@ -244,10 +244,12 @@ class OccupancyMap {
   }
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
-  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, order_flags_) and its
-  ///        hits (hit_, out->hits); clears the seen_ marks and out.
+  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, order_flags_; with
+  ///        centroids, the sums and counts of their points: order_end_, order_count_) and its hits (hit_, out->hits);
+  ///        clears the seen_ marks and out. The points' cells are found in parts on the pool (optional; the same
+  ///        result).
   void collectEndCells(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
-                       const Eigen::Vector3d& origin, MapUpdate* out);
+                       const Eigen::Vector3d& origin, MapUpdate* out, bool centroids, WorkerPool* pool);
   /// collectEndCells' table: the slot of cell c (where it is, or the empty one where it goes), and a table twice as
   ///        large (the cells of order_ kept).
   std::size_t slot(std::int64_t c) const;
@@ -272,6 +274,8 @@ class OccupancyMap {
   std::vector<std::uint8_t> order_flags_;   ///< computeUpdate's scratch: the flags of the points ending in each
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
+  std::vector<std::int32_t> point_cell_;    ///< collectEndCells' scratch: each point's end cell (-1: outside)
+  std::vector<std::uint8_t> point_flags_;   ///< ... and its flags
   /// computeUpdate's scratch: the end cells' index in order_, an open-addressing table keyed by cell id (-1: empty),
   /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many). Key and index
   /// side by side in 8 bytes (the map has fewer than 2^31 cells): a look-up touches one cache line, and a 160x120
@@ -291,9 +295,9 @@ class OccupancyMap {
   std::vector<std::uint8_t> block_count_;
   std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)
   std::vector<std::uint16_t> super_dirty_;  ///< per superblock: the same
-  std::vector<float> free_depth_;           ///< computeUpdateProjective's scratch: each pixel's free depth
-  std::vector<float> past_depth_;           ///< the same, robot pixels at their reach (they hide nothing beside)
-  std::vector<std::vector<float>> min_depth_, max_depth_;  ///< its pyramids of those depths
+  /// computeUpdateProjective's scratch: pyramids of each pixel's free depth (max_depth_, level 0: the free depths) and
+  /// of the same with robot pixels at their reach (min_depth_: they hide nothing beside)
+  std::vector<std::vector<float>> min_depth_, max_depth_;
   std::vector<std::uint16_t> super_count_;
   // The same counts for the cells seen occupied only (observed and at or above the threshold: CellClass::kSeen).
   std::vector<std::uint8_t> seen_block_count_;
@@ -313,8 +317,8 @@ class OccupancyMap {
   std::vector<std::unique_ptr<View>> views_;
   std::vector<std::uint64_t> end_hash_, super_end_hash_;
   std::vector<std::int64_t> end_blocks_, end_supers_;
-  std::vector<float> changed_;                   ///< per pixel: 1 where the depths differ from the camera's last view
-  std::vector<std::vector<float>> changed_max_;  ///< its max pyramid
+  /// per pixel: 1 where the depths differ from the camera's last view (level 0), and its max pyramid
+  std::vector<std::vector<float>> changed_max_;
   // computeUpdateProjective's tasks (the superblocks not all clamped free), its workers' scratch, each task's misses.
   std::vector<double> ray_x_, ray_y_;  ///< its camera's ray direction per pixel column and row (z = 1)
   std::vector<std::int64_t> tasks_;

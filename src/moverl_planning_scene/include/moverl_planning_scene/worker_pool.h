@@ -26,12 +26,22 @@ class WorkerPool {
   WorkerPool& operator=(const WorkerPool&) = delete;
 
   int threads() const { return threads_; }
+  /// runParts' smallest part for a loop of a few arithmetic operations per element (a cloud's points, pixels).
+  static constexpr std::size_t kCheapPart = 16384;
   /// \brief Run task(t, worker) for every t in [0, tasks), each exactly once, handed out in order one at a time to
   ///        whichever thread is free; returns when every started task has returned. `worker` is in [0, threads()), the
   ///        caller's 0, and no two tasks run at once with the same worker (per-worker scratch needs no lock). When a
   ///        task throws, no further task starts and the first exception is rethrown here. One batch at a time: calls
   ///        from several threads at once are refused (std::logic_error).
   void run(std::size_t tasks, const std::function<void(std::size_t task, int worker)>& task);
+
+  /// \brief Run part(begin, end, worker) over consecutive parts of [0, n) that cover it once: up to 4 parts per thread
+  ///        (the work of a cloud's points bunches in a part of the image) of at least min_part each (the elements
+  ///        whose work is worth a thread's wake-up): part(0, n, 0) on the caller when that leaves one part, or with a
+  ///        null pool. A part's position is [begin, end), not the worker: results kept per part and joined in order
+  ///        do not depend on the threads.
+  static void runParts(WorkerPool* pool, std::size_t n, std::size_t min_part,
+                       const std::function<void(std::size_t begin, std::size_t end, int worker)>& part);
 
  private:
   struct Impl;

@@ -521,6 +521,18 @@ TEST(SelfFilter, SkippedPointsAreLeftOutAndTheOthersAnsweredAsBefore) {
   EXPECT_GT(hits, points.size() / 20);
 }
 
+/// A world object of `type` and `dims` at `at`, turned by `turn` rad about (1, 1, 0).
+mps::WorldObject turnedShape(const std::string& id, mps::ShapeType type, std::vector<double> dims, const Vector3d& at,
+                             double turn) {
+  mps::WorldObject o;
+  o.id = id;
+  o.type = type;
+  o.dimensions = std::move(dims);
+  o.pose.translation() = at;
+  o.pose.linear() = Eigen::AngleAxisd(turn, Vector3d(1, 1, 0).normalized()).toRotationMatrix();
+  return o;
+}
+
 // The static filter marks the points within its padding of each static world object (a box as its box grown by the
 // padding along its axes, a cone as its bounding cylinder), never of a moving one; in parts on a pool's threads the
 // mask is the same.
@@ -530,22 +542,12 @@ TEST(StaticFilter, MarksPointsNearTheStaticObjectsAndTheSameOnAPool) {
   std::string error;
   auto checker = mps::FclCollisionChecker::create(scene->model(), scene->checker().options(), &error);
   ASSERT_NE(checker, nullptr) << error;
-  auto shape = [](const std::string& id, mps::ShapeType type, std::vector<double> dims, const Vector3d& at,
-                  double turn) {
-    mps::WorldObject o;
-    o.id = id;
-    o.type = type;
-    o.dimensions = std::move(dims);
-    o.pose.translation() = at;
-    o.pose.linear() = Eigen::AngleAxisd(turn, Vector3d(1, 1, 0).normalized()).toRotationMatrix();
-    return o;
-  };
   std::vector<mps::WorldObject> world = {
-      shape("box", mps::ShapeType::kBox, {0.4, 0.2, 0.1}, Vector3d(0.5, 0.0, 0.1), 0.5),
-      shape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.4, 0.3), 0.0),
-      shape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.4, 0.2), 0.6),
-      shape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.2, 0.4, 0.25), -0.9),
-      shape("swinging", mps::ShapeType::kSphere, {0.1}, Vector3d(0.0, 0.0, 0.6), 0.0),
+      turnedShape("box", mps::ShapeType::kBox, {0.4, 0.2, 0.1}, Vector3d(0.5, 0.0, 0.1), 0.5),
+      turnedShape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.4, 0.3), 0.0),
+      turnedShape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.4, 0.2), 0.6),
+      turnedShape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.2, 0.4, 0.25), -0.9),
+      turnedShape("swinging", mps::ShapeType::kSphere, {0.1}, Vector3d(0.0, 0.0, 0.6), 0.0),
   };
   world.back().motion.type = mps::ObstacleMotion::Type::kOscillate;
   world.back().motion.axis = Vector3d::UnitY();
@@ -606,23 +608,13 @@ void expectCullingChangesNoAnswer(const mps::RobotModel& model, mps::FclCheckerO
   options.cull_path_pairs = false;
   auto every = mps::FclCollisionChecker::create(model, options, &error);
   ASSERT_NE(every, nullptr) << error;
-  auto shape = [](const std::string& id, mps::ShapeType type, std::vector<double> dims, const Vector3d& at,
-                  double turn) {
-    mps::WorldObject o;
-    o.id = id;
-    o.type = type;
-    o.dimensions = std::move(dims);
-    o.pose.translation() = at;
-    o.pose.linear() = Eigen::AngleAxisd(turn, Vector3d(1, 1, 0).normalized()).toRotationMatrix();
-    return o;
-  };
   std::vector<mps::WorldObject> world = {
       mps::panda::box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015),
       mps::panda::box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45),
-      shape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.25, 0.35), 0.0),
-      shape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.3, 0.2), 0.6),
-      shape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.25, 0.4, 0.25), -0.9),
-      shape("swinging", mps::ShapeType::kSphere, {0.06}, Vector3d(0.3, 0.0, 0.6), 0.0),
+      turnedShape("ball", mps::ShapeType::kSphere, {0.08}, Vector3d(0.5, 0.25, 0.35), 0.0),
+      turnedShape("post", mps::ShapeType::kCylinder, {0.3, 0.05}, Vector3d(0.4, -0.3, 0.2), 0.6),
+      turnedShape("cone", mps::ShapeType::kCone, {0.3, 0.1}, Vector3d(0.25, 0.4, 0.25), -0.9),
+      turnedShape("swinging", mps::ShapeType::kSphere, {0.06}, Vector3d(0.3, 0.0, 0.6), 0.0),
   };
   world.back().motion.type = mps::ObstacleMotion::Type::kOscillate;
   world.back().motion.axis = Vector3d::UnitY();

@@ -80,6 +80,19 @@ struct Footprint {
 constexpr double kSameCameraPx = 1e-4, kSamePose = 1e-9;
 constexpr std::size_t kMaxViews = 8;
 
+/// A cell as a camera sees it, from its pose and intrinsics alone: what the projective update projects for a cell,
+/// kept per block for a camera's next views (each filled the first time a view needs it). nearest: the pixel nearest
+/// the projection of the cell's centre, as 2 * index + 1 when its ray passes within the cell's inscribed sphere (it
+/// surely crosses the cell), 2 * index otherwise, -1 when the centre projects outside the image. u0, u1, v0, v1: the
+/// cell's footprint rectangle (u0 > u1: nothing to see, the footprint's state 1 or 2).
+struct CellProjection {
+  static constexpr std::int32_t kNotYet = std::numeric_limits<std::int32_t>::min();
+  static constexpr std::int16_t kNotYet16 = std::numeric_limits<std::int16_t>::min();
+  std::int32_t nearest = kNotYet;
+  std::int16_t u0 = kNotYet16, u1 = 0, v0 = 0, v1 = 0;
+};
+constexpr int kBlockCells = 1 << (3 * kBlockShift);
+
 bool sameCamera(const PinholeCamera& a, const PinholeCamera& b) {
   if (a.width != b.width || a.height != b.height) return false;
   // The largest difference of the two models' pixel coordinates over the image's rays.
@@ -202,6 +215,12 @@ struct OccupancyMap::View {
   std::vector<std::uint64_t> super_all_none;            ///< ... of a view that saw no cell free in its blocks
   std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
   std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
+  /// Per block, its cells' projections (kBlockCells each, in the block's x, y, z order), valid where cells_id equals
+  /// id: allocated when a view of this camera first evaluates the block, and only when skip_unchanged_blocks (a map
+  /// that evaluates every block computes every cell's projection afresh: the tests that compare the two compare
+  /// these too).
+  std::vector<std::unique_ptr<CellProjection[]>> cells;
+  std::vector<std::uint64_t> cells_id;
 };
 
 /// Cache-line aligned: the workers' counters must not share a line.
@@ -209,6 +228,7 @@ struct alignas(64) OccupancyMap::Scratch {
   std::vector<std::uint64_t> misses;
   std::size_t free_cells = 0, reused = 0;
   Footprint f;
+  CellProjection cells[kBlockCells];  ///< a block's cell projections when the view keeps none
 };
 
 OccupancyMap::~OccupancyMap() = default;
@@ -478,7 +498,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const int w = fitted.width, h = fitted.height;
   // 1-2. End cells and hits, as computeUpdate's.
   collectEndCells(points, robot_mask, fitted_pose.translation(), out, false, pool);
-  if (w <= 0 || h <= 0 || depth.size() != static_cast<std::size_t>(w) * h || !(fitted.fx > 0) || !(fitted.fy > 0)) {
+  if (w <= 0 || h <= 0 || w > kMaxPinholeSide || h > kMaxPinholeSide ||
+      depth.size() != static_cast<std::size_t>(w) * h || !(fitted.fx > 0) || !(fitted.fy > 0)) {
     // A caller's error: nothing is seen free (the hits still count).
     out->stats.changed_cells = out->hits.size();
     return;
@@ -503,6 +524,10 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       view->super_none.assign(supers, 0);
       view->super_all_none.assign(supers, 0);
       view->super_end_hash.assign(supers, 0);
+      if (options_.skip_unchanged_blocks) {
+        view->cells.resize(blocks);
+        view->cells_id.assign(blocks, 0);
+      }
     } else {
       view = std::min_element(views_.begin(), views_.end(), [](const auto& a, const auto& b) {
                return a->last < b->last;
@@ -851,12 +876,24 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
           // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
           const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
+          // Its cells' projections: the camera's, kept from its earlier views, or afresh.
+          CellProjection* proj = sc.cells;
+          if (!view->cells.empty()) {
+            std::unique_ptr<CellProjection[]>& kept = view->cells[static_cast<std::size_t>(bi)];
+            if (kept == nullptr) kept.reset(new CellProjection[kBlockCells]);
+            proj = kept.get();
+          }
+          if (proj == sc.cells || view->cells_id[static_cast<std::size_t>(bi)] != view->id) {
+            std::fill(proj, proj + kBlockCells, CellProjection());
+            if (proj != sc.cells) view->cells_id[static_cast<std::size_t>(bi)] = view->id;
+          }
           for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
             for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
               const std::int64_t row = (at[0] * size_[1] + at[1]) * size_[2];
               Eigen::Vector3d c =
                   c0 + static_cast<double>(at[0] - ba[0]) * axis[0] + static_cast<double>(at[1] - ba[1]) * axis[1];
-              for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2]) {
+              CellProjection* q = proj + ((((at[0] - ba[0]) << kBlockShift) + (at[1] - ba[1])) << kBlockShift);
+              for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2], ++q) {
                 const std::int64_t k = row + at[2];
                 if (testBit(hit_, k) || seen(k) || testBit(clamped_, k)) continue;
                 // Seen free: some pixel's ray passes through the cell and sees past all of it (a cell between the rays
@@ -866,29 +903,47 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                 // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
                 // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
                 if (!(c.z() > half_depth)) continue;
-                const double zmax = c.z() + half_depth, inv_z = 1.0 / c.z();
-                const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
-                const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
-                bool crossed = false;  // a pixel's ray crosses the cell and sees past it
-                if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
-                  // The pixel nearest the centre's projection: when its ray surely crosses the cell (it passes
-                  // within the inscribed sphere), a surface it sees short of the far side settles the cell.
-                  const int u = static_cast<int>(uf), v = static_cast<int>(vf);
-                  const std::size_t p = static_cast<std::size_t>(v) * w + u;
-                  const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
-                  if (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm()) {
-                    if (past_depth[p] < zmax) continue;
-                    crossed = free_depth[p] >= zmax;
+                const double zmax = c.z() + half_depth;
+                if (q->nearest == CellProjection::kNotYet) {
+                  const double inv_z = 1.0 / c.z();
+                  const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
+                  const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
+                  q->nearest = -1;
+                  if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
+                    const int u = static_cast<int>(uf), v = static_cast<int>(vf);
+                    const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
+                    q->nearest = 2 * (v * w + u) + (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm() ? 1 : 0);
                   }
+                }
+                bool crossed = false;  // a pixel's ray crosses the cell and sees past it
+                if (q->nearest >= 0 && (q->nearest & 1) != 0) {
+                  // The pixel nearest the centre's projection surely crosses the cell (its ray passes within the
+                  // inscribed sphere): a surface it sees short of the far side settles the cell.
+                  const std::size_t p = static_cast<std::size_t>(q->nearest >> 1);
+                  if (past_depth[p] < zmax) continue;
+                  crossed = free_depth[p] >= zmax;
                 }
                 if (crossed && in_front) {
                   see(k);
                   continue;
                 }
-                cellFootprint(c, &f);
-                if (f.state != 0 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < f.zmax)) {
-                  continue;
+                if (q->u0 == CellProjection::kNotYet16) {
+                  cellFootprint(c, &f);
+                  if (f.state == 0) {
+                    q->u0 = static_cast<std::int16_t>(f.u0);
+                    q->u1 = static_cast<std::int16_t>(f.u1);
+                    q->v0 = static_cast<std::int16_t>(f.v0);
+                    q->v1 = static_cast<std::int16_t>(f.v1);
+                  } else {
+                    q->u0 = 1;
+                    q->u1 = 0;
+                  }
                 }
+                f.u0 = q->u0;
+                f.u1 = q->u1;
+                f.v0 = q->v0;
+                f.v1 = q->v1;
+                if (f.u0 > f.u1 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < zmax)) continue;
                 if (!crossed) {
                   // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
                   // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
@@ -896,7 +951,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
                   for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
                     for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
-                      if (free_depth[static_cast<std::size_t>(v) * w + u] < f.zmax) continue;
+                      if (free_depth[static_cast<std::size_t>(v) * w + u] < zmax) continue;
                       const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
                       double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
                       for (int i = 0; i < 3 && t0 <= t1; ++i) {

@@ -14,6 +14,9 @@ bool fitPinhole(const float* xyz, int width, int height, int stride, double tole
   };
   if (residual != nullptr) *residual = std::numeric_limits<double>::infinity();
   if (width < 2 || height < 2) return fail("an organized cloud of at least 2 x 2 points is needed");
+  if (width > kMaxPinholeSide || height > kMaxPinholeSide) {
+    return fail("an organized cloud of at most " + std::to_string(kMaxPinholeSide) + " points a side is fitted");
+  }
   stride = std::max(1, stride);
   // Least squares per axis: x / z = a u + b (a = 1 / fx, b = -cx / fx); likewise y / z against v.
   double n = 0, su = 0, suu = 0, sx = 0, sux = 0, sv = 0, svv = 0, sy = 0, svy = 0;

@@ -130,6 +130,11 @@ TEST(Pinhole, RefusesWhatIsNotAPinholeImage) {
   std::vector<float> none(3 * 80 * 60, std::numeric_limits<float>::quiet_NaN());
   EXPECT_FALSE(mps::fitPinhole(none.data(), 80, 60, 1, 0.05, &fit, &residual, &why));
   EXPECT_NE(why.find("too few"), std::string::npos) << why;
+  // An image wider than the projective update keeps pixel rectangles for (a pinhole image otherwise).
+  const mps::PinholeCamera wide{mps::kMaxPinholeSide + 1, 2, 1000.0, 1000.0, mps::kMaxPinholeSide / 2.0, 0.5};
+  EXPECT_FALSE(mps::fitPinhole(image(wide, [](int, int) { return 1.0; }).data(), wide.width, wide.height, 1, 0.05, &fit,
+                               &residual, &why));
+  EXPECT_NE(why.find(std::to_string(mps::kMaxPinholeSide)), std::string::npos) << why;
 }
 
 TEST(Projective, SeesFreeWhatLiesBeforeAWallAndNothingBehindIt) {

@@ -41,8 +41,10 @@
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
  * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
  * projective update remembers of each camera's last view (skip_unchanged_blocks: about 64 bytes per block, 1 per
- * cell, for each of up to 8 cameras; a camera that moves takes a new record at each pose, the least recently seen
- * one making way). An update costs its beams (projective: the blocks whose inputs changed) and the cells it changes
+ * cell, and 12 bytes per cell of the blocks its views evaluated, each cell's projection (its nearest pixel and its
+ * footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
+ * moves takes a new record at each pose, the least recently seen one making way). An update costs its beams
+ * (projective: the blocks whose inputs changed) and the cells it changes
  * (`rosrun moverl_planning_scene map_benchmark`).
  */
 #pragma once
@@ -86,7 +88,9 @@ struct OccupancyMapOptions {
   /// as they were, never see one free). A cloud from within 1e-4 px and 1e-9 of a remembered camera's intrinsics and
   /// pose is that camera's, whose values are used, with this on or off (fitPinhole's fits of a fixed camera differ by
   /// about 1e-7 px; its tolerance is kPinholeTolerancePx, 0.05 px).
-  /// Not a tunable (the updates do not depend on it): false evaluates every block, for the tests that compare the two.
+  /// The cells' projections into a remembered camera's image are kept between its views too (this on only).
+  /// Not a tunable (the updates do not depend on it): false evaluates every block and projects every cell afresh, for
+  /// the tests that compare the two.
   bool skip_unchanged_blocks = true;
 };
 

@@ -26,11 +26,14 @@ struct PinholeCamera {
   double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
 };
 
+/// \brief The widest and tallest image fitPinhole fits (the projective update keeps pixel rectangles in 16 bits).
+constexpr int kMaxPinholeSide = 32767;
+
 /// \brief Fits the pinhole model of an organized cloud: xyz holds width * height points (x, y, z, row-major, optical
 ///        frame; non-finite or z <= 0: no return, skipped). Every `stride`-th row and column take part (1: all).
-///        False with *why when too few points fall on distinct rows and columns, or when any point (all of them are
-///        checked) lies farther than `tolerance` pixels from its pixel's fitted ray (*residual: the largest distance
-///        over the threshold, pixels; 0 when none is).
+///        False with *why for an image wider or taller than kMaxPinholeSide, when too few points fall on distinct rows
+///        and columns, or when any point (all of them are checked) lies farther than `tolerance` pixels from its
+///        pixel's fitted ray (*residual: the largest distance over the threshold, pixels; 0 when none is).
 bool fitPinhole(const float* xyz, int width, int height, int stride, double tolerance, PinholeCamera* out,
                 double* residual, std::string* why);
 

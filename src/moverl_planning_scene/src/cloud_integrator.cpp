@@ -136,16 +136,20 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
 }
 
 void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update) {
-  // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free.
+  // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free. One mask
+  // for the cells of all the boxes (a mask places every shape first; boxes that overlap may list a cell twice).
   auto turn_free = [&](const auto& mask) {
-    free_keys_.clear();
+    cell_centers_.clear();
+    cell_keys_.clear();
     for (const Eigen::AlignedBox3d& box : boxes_) {
-      map_->unobservedCells(box, &cell_centers_, &cell_keys_);
-      if (cell_centers_.empty()) continue;
-      mask(cell_centers_, &mask_more_);
-      for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
-        if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
-      }
+      map_->unobservedCells(box, &box_centers_, &box_keys_);
+      cell_centers_.insert(cell_centers_.end(), box_centers_.begin(), box_centers_.end());
+      cell_keys_.insert(cell_keys_.end(), box_keys_.begin(), box_keys_.end());
+    }
+    free_keys_.clear();
+    if (!cell_centers_.empty()) mask(cell_centers_, &mask_more_);
+    for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
+      if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
     }
     map_->addKnownFree(free_keys_, update);
   };
@@ -158,7 +162,7 @@ void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& confi
   for (const auto& q : configurations) {
     checker_->robotBoundingBoxes(q.data(), robot_pad, &boxes_);
     turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      checker_->robotPointMask(q.data(), pts, robot_pad, m);
+      checker_->robotPointMask(q.data(), pts, robot_pad, m, nullptr, pool_.get());
     });
   }
   if (options_.filter_static && static_known_free_) {
@@ -167,7 +171,7 @@ void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& confi
     if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);  // the world
     checker_->staticObjectBoxes(static_pad, &boxes_);
     turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      checker_->staticObjectPointMask(pts, static_pad, m);
+      checker_->staticObjectPointMask(pts, static_pad, m, pool_.get());
     });
   }
 }

@@ -1157,13 +1157,19 @@ void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<E
                                    static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) - offset_[i]);
     if (lo[i] > hi[i]) return;
   }
+  // Each row of cells along z a word of observed_ at a time: a robot's boxes are mostly observed (every cloud asks).
   for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
     for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
-      for (std::int64_t k = lo[2]; k <= hi[2]; ++k) {
-        const std::int64_t c = (i * size_[1] + j) * size_[2] + k;
-        if (testBit(observed_, c)) continue;
-        centers->push_back(centre(i, j, k));
-        keys->push_back(static_cast<std::uint64_t>(c));
+      const std::int64_t row = (i * size_[1] + j) * size_[2], first = row + lo[2], last = row + hi[2];
+      for (std::int64_t word = first >> 6; word <= last >> 6; ++word) {
+        std::uint64_t unseen = ~observed_[static_cast<std::size_t>(word)];
+        if (word == first >> 6) unseen &= ~std::uint64_t{0} << (first & 63);
+        if (word == last >> 6) unseen &= ~std::uint64_t{0} >> (63 - (last & 63));
+        for (; unseen != 0; unseen &= unseen - 1) {
+          const std::int64_t c = (word << 6) + __builtin_ctzll(unseen);
+          centers->push_back(centre(i, j, c - row));
+          keys->push_back(static_cast<std::uint64_t>(c));
+        }
       }
     }
   }

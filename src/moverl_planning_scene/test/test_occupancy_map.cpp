@@ -8,6 +8,7 @@
 #include <octomap/OcTree.h>
 
 #include <chrono>
+#include <random>
 #include <limits>
 #include <unordered_map>
 
@@ -778,6 +779,58 @@ TEST(OccupancyMap, UnknownOccupiedRule) {
 
 /// The robot in a map where nothing has been seen: the cells inside its links (self-filter padding) are known free,
 /// so it is free at no margin; the unseen space around it blocks it once the sensed margin reaches past them.
+TEST(OccupancyMap, UnobservedCellsAreEveryCellInTheBoxNoCloudObserved) {
+  // Every cell whose centre lies in the box and that no cloud observed, in the grid's order, against a cell by cell
+  // walk (unobservedCells reads the observed bits a word at a time: rows that start and end anywhere in a word).
+  // The bounds are no multiple of the cell: rows of cells start anywhere in a word.
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  o.resolution = 0.02;
+  o.max_range = 3.0;
+  o.unknown_occupied = true;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.61, -0.5, -0.3), Eigen::Vector3d(0.7, 0.43, 0.95));
+  std::string error;
+  auto map = mps::OccupancyMap::create(o, &error);
+  ASSERT_TRUE(map) << error;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> x(-0.58, 0.67), y(-0.47, 0.4), z(-0.27, 0.92);  // a cell inside the bounds
+  for (int view = 0; view < 6; ++view) {  // scattered points from scattered origins: observed cells in every pattern
+    std::vector<Eigen::Vector3d> pts;
+    for (int k = 0; k < 400; ++k) pts.emplace_back(x(rng), y(rng), z(rng));
+    integrate(map.get(), pts, Eigen::Vector3d(x(rng), y(rng), z(rng)));
+  }
+  const double r = o.resolution;
+  std::vector<Eigen::Vector3d> centers;
+  std::vector<std::uint64_t> keys;
+  std::size_t unobserved = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const Eigen::Vector3d a(x(rng), y(rng), z(rng)), b(x(rng), y(rng), z(rng));
+    const Eigen::AlignedBox3d box(a.cwiseMin(b), a.cwiseMax(b));
+    map->unobservedCells(box, &centers, &keys);
+    ASSERT_EQ(centers.size(), keys.size());
+    std::vector<Eigen::Vector3d> expected;
+    // Cell centres (i + 0.5) r, in the grid's order (x, then y, then z), that lie in the box and in the map.
+    for (double cx = (std::floor(box.min().x() / r) + 0.5) * r; cx <= box.max().x(); cx += r) {
+      for (double cy = (std::floor(box.min().y() / r) + 0.5) * r; cy <= box.max().y(); cy += r) {
+        for (double cz = (std::floor(box.min().z() / r) + 0.5) * r; cz <= box.max().z(); cz += r) {
+          const Eigen::Vector3d c(cx, cy, cz);
+          if (!box.contains(c) || map->observed(c)) continue;
+          expected.push_back(c);
+        }
+      }
+    }
+    ASSERT_EQ(centers.size(), expected.size()) << "trial " << trial;
+    for (std::size_t k = 0; k < centers.size(); ++k) {
+      ASSERT_LT((centers[k] - expected[k]).norm(), 1e-9) << "trial " << trial << ", cell " << k;
+      EXPECT_TRUE(map->occupied(centers[k]));
+    }
+    unobserved += keys.size();
+  }
+  EXPECT_GT(unobserved, 1000u);
+  // Beyond the map on every side: the whole grid.
+  map->unobservedCells(Eigen::AlignedBox3d(o.bounds.min().array() - 0.1, o.bounds.max().array() + 0.1), &centers, &keys);
+  EXPECT_EQ(keys.size(), map->unobservedCount());
+}
+
 TEST_F(PandaOctomap, UnknownOccupiedAroundTheRobot) {
   mps::OccupancyMapOptions o = mps::panda::mapOptions();
   const double reach = scene_->checker().reachRadius() + 0.05;

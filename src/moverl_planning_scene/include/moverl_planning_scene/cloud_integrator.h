@@ -106,8 +106,8 @@ class CloudIntegrator {
   void addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update);
   bool static_known_free_ = true;           ///< the static objects' cells are to be turned free (next cloud)
   std::vector<Eigen::AlignedBox3d> boxes_;  ///< addKnownFree's scratch
-  std::vector<Eigen::Vector3d> cell_centers_;
-  std::vector<std::uint64_t> cell_keys_, free_keys_;
+  std::vector<Eigen::Vector3d> cell_centers_, box_centers_;
+  std::vector<std::uint64_t> cell_keys_, box_keys_, free_keys_;
 };
 
 }  // namespace moverl_planning_scene

@@ -8,8 +8,8 @@
 #include <octomap/OcTree.h>
 
 #include <chrono>
-#include <random>
 #include <limits>
+#include <random>
 #include <unordered_map>
 
 #include "moverl_planning_scene/occupancy_map.h"
@@ -827,7 +827,8 @@ TEST(OccupancyMap, UnobservedCellsAreEveryCellInTheBoxNoCloudObserved) {
   }
   EXPECT_GT(unobserved, 1000u);
   // Beyond the map on every side: the whole grid.
-  map->unobservedCells(Eigen::AlignedBox3d(o.bounds.min().array() - 0.1, o.bounds.max().array() + 0.1), &centers, &keys);
+  map->unobservedCells(Eigen::AlignedBox3d(o.bounds.min().array() - 0.1, o.bounds.max().array() + 0.1), &centers,
+                       &keys);
   EXPECT_EQ(keys.size(), map->unobservedCount());
 }
 

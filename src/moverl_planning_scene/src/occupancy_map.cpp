@@ -216,9 +216,9 @@ struct OccupancyMap::View {
   std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
   std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
   /// Per block, its cells' projections (kBlockCells each, in the block's x, y, z order), valid where cells_id equals
-  /// id: allocated when a view of this camera first evaluates the block, and only when skip_unchanged_blocks (a map
-  /// that evaluates every block computes every cell's projection afresh: the tests that compare the two compare
-  /// these too).
+  /// id: allocated when a later view of this camera (not its first) first evaluates the block, and only when
+  /// skip_unchanged_blocks (a map that evaluates every block computes every cell's projection afresh: the tests that
+  /// compare the two compare these too).
   std::vector<std::unique_ptr<CellProjection[]>> cells;
   std::vector<std::uint64_t> cells_id;
 };
@@ -876,9 +876,10 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
           // The block's first cell centre in the optical frame; the others one cell step (axis[]) apart.
           const Eigen::Vector3d c0 = rt * (centre(ba[0], ba[1], ba[2]) - tr);
-          // Its cells' projections: the camera's, kept from its earlier views, or afresh.
+          // Its cells' projections: the camera's, kept from its earlier views, or afresh (a camera's first view
+          // keeps none: a camera that moves takes a new record at each pose and would never read them).
           CellProjection* proj = sc.cells;
-          if (!view->cells.empty()) {
+          if (!view->cells.empty() && last != 0) {
             std::unique_ptr<CellProjection[]>& kept = view->cells[static_cast<std::size_t>(bi)];
             if (kept == nullptr) kept.reset(new CellProjection[kBlockCells]);
             proj = kept.get();

@@ -41,8 +41,8 @@
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
  * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
  * projective update remembers of each camera's last view (skip_unchanged_blocks: about 64 bytes per block, 1 per
- * cell, and 12 bytes per cell of the blocks its views evaluated, each cell's projection (its nearest pixel and its
- * footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
+ * cell, and 12 bytes per cell of the blocks its later views evaluated, each cell's projection (its nearest pixel and
+ * its footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
  * moves takes a new record at each pose, the least recently seen one making way). An update costs its beams
  * (projective: the blocks whose inputs changed) and the cells it changes
  * (`rosrun moverl_planning_scene map_benchmark`).

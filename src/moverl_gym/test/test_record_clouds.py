@@ -175,3 +175,19 @@ def test_map_benchmark_reads_the_recording(recording):
         timeout=60,
     )
     assert bad.returncode == 1 and "recording.yaml" in bad.stderr, bad.stdout + bad.stderr
+    # Another cell edge on the same clouds (what a coarser map costs); a value that is no length is refused.
+    coarse = subprocess.run(
+        ["rosrun", "moverl_planning_scene", "map_benchmark", "--recording", str(out), "--resolution", "0.04"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert coarse.returncode == 0 and "map resolution 0.040 m" in coarse.stdout, coarse.stdout + coarse.stderr
+    for value in ("0", "-0.02", "2cm", "nan"):
+        r = subprocess.run(
+            ["rosrun", "moverl_planning_scene", "map_benchmark", "--recording", str(out), "--resolution", value],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert r.returncode == 2 and "--resolution takes" in r.stderr, (value, r.stderr)

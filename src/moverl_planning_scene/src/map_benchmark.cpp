@@ -10,11 +10,14 @@
  * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
  * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda.
  *
- * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--check] [--identity]
+ * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--resolution M] [--check]
+ *                      [--identity]
  *   (synthetic: default worlds/human.yaml, 60 clouds, cameras in turn, --size overrides the cameras' images)
  *   --check: exit 1 when either integration sees free a cell whose centre lies inside the synthetic person (a cell
  *   holding part of an obstacle; the static table's cells are the fixture filter's to clear, and are not counted).
  *   --threads N: threads that integrate a cloud (default: config/planning_scene.yaml's octomap/integration_threads).
+ *   --resolution M: the map's cell edge in metres (default: config/planning_scene.yaml's octomap/resolution): what
+ *   a coarser or finer map costs on the same clouds.
  *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated, on one
  *   thread) into
  *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets).
@@ -25,6 +28,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -198,7 +202,7 @@ void report(const char* what, std::vector<double> t) {
 int usage(const char* why) {
   std::fprintf(stderr,
                "error: %s\nusage: map_benchmark [world.yaml with cameras:] [clouds > 0] [--size WxH] "
-               "[--recording DIR] [--threads N] [--check] [--identity]\n",
+               "[--recording DIR] [--threads N] [--resolution M] [--check] [--identity]\n",
                why);
   return 2;
 }
@@ -208,6 +212,7 @@ int usage(const char* why) {
 int main(int argc, char** argv) {
   std::string world = MOVERL_CONFIG_DIR "/../worlds/human.yaml", recording;
   int clouds_wanted = 60, width = 0, height = 0, threads = 0;
+  double resolution = 0.0;
   bool check = false, identity = false;
   std::vector<std::string> positional;
   for (int i = 1; i < argc; ++i) {
@@ -216,7 +221,7 @@ int main(int argc, char** argv) {
       check = true;
     } else if (a == "--identity") {
       identity = true;
-    } else if (a == "--size" || a == "--recording" || a == "--threads") {
+    } else if (a == "--size" || a == "--recording" || a == "--threads" || a == "--resolution") {
       if (i + 1 >= argc) return usage((a + " needs a value").c_str());
       const std::string v = argv[++i];
       if (a == "--recording") {
@@ -224,11 +229,18 @@ int main(int argc, char** argv) {
       } else if (a == "--threads") {
         threads = std::atoi(v.c_str());
         if (threads < 1) return usage("--threads takes a number >= 1");
+      } else if (a == "--resolution") {
+        char* end = nullptr;
+        resolution = std::strtod(v.c_str(), &end);
+        if (end == v.c_str() || *end != '\0' || !(resolution > 0.0) || !std::isfinite(resolution)) {
+          return usage("--resolution takes a cell edge in metres > 0 (e.g. 0.03)");
+        }
       } else if (std::sscanf(v.c_str(), "%dx%d", &width, &height) != 2 || width < 2 || height < 2) {
         return usage("--size takes WxH, both >= 2 (e.g. 640x480)");
       }
     } else if (a.rfind("--", 0) == 0) {
-      return usage(("unknown option " + a + " (--size, --recording, --threads, --check, --identity)").c_str());
+      return usage(
+          ("unknown option " + a + " (--size, --recording, --threads, --resolution, --check, --identity)").c_str());
     } else {
       positional.push_back(a);
     }
@@ -305,6 +317,7 @@ int main(int argc, char** argv) {
     io.self_filter_padding = tunables->require<double>("octomap/self_filter_padding");
     io.static_filter_padding = tunables->require<double>("octomap/static_filter_padding");
     io.threads = threads > 0 ? threads : tunables->require<int>("octomap/integration_threads");
+    if (resolution > 0.0) mo.resolution = resolution;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;

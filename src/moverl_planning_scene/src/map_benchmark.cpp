@@ -480,7 +480,7 @@ int main(int argc, char** argv) {
         "points/s; %zu fallbacks to ray casting\n",
         r.free_cells / n, r.changed / n,
         r.integration == mps::Integration::kProjective
-            ? (", " + std::to_string(r.reused / n) + " blocks left as the camera's last view").c_str()
+            ? (", " + std::to_string(r.reused / n) + " blocks not evaluated (the camera's last view repeated)").c_str()
             : "",
         r.map->occupiedLeafCount(), mean_total[k] > 0 ? points / mean_total[k] / 1e6 : 0.0, r.fallbacks);
     if (recording.empty()) {

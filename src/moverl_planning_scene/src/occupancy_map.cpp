@@ -92,6 +92,7 @@ struct CellProjection {
   std::int16_t u0 = kNotYet16, u1 = 0, v0 = 0, v1 = 0;
 };
 constexpr int kBlockCells = 1 << (3 * kBlockShift);
+static_assert(kBlockCells <= 64, "a block's cells seen free are kept as the bits of one word");
 
 bool sameCamera(const PinholeCamera& a, const PinholeCamera& b) {
   if (a.width != b.width || a.height != b.height) return false;
@@ -211,8 +212,11 @@ struct OccupancyMap::View {
   std::vector<float> reach;                             ///< per pixel: the z-depth where its ray reaches max_range
   std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
   std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
-  std::vector<std::uint64_t> block_none, super_none;    ///< the epoch of a view that saw none of its cells free
+  std::vector<std::uint64_t> super_none;                ///< the epoch of a view that saw none of its cells free
   std::vector<std::uint64_t> super_all_none;            ///< ... of a view that saw no cell free in its blocks
+  /// Per block: the cells a view saw free (a bit each, in the block's x, y, z order; a cell it skipped, as hit or
+  /// clamped free then, is 0) and that view's epoch.
+  std::vector<std::uint64_t> block_seen, block_at;
   std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
   std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
   /// Per block, its cells' projections (kBlockCells each, in the block's x, y, z order), valid where cells_id equals
@@ -517,7 +521,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       const std::size_t blocks = block_dirty_.size(), supers = super_dirty_.size();
       view->block_fp.resize(blocks);
       view->block_fp_id.assign(blocks, 0);
-      view->block_none.assign(blocks, 0);
+      view->block_seen.assign(blocks, 0);
+      view->block_at.assign(blocks, 0);
       view->end_hash.assign(blocks, 0);
       view->super_fp.resize(supers);
       view->super_fp_id.assign(supers, 0);
@@ -645,9 +650,8 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // skip_unchanged_blocks: what changed since this camera's last view. A block's cells are decided by the depths over
   // its rectangle (through the pyramids: over the tiles that cover it, which lie within the tiles `changed` looks at
   // over the rectangle one pixel wider), the cloud's end cells in it (hits, fixture cells) and which of its cells are
-  // clamped free. When none of
-  // these changed and that view saw none of its cells free, this one sees none either; a block that turned dirty
-  // since (block_dirtied_) is looked at again. Skipping a block can only leave cells as they are (no miss is added).
+  // clamped free. When none of these changed, this view sees free the cells that one saw free (block_seen), less those
+  // clamped free since; a block that turned dirty since (block_dirtied_) is looked at again.
   const std::uint64_t last = options_.skip_unchanged_blocks ? view->last : 0;
   // The pyramids, each a task on the pool.
   auto pyramid = [&](std::size_t task, int) {
@@ -859,18 +863,34 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
             bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
           }
           const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
-          if (hidden(fb)) {
-            view->block_none[bi] = epoch_;
-            continue;
-          }
-          if (last != 0 &&
-              (view->block_none[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
-              block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
-            view->block_none[bi] = epoch_;  // as the last view left it
-            ++sc.reused;
-            continue;
-          }
+          std::uint64_t& block_seen = view->block_seen[static_cast<std::size_t>(bi)];
           const std::size_t seen_before = sc.free_cells;
+          if (hidden(fb)) {
+            block_seen = 0;
+            view->block_at[bi] = epoch_;
+            continue;
+          }
+          // Nothing the block's cells depend on changed since the last view, and no cell in it has left clamp_min
+          // since (each cell not clamped free now was tested then): it sees free what that view saw, less the
+          // cells clamped free since. Its bits in order are the loop's cells in order.
+          if (last != 0 &&
+              (view->block_at[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
+              block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
+            if (view->block_at[bi] != last) block_seen = 0;  // its superblock was hidden, or saw nothing free
+            view->block_at[bi] = epoch_;
+            ++sc.reused;
+            for (std::uint64_t bits = block_seen; bits != 0; bits &= bits - 1) {
+              const int n = __builtin_ctzll(bits);
+              const std::int64_t k = ((ba[0] + (n >> (2 * kBlockShift))) * size_[1] + ba[1] +
+                                      ((n >> kBlockShift) & ((1 << kBlockShift) - 1))) *
+                                         size_[2] +
+                                     ba[2] + (n & ((1 << kBlockShift) - 1));
+              if (!testBit(hit_, k) && !seen(k) && !testBit(clamped_, k)) see(k);
+            }
+            all_none = all_none && sc.free_cells == seen_before;
+            continue;
+          }
+          std::uint64_t seen_bits = 0;
           // A block wholly in front of what every pixel that may see it saw (robot pixels aside): each of its
           // cells passes the rectangle test; a pixel crossing the cell and seeing past it is what is left.
           const bool in_front = fb.state == 0 && over(min_depth_, true, fb.u0, fb.u1, fb.v0, fb.v1) >= fb.zmax;
@@ -926,6 +946,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                 }
                 if (crossed && in_front) {
                   see(k);
+                  seen_bits |= std::uint64_t{1} << (q - proj);
                   continue;
                 }
                 if (q->u0 == CellProjection::kNotYet16) {
@@ -973,10 +994,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
                   if (!crossed) continue;
                 }
                 see(k);
+                seen_bits |= std::uint64_t{1} << (q - proj);
               }
             }
           }
-          view->block_none[bi] = sc.free_cells == seen_before ? epoch_ : 0;
+          block_seen = seen_bits;
+          view->block_at[bi] = epoch_;
           all_none = all_none && sc.free_cells == seen_before;
         }
       }

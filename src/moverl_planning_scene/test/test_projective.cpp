@@ -425,7 +425,8 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
   // skip_unchanged_blocks leaves a block as its camera's last view left it when nothing it depends on changed. Two
   // maps, one with it and one evaluating every block, take the same views (sceneView: cameras fixed and moving, more
   // than the map remembers, a ball walking, robot pixels, dropouts, ray casting now and then), and the
-  // unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets).
+  // unknown-is-occupied rule switched and the map cleared once. Every update is the same (hits and misses as sets, and
+  // the count of cells seen free).
   std::size_t reused = 0;
   for (bool unknown_occupied : {false, true}) {
     auto skipping = makeMap(unknown_occupied, true), every = makeMap(unknown_occupied, false);
@@ -440,6 +441,7 @@ TEST(Projective, SkippingUnchangedBlocksGivesTheSameUpdates) {
       for (auto* cells : {&us.hits, &us.misses, &ue.hits, &ue.misses}) std::sort(cells->begin(), cells->end());
       ASSERT_EQ(us.hits, ue.hits) << "view " << n << " unknown_occupied " << unknown_occupied;
       ASSERT_EQ(us.misses, ue.misses) << "view " << n << " unknown_occupied " << unknown_occupied;
+      EXPECT_EQ(us.stats.free_cells, ue.stats.free_cells) << "view " << n << " unknown_occupied " << unknown_occupied;
       skipping->apply(us);
       every->apply(ue);
       if (n == 60) {

@@ -23,8 +23,9 @@
  * It never sees free a cell where a pixel that may cross it saw a surface short of the cell's far side; ray casting's
  * beams to the end cells' centroids can graze such cells. A fixed camera sees mostly the same image view after view:
  * a block whose inputs did not change since the camera's last view (the depths over the tiles its rectangle reads, the
- * cloud's end cells in it, none of its cells newly not clamped free), and in which that view saw no cell free, is left
- * as it is (skip_unchanged_blocks; the cells that stay unknown behind surfaces are most of them). The updates are the
+ * cloud's end cells in it, none of its cells newly not clamped free) is not evaluated again: it sees free the cells
+ * that view saw free, less those clamped free since (skip_unchanged_blocks; the cells that stay unknown behind
+ * surfaces are most of them, and they are seen free in none). The updates are the
  * same as when every block is evaluated (gtest Projective.SkippingUnchangedBlocksGivesTheSameUpdates,
  * `map_benchmark --identity`).
  *
@@ -40,7 +41,7 @@
  * cells and every superblock of 16^3 (anyOccupied: empty blocks are skipped whole, full ones tested as one box). The
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
  * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
- * projective update remembers of each camera's last view (skip_unchanged_blocks: about 64 bytes per block, 1 per
+ * projective update remembers of each camera's last view (skip_unchanged_blocks: about 72 bytes per block, 1 per
  * cell, and 12 bytes per cell of the blocks its later views evaluated, each cell's projection (its nearest pixel and
  * its footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
  * moves takes a new record at each pose, the least recently seen one making way). An update costs its beams
@@ -118,8 +119,8 @@ struct MapUpdateStats {
   std::size_t free_cells = 0;     ///< distinct cells marked free (projective: those not yet clamped free only)
   std::size_t changed_cells = 0;  ///< of the hit and free cells, those whose value the update changes
   std::size_t known_free = 0;     ///< unobserved cells turned free by addKnownFree (inside the robot, static objects)
-  /// projective: dirty blocks left as the camera's last view left them, unvisited (skip_unchanged_blocks; with a
-  /// superblock left whole, its blocks hidden from the camera too)
+  /// projective: dirty blocks not evaluated, their cells seen free as the camera's last view saw them
+  /// (skip_unchanged_blocks; with a superblock left whole, its blocks hidden from the camera too)
   std::size_t reused_blocks = 0;
 };
 

@@ -212,8 +212,11 @@ struct OccupancyMap::View {
   std::vector<float> reach;                             ///< per pixel: the z-depth where its ray reaches max_range
   std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
   std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
-  std::vector<std::uint64_t> super_none;                ///< the epoch of a view that saw none of its cells free
-  std::vector<std::uint64_t> super_all_none;            ///< ... of a view that saw no cell free in its blocks
+  /// Per superblock: the epoch of the last view whose record of its dirty blocks is block_seen where block_at equals
+  /// its base (none of their cells seen free elsewhere), and that base: the epoch of the last view that evaluated it
+  /// (or found it hidden; the views left unchanged since repeat it).
+  std::vector<std::uint64_t> super_at, super_base;
+  std::vector<std::uint8_t> super_seen;  ///< ... and whether one of those records holds a cell (not clamped free)
   /// Per block: the cells a view saw free (a bit each, in the block's x, y, z order; a cell it skipped, as hit or
   /// clamped free then, is 0) and that view's epoch.
   std::vector<std::uint64_t> block_seen, block_at;
@@ -526,8 +529,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       view->end_hash.assign(blocks, 0);
       view->super_fp.resize(supers);
       view->super_fp_id.assign(supers, 0);
-      view->super_none.assign(supers, 0);
-      view->super_all_none.assign(supers, 0);
+      view->super_at.assign(supers, 0);
+      view->super_base.assign(supers, 0);
+      view->super_seen.assign(supers, 0);
       view->super_end_hash.assign(supers, 0);
       if (options_.skip_unchanged_blocks) {
         view->cells.resize(blocks);
@@ -833,26 +837,65 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
     }
     task_misses_[task] = {worker, misses_before, misses_before};
+    // A block's cells that the last view saw free (bits), seen free again where still to be seen (the bits in order
+    // are the cell loop's cells in order). Returns those bits less the cells clamped free by now: they stay clamped
+    // while the block is left unevaluated (a cell that leaves clamp_min has it evaluated again).
+    auto repeat = [&](std::uint64_t bits) {
+      ++sc.reused;
+      std::uint64_t still = bits;
+      for (; bits != 0; bits &= bits - 1) {
+        const int n = __builtin_ctzll(bits);
+        const std::int64_t k =
+            ((ba[0] + (n >> (2 * kBlockShift))) * size_[1] + ba[1] + ((n >> kBlockShift) & ((1 << kBlockShift) - 1))) *
+                size_[2] +
+            ba[2] + (n & ((1 << kBlockShift) - 1));
+        if (testBit(clamped_, k)) {
+          still &= ~(std::uint64_t{1} << n);
+        } else if (!testBit(hit_, k) && !seen(k)) {
+          see(k);
+        }
+      }
+      return still;
+    };
     const Footprint& fs = cached(&view->super_fp, &view->super_fp_id, si, sa, sb);
+    // The last view's record of each of its dirty blocks: a block's (block_seen) where block_at is the superblock's
+    // base, else none of its cells seen free (it was hidden then).
+    const bool was_whole = last != 0 && view->super_at[si] == last;
+    const std::uint64_t base = view->super_base[si];
+    view->super_at[si] = epoch_;
     if (hidden(fs)) {
-      view->super_none[si] = epoch_;
+      view->super_base[si] = epoch_;
+      view->super_seen[si] = 0;
       return;
     }
-    // A superblock whose blocks the last view saw nothing free in and whose inputs did not change (as a block's
-    // below, over its own rectangle's tiles, which hold its blocks'): left as it is, blocks and all.
-    if (last != 0 && view->super_all_none[si] == last && super_dirtied_[si] < last &&
-        super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
-      view->super_all_none[si] = epoch_;
+    // A superblock whose inputs did not change (as a block's below, over its own rectangle's tiles, which hold its
+    // blocks'): each of its blocks as the last view saw it, without a test. Its records stay as they are: no cell in
+    // it has left clamp_min since they were made (each view since was such a one), so no block turned dirty.
+    if (was_whole && super_dirtied_[si] < last && super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
+      bool any = false;  // a block's record still holds a cell to see free
       for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
         for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
           for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-            sc.reused += block_dirty_[(bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]] != 0 ? 1 : 0;
+            const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
+            if (block_dirty_[bi] == 0) continue;
+            if (view->super_seen[si] == 0) {  // no record holds a cell: counted only
+              ++sc.reused;
+              continue;
+            }
+            for (int i = 0; i < 3; ++i) ba[i] = bl[i] << kBlockShift;
+            const std::uint64_t bits = view->block_at[bi] == base ? view->block_seen[bi] : 0;
+            const std::uint64_t still = repeat(bits);
+            if (still != bits) view->block_seen[bi] = still;
+            any = any || still != 0;
           }
         }
       }
+      view->super_seen[si] = any ? 1 : 0;
+      task_misses_[task].end = sc.misses.size();
       return;
     }
-    bool all_none = true;  // the last view saw no cell of its blocks free
+    view->super_base[si] = epoch_;
+    bool any = false;
     for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
       for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
         for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
@@ -864,7 +907,6 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           }
           const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
           std::uint64_t& block_seen = view->block_seen[static_cast<std::size_t>(bi)];
-          const std::size_t seen_before = sc.free_cells;
           if (hidden(fb)) {
             block_seen = 0;
             view->block_at[bi] = epoch_;
@@ -872,22 +914,11 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           }
           // Nothing the block's cells depend on changed since the last view, and no cell in it has left clamp_min
           // since (each cell not clamped free now was tested then): it sees free what that view saw, less the
-          // cells clamped free since. Its bits in order are the loop's cells in order.
-          if (last != 0 &&
-              (view->block_at[bi] == last || view->super_none[si] == last || view->super_all_none[si] == last) &&
-              block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
-            if (view->block_at[bi] != last) block_seen = 0;  // its superblock was hidden, or saw nothing free
+          // cells clamped free since.
+          if (was_whole && block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
+            block_seen = repeat(view->block_at[bi] == base ? block_seen : 0);
             view->block_at[bi] = epoch_;
-            ++sc.reused;
-            for (std::uint64_t bits = block_seen; bits != 0; bits &= bits - 1) {
-              const int n = __builtin_ctzll(bits);
-              const std::int64_t k = ((ba[0] + (n >> (2 * kBlockShift))) * size_[1] + ba[1] +
-                                      ((n >> kBlockShift) & ((1 << kBlockShift) - 1))) *
-                                         size_[2] +
-                                     ba[2] + (n & ((1 << kBlockShift) - 1));
-              if (!testBit(hit_, k) && !seen(k) && !testBit(clamped_, k)) see(k);
-            }
-            all_none = all_none && sc.free_cells == seen_before;
+            any = any || block_seen != 0;
             continue;
           }
           std::uint64_t seen_bits = 0;
@@ -1000,11 +1031,11 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           }
           block_seen = seen_bits;
           view->block_at[bi] = epoch_;
-          all_none = all_none && sc.free_cells == seen_before;
+          any = any || seen_bits != 0;
         }
       }
     }
-    view->super_all_none[si] = all_none ? epoch_ : 0;
+    view->super_seen[si] = any ? 1 : 0;
     task_misses_[task].end = sc.misses.size();
   };
   if (pool != nullptr) {

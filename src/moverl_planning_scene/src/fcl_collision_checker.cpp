@@ -510,9 +510,15 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
   // within pad of the hull whose distance to it is at most d makes every point within pad - d of it within pad too; a
   // point farther than pad, at least D away, makes every point within D - pad of it farther too (the distance to a
   // set changes no faster than the point moves). Each radius is kept 1e-9 m short (rounding).
+  // And two faces are tried first, as they are likely to settle the next point too (a cloud's points on a link are
+  // mostly within pad of its hull, and each such point passed every one of its 150-odd planes): the last face found
+  // within pad of a point (a point within pad of a face is within pad of the hull), and the face whose plane put the
+  // last point beyond pad.
   struct Memo {
     Eigen::Vector3d in = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()), out = in;
     double in2 = -1.0, out2 = -1.0;  ///< squared radii (negative: none)
+    int near = -1;                   ///< the face within pad of a point (-1: none yet)
+    std::size_t beyond = 0;          ///< the face whose plane is tried first
   };
   auto remember = [](Eigen::Vector3d* at, double* r2, const Eigen::Vector3d& p, double radius) {
     radius -= 1e-9;
@@ -532,27 +538,45 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     }
     if ((p - memo.in).squaredNorm() <= memo.in2) return true;
     if ((p - memo.out).squaredNorm() <= memo.out2) return false;
+    auto near = [&](int f) {  // p's squared distance to face f
+      const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
+      return pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
+    };
+    if (memo.near >= 0) {
+      const double d2 = near(memo.near);
+      if (d2 <= pad2) {
+        remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
+        return true;
+      }
+    }
     front.clear();
     double most = -std::numeric_limits<double>::infinity();  // the largest plane distance: inside when <= 0
-    for (std::size_t f = 0; f < sh.planes.size(); ++f) {
+    int most_face = -1;
+    const std::size_t faces = sh.planes.size();
+    for (std::size_t i = 0, f = memo.beyond; i < faces; ++i, f = f + 1 == faces ? 0 : f + 1) {
       const double e = sh.planes[f].head<3>().dot(p) - sh.planes[f][3];
       if (e > pad) {
         remember(&memo.out, &memo.out2, p, e - pad);  // at least e away
+        memo.beyond = f;
         return false;
       }
-      most = std::max(most, e);
+      if (e > most) {
+        most = e;
+        most_face = static_cast<int>(f);
+      }
       if (e > 0.0) front.push_back(static_cast<int>(f));
     }
     if (front.empty()) {
       remember(&memo.in, &memo.in2, p, pad - most);  // inside, at least -most deep
+      memo.near = most_face;  // the face nearest the point's plane-wise: likely its neighbours' within pad
       return true;
     }
     double nearest2 = std::numeric_limits<double>::infinity();
     for (int f : front) {
-      const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
-      const double d2 = pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
+      const double d2 = near(f);
       if (d2 <= pad2) {
         remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
+        memo.near = f;
         return true;
       }
       nearest2 = std::min(nearest2, d2);

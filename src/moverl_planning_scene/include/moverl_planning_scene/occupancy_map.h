@@ -41,7 +41,7 @@
  * cells and every superblock of 16^3 (anyOccupied: empty blocks are skipped whole, full ones tested as one box). The
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
  * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
- * projective update remembers of each camera's last view (skip_unchanged_blocks: about 72 bytes per block, 1 per
+ * projective update remembers of each camera's last view (skip_unchanged_blocks: about 88 bytes per block, 1 per
  * cell, and 12 bytes per cell of the blocks its later views evaluated, each cell's projection (its nearest pixel and
  * its footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
  * moves takes a new record at each pose, the least recently seen one making way). An update costs its beams

@@ -503,9 +503,6 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     }
     shapes.push_back(std::move(sh));
   }
-  // Within pad of a convex hull: inside every face's plane, or, outside, within pad of a face it lies in front of
-  // (the nearest point of a convex polytope to a point outside lies on such a face); farther than pad beyond any
-  // plane: not. Exact, as FCL's sphere test (which answers the shapes without planes). front: the caller's scratch.
   // What a hull's answer for one point tells of the points near it (a cloud's next points lie near its last): a point
   // within pad of the hull whose distance to it is at most d makes every point within pad - d of it within pad too; a
   // point farther than pad, at least D away, makes every point within D - pad of it farther too (the distance to a
@@ -538,12 +535,12 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     }
     if ((p - memo.in).squaredNorm() <= memo.in2) return true;
     if ((p - memo.out).squaredNorm() <= memo.out2) return false;
-    auto near = [&](int f) {  // p's squared distance to face f
+    auto distance2 = [&](int f) {  // p's squared distance to face f
       const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
       return pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
     };
     if (memo.near >= 0) {
-      const double d2 = near(memo.near);
+      const double d2 = distance2(memo.near);
       if (d2 <= pad2) {
         remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
         return true;
@@ -573,7 +570,7 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     }
     double nearest2 = std::numeric_limits<double>::infinity();
     for (int f : front) {
-      const double d2 = near(f);
+      const double d2 = distance2(f);
       if (d2 <= pad2) {
         remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
         memo.near = f;

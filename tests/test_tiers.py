@@ -102,6 +102,20 @@ def test_a_file_in_no_tier_fails_the_check(repo, rel, text, problem, capsys):
     assert f"NOT IN A TIER (it would never run): {rel}: " in out and problem in out, out
 
 
+def test_a_gtest_built_from_two_sources_is_listed_once(repo, capsys):
+    write(
+        repo,
+        "src/pkg/CMakeLists.txt",
+        "project(pkg)\ncatkin_add_gtest(${PROJECT_NAME}_test test/test_a.cpp test/b_test.cpp)\n",
+    )
+    write(repo, "src/pkg/test/b_test.cpp", "// gtest\n")
+    entries = by_path(tiers.collect())
+    assert entries["src/pkg/test/b_test.cpp"].binary == entries["src/pkg/test/test_a.cpp"].binary
+    capsys.readouterr()
+    assert tiers.main(["list", "gtest", "core"]) == 0
+    assert capsys.readouterr().out.splitlines() == ["devel/lib/pkg/pkg_test"]
+
+
 def test_an_unbuilt_gtest_fails_the_check(repo, capsys):
     (repo / "devel/lib/pkg/pkg_test").unlink()
     assert tiers.check(tiers.collect()) == 1

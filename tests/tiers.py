@@ -23,7 +23,7 @@ A test file, and where its tier comes from:
 
     python tests/tiers.py check               every test file with its kind and tier; exit 1 naming each without one
     python tests/tiers.py list KIND TIER...   the files of KIND (pytest, rostest, gtest) in the tiers, one a line
-                                              (gtest: the binaries; pytest: path, a tab, the docstring's first line)
+                                              (gtest: each binary once; pytest: path, a tab, the docstring's first line)
 """
 
 from __future__ import annotations
@@ -191,9 +191,13 @@ def main(argv: list[str]) -> int:
         if unknown:
             print(f"tiers.py: unknown tier {sorted(unknown)} (tiers: {', '.join(tiers())})", file=sys.stderr)
             return 2
-        for f in collect():
-            if f.kind == argv[1] and f.tier in argv[2:]:
-                print(f.binary if f.kind == "gtest" else f"{f.path}\t{f.title}")
+        lines = [
+            f.binary if f.kind == "gtest" else f"{f.path}\t{f.title}"
+            for f in collect()
+            if f.kind == argv[1] and f.tier in argv[2:]
+        ]
+        for line in dict.fromkeys(lines):  # once each: a gtest binary built from two sources runs once
+            print(line)
         return 0
     print(__doc__.split("\n\n")[-1].rstrip(), file=sys.stderr)
     return 2

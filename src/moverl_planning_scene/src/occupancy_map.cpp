@@ -19,6 +19,8 @@ constexpr std::int64_t kMaxCells = 64 * 1024 * 1024;
 static_assert(kMaxCells < (std::int64_t{1} << 31), "collectEndCells' table keys cells by int32");
 /// Cells per block (4^3) and superblock (16^3) edge, as shifts.
 constexpr int kBlockShift = 2, kSuperShift = 4;
+/// A superblock's blocks along each axis, and in all (kSubShift: their shift).
+constexpr int kSubShift = kSuperShift - kBlockShift, kSuperBlocks = 1 << (3 * kSubShift);
 
 /// Clips the segment a -> b to the box: the parameters [*t0, *t1] of the part inside. False when it misses the box.
 bool clipToBox(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::AlignedBox3d& box, double* t0,
@@ -67,11 +69,13 @@ constexpr double kInside = 1e-6, kEdgePx = 1e-6;
 /// A box of the grid as a camera sees it: its z-depth range and the pixels whose rays may cross it (the bounding
 /// rectangle of its corners' projections, clipped to the image). state: 0 in front of the camera with pixels, 1
 /// nothing to see (behind the camera, or outside the image), 2 across the camera's plane (no projection).
+/// The rectangle's bounds fit 16 bits (kMaxPinholeSide): a block's record, footprint included, is one cache line.
 struct Footprint {
-  int state = 1;
   double zmin = 0.0, zmax = 0.0;
-  int u0 = 0, u1 = -1, v0 = 0, v1 = -1;
+  std::int16_t u0 = 0, u1 = -1, v0 = 0, v1 = -1;
+  std::int8_t state = 1;
 };
+static_assert(kMaxPinholeSide <= std::numeric_limits<std::int16_t>::max(), "a footprint's pixels are 16-bit");
 
 /// skip_unchanged_blocks: a cloud from a pose and intrinsics this close to a remembered view's is that camera's next
 /// view (fitPinhole's intrinsics of a fixed camera differ from cloud to cloud by about 1e-7 px, the points' float
@@ -170,13 +174,13 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->observed_.assign(words, 0);
   m->occupied_.assign(words, 0);
   m->clamped_.assign(words, 0);
-  std::int64_t blocks = 1, supers = 1;
+  std::int64_t supers = 1;
   for (int i = 0; i < 3; ++i) {
     m->blocks_[i] = ((m->size_[i] - 1) >> kBlockShift) + 1;
     m->supers_[i] = ((m->size_[i] - 1) >> kSuperShift) + 1;
-    blocks *= m->blocks_[i];
     supers *= m->supers_[i];
   }
+  const std::int64_t blocks = supers * kSuperBlocks;  // blockIndex's: every superblock's, those past the grid unused
   m->block_count_.assign(static_cast<std::size_t>(blocks), 0);
   m->block_dirty_.assign(static_cast<std::size_t>(blocks), 0);
   m->super_count_.assign(static_cast<std::size_t>(supers), 0);
@@ -203,31 +207,42 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   return m;
 }
 
+/// What one camera's views left of a block: its footprint (valid where id equals the view's id: it depends on the
+/// camera's pose and intrinsics only), the cells the view at epoch `at` saw free (a bit each, in the block's x, y, z
+/// order; a cell it skipped, as hit or clamped free then, is 0), and end_hash_ at the camera's last view. One cache
+/// line, and a superblock's blocks' records side by side (blockIndex): the update reads them in that order.
+struct alignas(64) BlockRecord {
+  Footprint fp;
+  std::uint64_t id = 0, seen = 0, at = 0, end_hash = 0;
+};
+static_assert(sizeof(BlockRecord) == 64, "a block's record is one cache line");
+
+/// What one camera's views left of a superblock: its footprint (valid where id equals the view's id); the epoch of the
+/// last view whose record of its dirty blocks is their `seen` where their `at` equals base (none of their cells seen
+/// free elsewhere), and that base: the epoch of the last view that evaluated it (or found it hidden; the views left
+/// unchanged since repeat it); whether one of those records holds a cell (not clamped free); super_end_hash_ at the
+/// camera's last view.
+struct SuperRecord {
+  Footprint fp;
+  std::uint64_t id = 0, at = 0, base = 0, end_hash = 0;
+  bool seen = false;
+};
+
 struct OccupancyMap::View {
   PinholeCamera camera;
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   std::uint64_t id = 0;    ///< the epoch this camera was first seen at: tags the footprints computed for it
   std::uint64_t last = 0;  ///< the epoch of its last view (0: none)
-  std::vector<float> free_depth, past_depth;            ///< that view's depths (computeUpdateProjective's)
-  std::vector<float> reach;                             ///< per pixel: the z-depth where its ray reaches max_range
-  std::vector<Footprint> block_fp, super_fp;            ///< blocks' and superblocks' footprints, where
-  std::vector<std::uint64_t> block_fp_id, super_fp_id;  ///< ... this equals id
-  /// Per superblock: the epoch of the last view whose record of its dirty blocks is block_seen where block_at equals
-  /// its base (none of their cells seen free elsewhere), and that base: the epoch of the last view that evaluated it
-  /// (or found it hidden; the views left unchanged since repeat it).
-  std::vector<std::uint64_t> super_at, super_base;
-  std::vector<std::uint8_t> super_seen;  ///< ... and whether one of those records holds a cell (not clamped free)
-  /// Per block: the cells a view saw free (a bit each, in the block's x, y, z order; a cell it skipped, as hit or
-  /// clamped free then, is 0) and that view's epoch.
-  std::vector<std::uint64_t> block_seen, block_at;
-  std::vector<std::uint64_t> end_hash, super_end_hash;  ///< per block (superblock): end_hash_ at the last view
-  std::vector<std::int64_t> end_blocks, end_supers;     ///< the blocks (superblocks) where it is not 0
-  /// Per block, its cells' projections (kBlockCells each, in the block's x, y, z order), valid where cells_id equals
-  /// id: allocated when a later view of this camera (not its first) first evaluates the block, and only when
-  /// skip_unchanged_blocks (a map that evaluates every block computes every cell's projection afresh: the tests that
-  /// compare the two compare these too).
+  std::vector<float> free_depth, past_depth;         ///< that view's depths (computeUpdateProjective's)
+  std::vector<float> reach;                          ///< per pixel: the z-depth where its ray reaches max_range
+  std::vector<BlockRecord> blocks;                   ///< per block (blockIndex)
+  std::vector<SuperRecord> supers;                   ///< per superblock
+  std::vector<std::int64_t> end_blocks, end_supers;  ///< the blocks (superblocks) whose end_hash is not 0
+  /// Per block, its cells' projections (kBlockCells each, in the block's x, y, z order), for this camera (freed when
+  /// the view takes another): allocated when a later view of this camera (not its first) first evaluates the block,
+  /// and only when skip_unchanged_blocks (a map that evaluates every block computes every cell's projection afresh:
+  /// the tests that compare the two compare these too).
   std::vector<std::unique_ptr<CellProjection[]>> cells;
-  std::vector<std::uint64_t> cells_id;
 };
 
 /// Cache-line aligned: the workers' counters must not share a line.
@@ -240,9 +255,15 @@ struct alignas(64) OccupancyMap::Scratch {
 
 OccupancyMap::~OccupancyMap() = default;
 
+inline std::int64_t OccupancyMap::blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
+  constexpr std::int64_t sub = (1 << kSubShift) - 1;
+  const std::int64_t super = ((x >> kSubShift) * supers_[1] + (y >> kSubShift)) * supers_[2] + (z >> kSubShift);
+  return (super << (3 * kSubShift)) | (((x & sub) << (2 * kSubShift)) | ((y & sub) << kSubShift) | (z & sub));
+}
+
 void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const {
   const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
-  *block = ((i >> kBlockShift) * blocks_[1] + (j >> kBlockShift)) * blocks_[2] + (k >> kBlockShift);
+  *block = blockIndex(i >> kBlockShift, j >> kBlockShift, k >> kBlockShift);
   *super = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
 }
 
@@ -431,8 +452,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
     for (;;) {
       const bool at_last = at[0] == last[0] && at[1] == last[1] && at[2] == last[2];
       if (at_last && !through_end) break;
-      const std::int64_t block =
-          ((at[0] >> kBlockShift) * blocks_[1] + (at[1] >> kBlockShift)) * blocks_[2] + (at[2] >> kBlockShift);
+      const std::int64_t block = blockIndex(at[0] >> kBlockShift, at[1] >> kBlockShift, at[2] >> kBlockShift);
       if (block_dirty_[block] == 0 && !at_last) {
         // Every cell of this block is clamped at clamp_min (the free space the cameras keep seeing): a miss changes
         // none of them. Jump to where the beam leaves the block, unless it ends in it.
@@ -521,22 +541,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     if (views_.size() < kMaxViews) {
       views_.push_back(std::make_unique<View>());
       view = views_.back().get();
-      const std::size_t blocks = block_dirty_.size(), supers = super_dirty_.size();
-      view->block_fp.resize(blocks);
-      view->block_fp_id.assign(blocks, 0);
-      view->block_seen.assign(blocks, 0);
-      view->block_at.assign(blocks, 0);
-      view->end_hash.assign(blocks, 0);
-      view->super_fp.resize(supers);
-      view->super_fp_id.assign(supers, 0);
-      view->super_at.assign(supers, 0);
-      view->super_base.assign(supers, 0);
-      view->super_seen.assign(supers, 0);
-      view->super_end_hash.assign(supers, 0);
-      if (options_.skip_unchanged_blocks) {
-        view->cells.resize(blocks);
-        view->cells_id.assign(blocks, 0);
-      }
+      view->blocks.resize(block_dirty_.size());
+      view->supers.resize(super_dirty_.size());
+      if (options_.skip_unchanged_blocks) view->cells.resize(block_dirty_.size());
     } else {
       view = std::min_element(views_.begin(), views_.end(), [](const auto& a, const auto& b) {
                return a->last < b->last;
@@ -546,8 +553,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     view->pose = fitted_pose;
     view->id = epoch_;
     view->last = 0;
-    for (std::int64_t b : view->end_blocks) view->end_hash[b] = 0;
-    for (std::int64_t b : view->end_supers) view->super_end_hash[b] = 0;
+    for (auto& kept : view->cells) kept.reset();  // another camera's
+    for (std::int64_t b : view->end_blocks) view->blocks[b].end_hash = 0;
+    for (std::int64_t b : view->end_supers) view->supers[b].end_hash = 0;
     view->end_blocks.clear();
     view->end_supers.clear();
   }
@@ -696,10 +704,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     vmin -= kEdgePx;
     umax += kEdgePx;
     vmax += kEdgePx;
-    f->u0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(umin, -1.0), static_cast<double>(w)))));
-    f->u1 = static_cast<int>(std::min(w - 1.0, floorOf(std::min(std::max(umax, -1.0), static_cast<double>(w)))));
-    f->v0 = static_cast<int>(std::max(0.0, ceilOf(std::min(std::max(vmin, -1.0), static_cast<double>(h)))));
-    f->v1 = static_cast<int>(std::min(h - 1.0, floorOf(std::min(std::max(vmax, -1.0), static_cast<double>(h)))));
+    f->u0 = static_cast<std::int16_t>(std::max(0.0, ceilOf(std::min(std::max(umin, -1.0), static_cast<double>(w)))));
+    f->u1 =
+        static_cast<std::int16_t>(std::min(w - 1.0, floorOf(std::min(std::max(umax, -1.0), static_cast<double>(w)))));
+    f->v0 = static_cast<std::int16_t>(std::max(0.0, ceilOf(std::min(std::max(vmin, -1.0), static_cast<double>(h)))));
+    f->v1 =
+        static_cast<std::int16_t>(std::min(h - 1.0, floorOf(std::min(std::max(vmax, -1.0), static_cast<double>(h)))));
     f->state = f->u0 > f->u1 || f->v0 > f->v1 ? 1 : 0;
   };
   auto footprint = [&](const std::int64_t* a, const std::int64_t* b, Footprint* f) {
@@ -749,14 +759,12 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     rectangle(umin, umax, vmin, vmax, f);
   };
   // A block's or superblock's footprint, computed once per camera (it depends on the pose and intrinsics only).
-  auto cached = [&](std::vector<Footprint>* fps, std::vector<std::uint64_t>* ids, std::int64_t index,
-                    const std::int64_t* a, const std::int64_t* b) -> const Footprint& {
-    Footprint& f = (*fps)[static_cast<std::size_t>(index)];
-    if ((*ids)[static_cast<std::size_t>(index)] != view->id) {
-      footprint(a, b, &f);
-      (*ids)[static_cast<std::size_t>(index)] = view->id;
+  auto cached = [&](auto* record, const std::int64_t* a, const std::int64_t* b) -> const Footprint& {
+    if (record->id != view->id) {
+      footprint(a, b, &record->fp);
+      record->id = view->id;
     }
-    return f;
+    return record->fp;
   };
   // No pixel changed since the camera's last view over the tiles a box's rectangle reads (one pixel wider); a box
   // across the camera's plane has no rectangle (its cells' pixels are anywhere): changed.
@@ -857,68 +865,70 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       }
       return still;
     };
-    const Footprint& fs = cached(&view->super_fp, &view->super_fp_id, si, sa, sb);
-    // The last view's record of each of its dirty blocks: a block's (block_seen) where block_at is the superblock's
-    // base, else none of its cells seen free (it was hidden then).
-    const bool was_whole = last != 0 && view->super_at[si] == last;
-    const std::uint64_t base = view->super_base[si];
-    view->super_at[si] = epoch_;
+    SuperRecord& sr = view->supers[static_cast<std::size_t>(si)];
+    const Footprint& fs = cached(&sr, sa, sb);
+    // The last view's record of each of its dirty blocks: a block's `seen` where its `at` is the superblock's base,
+    // else none of its cells seen free (it was hidden then).
+    const bool was_whole = last != 0 && sr.at == last;
+    const std::uint64_t base = sr.base;
+    sr.at = epoch_;
     if (hidden(fs)) {
-      view->super_base[si] = epoch_;
-      view->super_seen[si] = 0;
+      sr.base = epoch_;
+      sr.seen = false;
       return;
     }
     // A superblock whose inputs did not change (as a block's below, over its own rectangle's tiles, which hold its
     // blocks'): each of its blocks as the last view saw it, without a test. Its records stay as they are: no cell in
     // it has left clamp_min since they were made (each view since was such a one), so no block turned dirty.
-    if (was_whole && super_dirtied_[si] < last && super_end_hash_[si] == view->super_end_hash[si] && unchanged(fs)) {
+    if (was_whole && super_dirtied_[si] < last && super_end_hash_[si] == sr.end_hash && unchanged(fs)) {
       bool any = false;  // a block's record still holds a cell to see free
       for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
         for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
           for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-            const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
+            const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
             if (block_dirty_[bi] == 0) continue;
-            if (view->super_seen[si] == 0) {  // no record holds a cell: counted only
+            if (!sr.seen) {  // no record holds a cell: counted only
               ++sc.reused;
               continue;
             }
             for (int i = 0; i < 3; ++i) ba[i] = bl[i] << kBlockShift;
-            const std::uint64_t bits = view->block_at[bi] == base ? view->block_seen[bi] : 0;
+            BlockRecord& br = view->blocks[static_cast<std::size_t>(bi)];
+            const std::uint64_t bits = br.at == base ? br.seen : 0;
             const std::uint64_t still = repeat(bits);
-            if (still != bits) view->block_seen[bi] = still;
+            if (still != bits) br.seen = still;
             any = any || still != 0;
           }
         }
       }
-      view->super_seen[si] = any ? 1 : 0;
+      sr.seen = any;
       task_misses_[task].end = sc.misses.size();
       return;
     }
-    view->super_base[si] = epoch_;
+    sr.base = epoch_;
     bool any = false;
     for (bl[0] = sa[0] >> kBlockShift; bl[0] <= sb[0] >> kBlockShift; ++bl[0]) {
       for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
         for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
-          const std::int64_t bi = (bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2];
+          const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
           if (block_dirty_[bi] == 0) continue;
           for (int i = 0; i < 3; ++i) {
             ba[i] = bl[i] << kBlockShift;
             bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
           }
-          const Footprint& fb = cached(&view->block_fp, &view->block_fp_id, bi, ba, bb);
-          std::uint64_t& block_seen = view->block_seen[static_cast<std::size_t>(bi)];
+          BlockRecord& br = view->blocks[static_cast<std::size_t>(bi)];
+          const Footprint& fb = cached(&br, ba, bb);
           if (hidden(fb)) {
-            block_seen = 0;
-            view->block_at[bi] = epoch_;
+            br.seen = 0;
+            br.at = epoch_;
             continue;
           }
           // Nothing the block's cells depend on changed since the last view, and no cell in it has left clamp_min
           // since (each cell not clamped free now was tested then): it sees free what that view saw, less the
           // cells clamped free since.
-          if (was_whole && block_dirtied_[bi] < last && end_hash_[bi] == view->end_hash[bi] && unchanged(fb)) {
-            block_seen = repeat(view->block_at[bi] == base ? block_seen : 0);
-            view->block_at[bi] = epoch_;
-            any = any || block_seen != 0;
+          if (was_whole && block_dirtied_[bi] < last && end_hash_[bi] == br.end_hash && unchanged(fb)) {
+            br.seen = repeat(br.at == base ? br.seen : 0);
+            br.at = epoch_;
+            any = any || br.seen != 0;
             continue;
           }
           std::uint64_t seen_bits = 0;
@@ -932,12 +942,10 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           CellProjection* proj = sc.cells;
           if (!view->cells.empty() && last != 0) {
             std::unique_ptr<CellProjection[]>& kept = view->cells[static_cast<std::size_t>(bi)];
-            if (kept == nullptr) kept.reset(new CellProjection[kBlockCells]);
+            if (kept == nullptr) kept.reset(new CellProjection[kBlockCells]);  // each kNotYet
             proj = kept.get();
-          }
-          if (proj == sc.cells || view->cells_id[static_cast<std::size_t>(bi)] != view->id) {
+          } else {
             std::fill(proj, proj + kBlockCells, CellProjection());
-            if (proj != sc.cells) view->cells_id[static_cast<std::size_t>(bi)] = view->id;
           }
           for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
             for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
@@ -1029,13 +1037,13 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               }
             }
           }
-          block_seen = seen_bits;
-          view->block_at[bi] = epoch_;
+          br.seen = seen_bits;
+          br.at = epoch_;
           any = any || seen_bits != 0;
         }
       }
     }
-    view->super_seen[si] = any ? 1 : 0;
+    sr.seen = any;
     task_misses_[task].end = sc.misses.size();
   };
   if (pool != nullptr) {
@@ -1057,19 +1065,19 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   view->last = epoch_;
   view->free_depth.swap(free_depth);
   view->past_depth.swap(past_depth);
-  auto keep = [](std::vector<std::uint64_t>* now, std::vector<std::int64_t>* now_listed,
-                 std::vector<std::uint64_t>* kept, std::vector<std::int64_t>* kept_listed) {
-    for (std::int64_t b : *kept_listed) (*kept)[b] = 0;
+  auto keep = [](std::vector<std::uint64_t>* now, std::vector<std::int64_t>* now_listed, auto* records,
+                 std::vector<std::int64_t>* kept_listed) {
+    for (std::int64_t b : *kept_listed) (*records)[b].end_hash = 0;
     kept_listed->clear();
     for (std::int64_t b : *now_listed) {
-      (*kept)[b] = (*now)[b];
+      (*records)[b].end_hash = (*now)[b];
       if ((*now)[b] != 0) kept_listed->push_back(b);
       (*now)[b] = 0;
     }
     now_listed->clear();
   };
-  keep(&end_hash_, &end_blocks_, &view->end_hash, &view->end_blocks);
-  keep(&super_end_hash_, &end_supers_, &view->super_end_hash, &view->end_supers);
+  keep(&end_hash_, &end_blocks_, &view->blocks, &view->end_blocks);
+  keep(&super_end_hash_, &end_supers_, &view->supers, &view->end_supers);
   out->stats.free_cells = free_cells;
   out->stats.reused_blocks = reused;
   out->stats.changed_cells = out->hits.size() + out->misses.size();
@@ -1173,7 +1181,7 @@ void OccupancyMap::fillUnobserved(bool on) {
   std::fill(seen_super_count_.begin(), seen_super_count_.end(), 0);
   seen_occupied_ = 0;
   // Every cell counts as dirty (unknown) until setValue says otherwise: each block and superblock as many as it holds.
-  auto fill = [&](const std::int64_t* boxes, int shift, auto* dirty) {
+  auto fill = [&](const std::int64_t* boxes, int shift, auto* dirty, auto index) {
     using Count = typename std::remove_reference_t<decltype(*dirty)>::value_type;
     std::int64_t at[3];
     for (at[0] = 0; at[0] < boxes[0]; ++at[0]) {
@@ -1181,13 +1189,14 @@ void OccupancyMap::fillUnobserved(bool on) {
         for (at[2] = 0; at[2] < boxes[2]; ++at[2]) {
           std::int64_t n = 1;
           for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << shift) - (at[i] << shift);
-          (*dirty)[(at[0] * boxes[1] + at[1]) * boxes[2] + at[2]] = static_cast<Count>(n);
+          (*dirty)[static_cast<std::size_t>(index(at))] = static_cast<Count>(n);
         }
       }
     }
   };
-  fill(blocks_, kBlockShift, &block_dirty_);
-  fill(supers_, kSuperShift, &super_dirty_);
+  fill(blocks_, kBlockShift, &block_dirty_, [&](const std::int64_t* at) { return blockIndex(at[0], at[1], at[2]); });
+  fill(supers_, kSuperShift, &super_dirty_,
+       [&](const std::int64_t* at) { return (at[0] * supers_[1] + at[1]) * supers_[2] + at[2]; });
   const auto cells = static_cast<std::int64_t>(value_.size());
   for (std::int64_t c = 0; c < cells; ++c) {
     if (!testBit(observed_, c)) value_[c] = on ? prior_ : unknown;
@@ -1345,7 +1354,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
           for (bl[1] = std::max(lo[1], sa[1]) >> kBlockShift; bl[1] <= std::min(hi[1], sb[1]) >> kBlockShift; ++bl[1]) {
             for (bl[2] = std::max(lo[2], sa[2]) >> kBlockShift; bl[2] <= std::min(hi[2], sb[2]) >> kBlockShift;
                  ++bl[2]) {
-              const std::int64_t bc = block_count((bl[0] * blocks_[1] + bl[1]) * blocks_[2] + bl[2]);
+              const std::int64_t bc = block_count(blockIndex(bl[0], bl[1], bl[2]));
               if (bc == 0) continue;
               const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
               const Eigen::AlignedBox3d block_box = box(ba, bb);

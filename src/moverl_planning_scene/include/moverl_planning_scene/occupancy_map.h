@@ -41,7 +41,7 @@
  * cells and every superblock of 16^3 (anyOccupied: empty blocks are skipped whole, full ones tested as one box). The
  * update deduplicates the cells that a cloud's beams cross without sorting, and it tells which of them it changes: a
  * cell already clamped at clamp_min stays where it is when seen free again. Besides the cells, the map keeps what the
- * projective update remembers of each camera's last view (skip_unchanged_blocks: about 88 bytes per block, 1 per
+ * projective update remembers of each camera's last view (skip_unchanged_blocks: about 72 bytes per block, 1 per
  * cell, and 12 bytes per cell of the blocks its later views evaluated, each cell's projection (its nearest pixel and
  * its footprint rectangle, which depend on the pose and intrinsics alone), for each of up to 8 cameras; a camera that
  * moves takes a new record at each pose, the least recently seen one making way). An update costs its beams
@@ -259,6 +259,10 @@ class OccupancyMap {
   ///        large (the cells of order_ kept).
   std::size_t slot(std::int64_t c) const;
   void growSlots();
+  /// The index of block (x, y, z) (block grid coordinates) in the per-block arrays: superblock-major (a superblock's
+  /// blocks side by side, in x, y, z order), so that the blocks the projective update visits together share cache
+  /// lines.
+  std::int64_t blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const;
   /// The block and the superblock that hold cell c.
   void boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const;
   /// Set cell c's value, keeping the occupied bit and the block counts.
@@ -296,7 +300,7 @@ class OccupancyMap {
   std::size_t observed_cells_ = 0;       ///< how many bits of observed_ are set
   std::vector<std::uint64_t> occupied_;  ///< a bit per cell: log-odds >= the threshold
   std::vector<std::uint64_t> clamped_;   ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
-  // Occupied cells per block of 4^3 cells and per superblock of 16^3, and the blocks' grid sizes.
+  // Occupied cells per block of 4^3 cells (blockIndex) and per superblock of 16^3, and the blocks' grid sizes.
   std::vector<std::uint8_t> block_count_;
   std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)
   std::vector<std::uint16_t> super_dirty_;  ///< per superblock: the same

@@ -53,7 +53,9 @@ for tier in "${tiers[@]}"; do
     for bin in "${bins[@]}"; do suite "gtest $(basename "$bin")" "$bin"; done
     files_of lines pytest core
     core=("${lines[@]%%$'\t'*}")
-    suite "pytest core (${#core[@]} files: the Python cores, geometry parity with PyBullet)" pytest_ -m core "${core[@]}"
+    # On every core (pytest-xdist, -n auto): the core tests start no ROS master and share no fixed path.
+    suite "pytest core (${#core[@]} files: the Python cores, geometry parity with PyBullet)" \
+      pytest_ -n auto -m core "${core[@]}"
     continue
   fi
   # The live graph: one suite per file, each in its own process (rospy allows one ROS master per process).

@@ -96,7 +96,9 @@ struct CellProjection {
   std::int16_t u0 = kNotYet16, u1 = 0, v0 = 0, v1 = 0;
 };
 constexpr int kBlockCells = 1 << (3 * kBlockShift);
-static_assert(kBlockCells <= 64, "a block's cells seen free are kept as the bits of one word");
+static_assert(kBlockCells <= 64, "a block's cells are the bits of one word");
+/// A block's word with every bit set: each of its cells (and the bits past them) clamped free, or past the grid's end.
+constexpr std::uint64_t kAllCells = ~std::uint64_t{0};
 
 bool sameCamera(const PinholeCamera& a, const PinholeCamera& b) {
   if (a.width != b.width || a.height != b.height) return false;
@@ -182,7 +184,13 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   }
   const std::int64_t blocks = supers * kSuperBlocks;  // blockIndex's: every superblock's, those past the grid unused
   m->block_count_.assign(static_cast<std::size_t>(blocks), 0);
-  m->block_dirty_.assign(static_cast<std::size_t>(blocks), 0);
+  m->block_clamped_.assign(static_cast<std::size_t>(blocks), 0);
+  m->block_ended_.assign(static_cast<std::size_t>(blocks), 0);
+  for (int n = 0; n < kBlockCells; ++n) {
+    constexpr int mask = (1 << kBlockShift) - 1;
+    m->cell_offset_[n] =
+        ((n >> (2 * kBlockShift)) * m->size_[1] + ((n >> kBlockShift) & mask)) * m->size_[2] + (n & mask);
+  }
   m->super_count_.assign(static_cast<std::size_t>(supers), 0);
   m->super_dirty_.assign(static_cast<std::size_t>(supers), 0);
   m->seen_block_count_.assign(static_cast<std::size_t>(blocks), 0);
@@ -261,10 +269,12 @@ inline std::int64_t OccupancyMap::blockIndex(std::int64_t x, std::int64_t y, std
   return (super << (3 * kSubShift)) | (((x & sub) << (2 * kSubShift)) | ((y & sub) << kSubShift) | (z & sub));
 }
 
-void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const {
+void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super, std::uint64_t* bit) const {
   const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
   *block = blockIndex(i >> kBlockShift, j >> kBlockShift, k >> kBlockShift);
   *super = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  constexpr std::int64_t m = (1 << kBlockShift) - 1;
+  if (bit != nullptr) *bit = std::uint64_t{1} << ((((i & m) << kBlockShift | (j & m)) << kBlockShift) | (k & m));
 }
 
 std::size_t OccupancyMap::slot(std::int64_t c) const {
@@ -453,7 +463,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       const bool at_last = at[0] == last[0] && at[1] == last[1] && at[2] == last[2];
       if (at_last && !through_end) break;
       const std::int64_t block = blockIndex(at[0] >> kBlockShift, at[1] >> kBlockShift, at[2] >> kBlockShift);
-      if (block_dirty_[block] == 0 && !at_last) {
+      if (block_clamped_[block] == kAllCells && !at_last) {
         // Every cell of this block is clamped at clamp_min (the free space the cameras keep seeing): a miss changes
         // none of them. Jump to where the beam leaves the block, unless it ends in it.
         bool ends_here = true;
@@ -541,9 +551,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     if (views_.size() < kMaxViews) {
       views_.push_back(std::make_unique<View>());
       view = views_.back().get();
-      view->blocks.resize(block_dirty_.size());
+      view->blocks.resize(block_clamped_.size());
       view->supers.resize(super_dirty_.size());
-      if (options_.skip_unchanged_blocks) view->cells.resize(block_dirty_.size());
+      if (options_.skip_unchanged_blocks) view->cells.resize(block_clamped_.size());
     } else {
       view = std::min_element(views_.begin(), views_.end(), [](const auto& a, const auto& b) {
                return a->last < b->last;
@@ -567,12 +577,15 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     if ((order_flags_[n] & (kHit | kFixture)) == 0) continue;
     const std::int64_t c = order_[n];
     std::int64_t b, sb;
-    boxesOf(c, &b, &sb);
+    std::uint64_t bit;
+    boxesOf(c, &b, &sb, &bit);
     const std::uint64_t hash = mix((static_cast<std::uint64_t>(c) << 8) | order_flags_[n]);
     if (end_hash_[b] == 0) end_blocks_.push_back(b);
     if (super_end_hash_[sb] == 0) end_supers_.push_back(sb);
     end_hash_[b] += hash;
     super_end_hash_[sb] += hash;
+    // Hit (hit_), or seen free below as a fixture's end cell (seen_): not to be seen free by projection.
+    if ((order_flags_[n] & kHit) != 0 || onlyFixtureEnds(order_flags_[n])) block_ended_[b] |= bit;
   }
   std::size_t free_cells = 0;
   auto see = [&](std::int64_t k) {
@@ -789,6 +802,14 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     corner[k] =
         0.5 * ((k & 1 ? 1.0 : -1.0) * axis[0] + (k & 2 ? 1.0 : -1.0) * axis[1] + (k & 4 ? 1.0 : -1.0) * axis[2]);
   }
+  // Each cell of a block (its bit n: x, y, z within the block) from the block's first cell: its centre's offset in
+  // the optical frame (its id's is cell_offset_).
+  Eigen::Vector3d cell_step[kBlockCells];
+  for (int n = 0; n < kBlockCells; ++n) {
+    cell_step[n] = static_cast<double>(n >> (2 * kBlockShift)) * axis[0] +
+                   static_cast<double>((n >> kBlockShift) & ((1 << kBlockShift) - 1)) * axis[1] +
+                   static_cast<double>(n & ((1 << kBlockShift) - 1)) * axis[2];
+  }
   auto cellFootprint = [&](const Eigen::Vector3d& c, Footprint* f) {
     f->zmin = c.z() - half_depth;
     f->zmax = c.z() + half_depth;
@@ -830,12 +851,9 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     auto see = [&](std::int64_t k) {
       __atomic_fetch_or(&seen_[static_cast<std::size_t>(k >> 6)], std::uint64_t{1} << (k & 63), __ATOMIC_RELAXED);
       ++sc.free_cells;
-      if (!testBit(clamped_, k)) sc.misses.push_back(static_cast<std::uint64_t>(k));
+      sc.misses.push_back(static_cast<std::uint64_t>(k));  // (never a cell clamped free: block_clamped_ leaves those)
     };
-    auto seen = [&](std::int64_t k) {
-      return ((__atomic_load_n(&seen_[static_cast<std::size_t>(k >> 6)], __ATOMIC_RELAXED) >> (k & 63)) & 1u) != 0;
-    };
-    std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3], at[3];
+    std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3];
     s[2] = si % supers_[2];
     s[1] = (si / supers_[2]) % supers_[1];
     s[0] = si / (supers_[1] * supers_[2]);
@@ -845,23 +863,15 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       sb[i] = std::min(size_[i] - 1, ((s[i] + 1) << kSuperShift) - 1);
     }
     task_misses_[task] = {worker, misses_before, misses_before};
-    // A block's cells that the last view saw free (bits), seen free again where still to be seen (the bits in order
-    // are the cell loop's cells in order). Returns those bits less the cells clamped free by now: they stay clamped
-    // while the block is left unevaluated (a cell that leaves clamp_min has it evaluated again).
-    auto repeat = [&](std::uint64_t bits) {
+    // A block's cells that the last view saw free (bits), seen free again where still to be seen (not hit, nor seen
+    // free already). Returns those bits less the cells clamped free by now: they stay clamped while the block is left
+    // unevaluated (a cell that leaves clamp_min has it evaluated again).
+    auto repeat = [&](std::uint64_t bits, std::int64_t bi) {
       ++sc.reused;
-      std::uint64_t still = bits;
-      for (; bits != 0; bits &= bits - 1) {
-        const int n = __builtin_ctzll(bits);
-        const std::int64_t k =
-            ((ba[0] + (n >> (2 * kBlockShift))) * size_[1] + ba[1] + ((n >> kBlockShift) & ((1 << kBlockShift) - 1))) *
-                size_[2] +
-            ba[2] + (n & ((1 << kBlockShift) - 1));
-        if (testBit(clamped_, k)) {
-          still &= ~(std::uint64_t{1} << n);
-        } else if (!testBit(hit_, k) && !seen(k)) {
-          see(k);
-        }
+      const std::uint64_t still = bits & ~block_clamped_[bi];
+      const std::int64_t k0 = (ba[0] * size_[1] + ba[1]) * size_[2] + ba[2];
+      for (std::uint64_t todo = still & ~block_ended_[bi]; todo != 0; todo &= todo - 1) {
+        see(k0 + cell_offset_[__builtin_ctzll(todo)]);
       }
       return still;
     };
@@ -886,7 +896,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
         for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
           for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
             const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
-            if (block_dirty_[bi] == 0) continue;
+            if (block_clamped_[bi] == kAllCells) continue;
             if (!sr.seen) {  // no record holds a cell: counted only
               ++sc.reused;
               continue;
@@ -894,7 +904,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
             for (int i = 0; i < 3; ++i) ba[i] = bl[i] << kBlockShift;
             BlockRecord& br = view->blocks[static_cast<std::size_t>(bi)];
             const std::uint64_t bits = br.at == base ? br.seen : 0;
-            const std::uint64_t still = repeat(bits);
+            const std::uint64_t still = repeat(bits, bi);
             if (still != bits) br.seen = still;
             any = any || still != 0;
           }
@@ -910,7 +920,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
         for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
           const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
-          if (block_dirty_[bi] == 0) continue;
+          if (block_clamped_[bi] == kAllCells) continue;
           for (int i = 0; i < 3; ++i) {
             ba[i] = bl[i] << kBlockShift;
             bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
@@ -926,7 +936,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           // since (each cell not clamped free now was tested then): it sees free what that view saw, less the
           // cells clamped free since.
           if (was_whole && block_dirtied_[bi] < last && end_hash_[bi] == br.end_hash && unchanged(fb)) {
-            br.seen = repeat(br.at == base ? br.seen : 0);
+            br.seen = repeat(br.at == base ? br.seen : 0, bi);
             br.at = epoch_;
             any = any || br.seen != 0;
             continue;
@@ -947,95 +957,92 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           } else {
             std::fill(proj, proj + kBlockCells, CellProjection());
           }
-          for (at[0] = ba[0]; at[0] <= bb[0]; ++at[0]) {
-            for (at[1] = ba[1]; at[1] <= bb[1]; ++at[1]) {
-              const std::int64_t row = (at[0] * size_[1] + at[1]) * size_[2];
-              Eigen::Vector3d c =
-                  c0 + static_cast<double>(at[0] - ba[0]) * axis[0] + static_cast<double>(at[1] - ba[1]) * axis[1];
-              CellProjection* q = proj + ((((at[0] - ba[0]) << kBlockShift) + (at[1] - ba[1])) << kBlockShift);
-              for (at[2] = ba[2]; at[2] <= bb[2]; ++at[2], c += axis[2], ++q) {
-                const std::int64_t k = row + at[2];
-                if (testBit(hit_, k) || seen(k) || testBit(clamped_, k)) continue;
-                // Seen free: some pixel's ray passes through the cell and sees past all of it (a cell between the rays
-                // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
-                // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
-                // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
-                // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
-                // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
-                if (!(c.z() > half_depth)) continue;
-                const double zmax = c.z() + half_depth;
-                if (q->nearest == CellProjection::kNotYet) {
-                  const double inv_z = 1.0 / c.z();
-                  const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
-                  const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
-                  q->nearest = -1;
-                  if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
-                    const int u = static_cast<int>(uf), v = static_cast<int>(vf);
-                    const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
-                    q->nearest = 2 * (v * w + u) + (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm() ? 1 : 0);
-                  }
-                }
-                bool crossed = false;  // a pixel's ray crosses the cell and sees past it
-                if (q->nearest >= 0 && (q->nearest & 1) != 0) {
-                  // The pixel nearest the centre's projection surely crosses the cell (its ray passes within the
-                  // inscribed sphere): a surface it sees short of the far side settles the cell.
-                  const std::size_t p = static_cast<std::size_t>(q->nearest >> 1);
-                  if (past_depth[p] < zmax) continue;
-                  crossed = free_depth[p] >= zmax;
-                }
-                if (crossed && in_front) {
-                  see(k);
-                  seen_bits |= std::uint64_t{1} << (q - proj);
-                  continue;
-                }
-                if (q->u0 == CellProjection::kNotYet16) {
-                  cellFootprint(c, &f);
-                  if (f.state == 0) {
-                    q->u0 = static_cast<std::int16_t>(f.u0);
-                    q->u1 = static_cast<std::int16_t>(f.u1);
-                    q->v0 = static_cast<std::int16_t>(f.v0);
-                    q->v1 = static_cast<std::int16_t>(f.v1);
-                  } else {
-                    q->u0 = 1;
-                    q->u1 = 0;
-                  }
-                }
-                f.u0 = q->u0;
-                f.u1 = q->u1;
-                f.v0 = q->v0;
-                f.v1 = q->v1;
-                if (f.u0 > f.u1 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < zmax)) continue;
-                if (!crossed) {
-                  // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
-                  // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
-                  const Eigen::Vector3d s0 = c - 0.5 * (axis[0] + axis[1] + axis[2]);
-                  const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
-                  for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
-                    for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
-                      if (free_depth[static_cast<std::size_t>(v) * w + u] < zmax) continue;
-                      const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
-                      double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
-                      for (int i = 0; i < 3 && t0 <= t1; ++i) {
-                        const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
-                        if (std::fabs(dd) < 1e-15) {
-                          // parallel: inside the slab by kInside of a cell, or not (one along a face only touches)
-                          if (!(o[i] < -kInside * e && o[i] > -e + kInside * e)) t1 = -1.0;
-                          continue;
-                        }
-                        double ta = o[i] / dd, tb = (o[i] + e) / dd;
-                        if (ta > tb) std::swap(ta, tb);
-                        t0 = std::max(t0, ta);
-                        t1 = std::min(t1, tb);
-                      }
-                      crossed = t1 - t0 > kInside * res;  // through the cell, not touching an edge or corner
-                    }
-                  }
-                  if (!crossed) continue;
-                }
-                see(k);
-                seen_bits |= std::uint64_t{1} << (q - proj);
+          // The cells neither clamped free nor hit nor seen free already (a block's words: no test per cell), each
+          // at its offset from the block's first cell (its id, its centre in the optical frame, its projection).
+          const std::int64_t k0 = (ba[0] * size_[1] + ba[1]) * size_[2] + ba[2];
+          for (std::uint64_t todo = ~(block_clamped_[bi] | block_ended_[bi]); todo != 0; todo &= todo - 1) {
+            const int n = __builtin_ctzll(todo);
+            const std::int64_t k = k0 + cell_offset_[n];
+            const Eigen::Vector3d c = c0 + cell_step[n];
+            CellProjection* q = proj + n;
+            // Seen free: some pixel's ray passes through the cell and sees past all of it (a cell between the rays
+            // of a sparse image is not seen), and every pixel whose ray may cross the cell (its rectangle),
+            // robot pixels aside, sees past all of it too. Tests, cheapest first: the pixel nearest the
+            // centre's projection, whose ray surely crosses the cell when it passes within the inscribed
+            // sphere (most cells that get here lie behind a surface and stop there); the rectangle's depths
+            // (pyramid); then, unless the first pixel settled it, each pixel of the rectangle (exact slabs).
+            if (!(c.z() > half_depth)) continue;
+            const double zmax = c.z() + half_depth;
+            if (q->nearest == CellProjection::kNotYet) {
+              const double inv_z = 1.0 / c.z();
+              const double uf = camera.fx * c.x() * inv_z + camera.cx + 0.5;
+              const double vf = camera.fy * c.y() * inv_z + camera.cy + 0.5;
+              q->nearest = -1;
+              if (uf >= 0.0 && uf < w && vf >= 0.0 && vf < h) {
+                const int u = static_cast<int>(uf), v = static_cast<int>(vf);
+                const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
+                q->nearest = 2 * (v * w + u) + (c.cross(ray).squaredNorm() < r2 * ray.squaredNorm() ? 1 : 0);
               }
             }
+            bool crossed = false;  // a pixel's ray crosses the cell and sees past it
+            if (q->nearest >= 0 && (q->nearest & 1) != 0) {
+              // The pixel nearest the centre's projection surely crosses the cell (its ray passes within the
+              // inscribed sphere): a surface it sees short of the far side settles the cell.
+              const std::size_t p = static_cast<std::size_t>(q->nearest >> 1);
+              if (past_depth[p] < zmax) continue;
+              crossed = free_depth[p] >= zmax;
+            }
+            if (crossed && in_front) {
+              see(k);
+              seen_bits |= std::uint64_t{1} << n;
+              continue;
+            }
+            if (q->u0 == CellProjection::kNotYet16) {
+              cellFootprint(c, &f);
+              if (f.state == 0) {
+                q->u0 = static_cast<std::int16_t>(f.u0);
+                q->u1 = static_cast<std::int16_t>(f.u1);
+                q->v0 = static_cast<std::int16_t>(f.v0);
+                q->v1 = static_cast<std::int16_t>(f.v1);
+              } else {
+                q->u0 = 1;
+                q->u1 = 0;
+              }
+            }
+            f.u0 = q->u0;
+            f.u1 = q->u1;
+            f.v0 = q->v0;
+            f.v1 = q->v1;
+            if (f.u0 > f.u1 || (!in_front && over(min_depth_, true, f.u0, f.u1, f.v0, f.v1) < zmax)) continue;
+            if (!crossed) {
+              // Another pixel of the rectangle whose ray crosses the cell (slabs along the cell's edges, in
+              // the optical frame) and sees past it: beside the robot, whose pixels hide part of the cell.
+              const Eigen::Vector3d s0 = c - 0.5 * (axis[0] + axis[1] + axis[2]);
+              const double o[3] = {s0.dot(axis[0]), s0.dot(axis[1]), s0.dot(axis[2])}, e = res * res;
+              for (int v = f.v0; v <= f.v1 && !crossed; ++v) {
+                for (int u = f.u0; u <= f.u1 && !crossed; ++u) {
+                  if (free_depth[static_cast<std::size_t>(v) * w + u] < zmax) continue;
+                  const Eigen::Vector3d ray(ray_x_[u], ray_y_[v], 1.0);
+                  double t0 = 0.0, t1 = std::numeric_limits<double>::infinity();
+                  for (int i = 0; i < 3 && t0 <= t1; ++i) {
+                    const double dd = ray.dot(axis[i]);  // the ray's rate along edge i, x res
+                    if (std::fabs(dd) < 1e-15) {
+                      // parallel: inside the slab by kInside of a cell, or not (one along a face only touches)
+                      if (!(o[i] < -kInside * e && o[i] > -e + kInside * e)) t1 = -1.0;
+                      continue;
+                    }
+                    double ta = o[i] / dd, tb = (o[i] + e) / dd;
+                    if (ta > tb) std::swap(ta, tb);
+                    t0 = std::max(t0, ta);
+                    t1 = std::min(t1, tb);
+                  }
+                  crossed = t1 - t0 > kInside * res;  // through the cell, not touching an edge or corner
+                }
+              }
+              if (!crossed) continue;
+            }
+            see(k);
+            seen_bits |= std::uint64_t{1} << n;
           }
           br.seen = seen_bits;
           br.at = epoch_;
@@ -1076,6 +1083,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     }
     now_listed->clear();
   };
+  for (std::int64_t b : end_blocks_) block_ended_[b] = 0;
   keep(&end_hash_, &end_blocks_, &view->blocks, &view->end_blocks);
   keep(&super_end_hash_, &end_supers_, &view->supers, &view->end_supers);
   out->stats.free_cells = free_cells;
@@ -1100,8 +1108,9 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   const bool now = v >= threshold_;  // false for NaN (unknown)
   if (now == testBit(occupied_, c) && was_dirty == dirty) return;
   std::int64_t b, s;
-  boxesOf(c, &b, &s);
-  block_dirty_[b] = static_cast<std::uint8_t>(block_dirty_[b] + dirty - was_dirty);
+  std::uint64_t bit;
+  boxesOf(c, &b, &s, &bit);
+  block_clamped_[b] = dirty ? block_clamped_[b] & ~bit : block_clamped_[b] | bit;
   if (dirty && !was_dirty) block_dirtied_[b] = super_dirtied_[s] = epoch_;
   super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
   if (now == testBit(occupied_, c)) return;
@@ -1180,23 +1189,34 @@ void OccupancyMap::fillUnobserved(bool on) {
   std::fill(seen_block_count_.begin(), seen_block_count_.end(), 0);
   std::fill(seen_super_count_.begin(), seen_super_count_.end(), 0);
   seen_occupied_ = 0;
-  // Every cell counts as dirty (unknown) until setValue says otherwise: each block and superblock as many as it holds.
-  auto fill = [&](const std::int64_t* boxes, int shift, auto* dirty, auto index) {
-    using Count = typename std::remove_reference_t<decltype(*dirty)>::value_type;
-    std::int64_t at[3];
-    for (at[0] = 0; at[0] < boxes[0]; ++at[0]) {
-      for (at[1] = 0; at[1] < boxes[1]; ++at[1]) {
-        for (at[2] = 0; at[2] < boxes[2]; ++at[2]) {
-          std::int64_t n = 1;
-          for (int i = 0; i < 3; ++i) n *= std::min(size_[i], (at[i] + 1) << shift) - (at[i] << shift);
-          (*dirty)[static_cast<std::size_t>(index(at))] = static_cast<Count>(n);
-        }
+  // Every cell counts as dirty (unknown) until setValue says otherwise: each superblock as many as it holds, and no
+  // cell of a block is clamped free (a block's bits past the grid's end are set: those cells never count).
+  std::int64_t at[3], n[3];
+  for (at[0] = 0; at[0] < supers_[0]; ++at[0]) {
+    for (at[1] = 0; at[1] < supers_[1]; ++at[1]) {
+      for (at[2] = 0; at[2] < supers_[2]; ++at[2]) {
+        for (int i = 0; i < 3; ++i) n[i] = std::min(size_[i], (at[i] + 1) << kSuperShift) - (at[i] << kSuperShift);
+        super_dirty_[(at[0] * supers_[1] + at[1]) * supers_[2] + at[2]] =
+            static_cast<std::uint16_t>(n[0] * n[1] * n[2]);
       }
     }
-  };
-  fill(blocks_, kBlockShift, &block_dirty_, [&](const std::int64_t* at) { return blockIndex(at[0], at[1], at[2]); });
-  fill(supers_, kSuperShift, &super_dirty_,
-       [&](const std::int64_t* at) { return (at[0] * supers_[1] + at[1]) * supers_[2] + at[2]; });
+  }
+  std::fill(block_clamped_.begin(), block_clamped_.end(), kAllCells);  // the blocks past the grid's end
+  for (at[0] = 0; at[0] < blocks_[0]; ++at[0]) {
+    for (at[1] = 0; at[1] < blocks_[1]; ++at[1]) {
+      for (at[2] = 0; at[2] < blocks_[2]; ++at[2]) {
+        for (int i = 0; i < 3; ++i) n[i] = std::min(size_[i], (at[i] + 1) << kBlockShift) - (at[i] << kBlockShift);
+        std::uint64_t inside = 0;
+        for (std::int64_t x = 0; x < n[0]; ++x) {
+          for (std::int64_t y = 0; y < n[1]; ++y) {
+            for (std::int64_t z = 0; z < n[2]; ++z)
+              inside |= std::uint64_t{1} << (((x << kBlockShift | y) << kBlockShift) | z);
+          }
+        }
+        block_clamped_[static_cast<std::size_t>(blockIndex(at[0], at[1], at[2]))] = ~inside;
+      }
+    }
+  }
   const auto cells = static_cast<std::int64_t>(value_.size());
   for (std::int64_t c = 0; c < cells; ++c) {
     if (!testBit(observed_, c)) value_[c] = on ? prior_ : unknown;

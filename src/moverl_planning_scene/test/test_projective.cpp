@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <set>
 #include <stdexcept>
 
 #include "moverl_planning_scene/cloud_integrator.h"
@@ -152,6 +153,57 @@ TEST(Projective, SeesFreeWhatLiesBeforeAWallAndNothingBehindIt) {
   }
   EXPECT_FALSE(map->observed(Eigen::Vector3d(1.7, 0.01, 0.01)));  // behind the wall: unknown
   EXPECT_FALSE(map->observed(Eigen::Vector3d(0.5, 0.9, 0.01)));   // outside the view (half angle ~38 deg)
+}
+
+TEST(Projective, AHitCellOrAFixturesEndCellIsNotSeenFreeByTheProjectionToo) {
+  // A wall at x = 1.5 in every pixel; besides its points, an obstacle's point and a fixture's point in front of it,
+  // on rays that see past them (the depths say free there). The obstacle's cell is hit and stays so (occupied wins);
+  // the fixture's cell is seen free once, as where only a fixture's points end; no cell is in the update twice.
+  auto map = makeMap();
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const auto xyz = image(kCamera, [](int, int) { return 1.5; });
+  std::vector<Eigen::Vector3d> points = mapPoints(xyz, pose);
+  std::vector<std::uint8_t> mask(points.size(), mps::kPointObstacle);
+  const Eigen::Vector3d obstacle(0.71, 0.01, 0.01), fixture(0.91, 0.01, 0.01);
+  points.push_back(obstacle);
+  mask.push_back(mps::kPointObstacle);
+  points.push_back(fixture);
+  mask.push_back(mps::kPointOnFixture);
+  mps::MapUpdate u;
+  map->computeUpdateProjective(points, mask, depths(xyz), {}, kCamera, pose, &u);
+  auto cells_at = [&](const std::vector<std::uint64_t>& keys, const Eigen::Vector3d& p) {
+    return std::count_if(keys.begin(), keys.end(), [&](std::uint64_t key) {
+      return (map->cellCentre(key) - p).cwiseAbs().maxCoeff() < 0.01;  // p's cell (resolution 0.02)
+    });
+  };
+  EXPECT_EQ(cells_at(u.hits, obstacle), 1);
+  EXPECT_EQ(cells_at(u.misses, obstacle), 0);
+  EXPECT_EQ(cells_at(u.hits, fixture), 0);
+  EXPECT_EQ(cells_at(u.misses, fixture), 1);
+  EXPECT_GT(cells_at(u.misses, Eigen::Vector3d(0.81, 0.01, 0.01)), 0);  // between them: seen free
+  std::set<std::uint64_t> once(u.hits.begin(), u.hits.end());
+  once.insert(u.misses.begin(), u.misses.end());
+  EXPECT_EQ(once.size(), u.hits.size() + u.misses.size());
+  EXPECT_EQ(u.stats.free_cells, u.misses.size());  // a fresh map: every cell seen free changes
+}
+
+TEST(Projective, ACellClampedFreeIsNotLookedAtAgain) {
+  // The same wall, view after view: the cells before it clamp free, and from then on an update sees none of them
+  // (stats.free_cells counts the cells not yet clamped free only), with the camera's last view repeated or without.
+  for (bool skip : {false, true}) {
+    auto map = makeMap(false, skip);
+    const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+    const auto xyz = image(kCamera, [](int, int) { return 1.5; });
+    mps::MapUpdate u;
+    for (int view = 0; view < 12; ++view) {
+      map->computeUpdateProjective(mapPoints(xyz, pose), {}, depths(xyz), {}, kCamera, pose, &u);
+      if (view == 0) EXPECT_GT(u.stats.free_cells, 1000u);
+      map->apply(u);
+    }
+    EXPECT_EQ(u.stats.free_cells, 0u) << "skip_unchanged_blocks " << skip;
+    EXPECT_TRUE(u.misses.empty()) << "skip_unchanged_blocks " << skip;
+    EXPECT_FALSE(map->occupied(Eigen::Vector3d(1.1, 0.01, 0.01)));
+  }
 }
 
 TEST(Projective, PixelsWithoutAReturnSeeNothingFree) {

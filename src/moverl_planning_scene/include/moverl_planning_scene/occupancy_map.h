@@ -263,8 +263,8 @@ class OccupancyMap {
   /// blocks side by side, in x, y, z order), so that the blocks the projective update visits together share cache
   /// lines.
   std::int64_t blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const;
-  /// The block and the superblock that hold cell c.
-  void boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super) const;
+  /// The block and the superblock that hold cell c, and (bit: optional) c's bit in the block's words (block_clamped_).
+  void boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super, std::uint64_t* bit = nullptr) const;
   /// Set cell c's value, keeping the occupied bit and the block counts.
   void setValue(std::int64_t c, float v);
   /// Every unobserved cell at the prior (on) or unknown (off).
@@ -302,8 +302,15 @@ class OccupancyMap {
   std::vector<std::uint64_t> clamped_;   ///< a bit per cell: log-odds at clamp_min (a miss changes nothing)
   // Occupied cells per block of 4^3 cells (blockIndex) and per superblock of 16^3, and the blocks' grid sizes.
   std::vector<std::uint8_t> block_count_;
-  std::vector<std::uint8_t> block_dirty_;   ///< per block: cells not at clamp_min (unknown ones included)
-  std::vector<std::uint16_t> super_dirty_;  ///< per superblock: the same
+  /// Per block, a bit per cell (in the block's x, y, z order): at clamp_min (clamped_'s bits, gathered per block), or
+  /// past the grid's end. A block with every bit set has no dirty cell: a miss changes none of its cells.
+  std::vector<std::uint64_t> block_clamped_;
+  /// computeUpdateProjective's scratch, per block: a bit per cell hit or seen free before its blocks are evaluated
+  /// (hit_ and seen_'s bits of the cloud's end cells; zero again after the update)
+  std::vector<std::uint64_t> block_ended_;
+  /// Each cell of a block (its bit in those words) as an offset of its id from the block's first cell's.
+  std::int64_t cell_offset_[64] = {};
+  std::vector<std::uint16_t> super_dirty_;  ///< per superblock: its cells not at clamp_min (unknown ones included)
   /// computeUpdateProjective's scratch: pyramids of each pixel's free depth (max_depth_, level 0: the free depths) and
   /// of the same with robot pixels at their reach (min_depth_: they hide nothing beside)
   std::vector<std::vector<float>> min_depth_, max_depth_;

@@ -80,17 +80,27 @@ def test_standard_driver_real_time_moving_wall():
         truth = GroundTruthContacts()
         env.reset(seed=0, options={"start": LEFT})
         step = rospy.ServiceProxy("/shield/step", ShieldStep)
-        # Turning from LEFT to RIGHT takes 0.74 s; the wall (1 s period) crosses that path during any such window.
+        # Turning between LEFT and RIGHT takes 0.74 s; the wall (1 s period) crosses that path during any such window.
+        # Each call turns towards the other side from where the robot stands: a call is answered either by
+        # DISCARDED_PATH (held still) or by REPLANNED (a plan around the wall, executed), depending on the wall's phase
+        # in real time. Turning back from where the robot stands keeps a reset across the swing (8-17 s) out of it.
+        right, turns = False, []
         for _ in range(3):
-            res = step(target=RIGHT, duration=0.05)
+            res = step(target=LEFT if right else RIGHT, duration=0.05)
             assert res.verdict != ShieldStepResponse.SAFE, res.message
-            env.reset(options={"start": LEFT})
-        counts, _ = push(env, INTO_WALL, 150, seed=1, start=NEAR_WALL)
+            turns.append(res.verdict)
+            right = res.state.position[0] > 0.0
+        # Push towards the wall from the side the robot stands on (the wall lies in the plane y = 0, so the mirror
+        # image of a start and a direction is the same test).
+        mirror = np.array([-1.0 if right else 1.0] + [1.0] * 6)
+        start = list(np.array(NEAR_WALL) * mirror)
+        counts, _ = push(env, INTO_WALL * mirror, 150, seed=1, start=start)
         rospy.sleep(0.3)  # the last contact reports arrive
         pairs, substeps, reports = truth.snapshot()
         print(
-            "\nstandard driver, real time, dynamic control, moving wall: verdicts %s, %d ground-truth contact pairs"
-            " (%d reports)" % (counts, pairs, reports)
+            "\nstandard driver, real time, dynamic control, moving wall: turns across the swing %s;"
+            " pushing from the %s: verdicts %s, %d ground-truth contact pairs (%d reports)"
+            % (turns, "right" if right else "left", counts, pairs, reports)
         )
         assert reports > 0
         assert (pairs, substeps) == (0, 0), truth.pairs

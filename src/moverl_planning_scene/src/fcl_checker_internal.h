@@ -20,6 +20,29 @@
 
 namespace moverl_planning_scene {
 
+/// A convex hull's distance field on a grid in the shape's frame: each grid vertex's distance to the hull (0 inside),
+/// for the self filter's point test (FclCollisionChecker::pointMask). The distance to a convex set is a convex function
+/// that changes no faster than the point moves, so the eight vertices of the grid cell around a point bound its
+/// distance: from above by their trilinear interpolation (the weights are a convex combination of the vertices that
+/// reproduces the point: Jensen's inequality), from below by the nearest vertex's distance less the way to it. Most of
+/// a cloud's points on or near a link are settled by these bounds; the hull's faces answer the rest.
+struct HullDistanceGrid {
+  Eigen::Vector3d lo = Eigen::Vector3d::Zero();  ///< the first vertex (shape frame)
+  double h = 0.0, inv_h = 0.0;                   ///< vertex spacing (m) and its inverse
+  double margin = 0.0;  ///< the grid reaches this far beyond the hull's box: a point outside is farther from the hull
+  std::array<int, 3> n{{0, 0, 0}};  ///< vertices per axis
+  std::vector<float> d;             ///< distances, x fastest (rounded up to a float)
+  /// 1: x (shape frame) lies within pad of the hull; -1: farther; 0: the bounds do not settle it.
+  int classify(const Eigen::Vector3d& x, double pad) const;
+};
+
+/// The distance field of the hull (vertices, triangles, planes as in Geom) on a grid of spacing h reaching margin
+/// beyond its box.
+std::shared_ptr<const HullDistanceGrid> buildHullDistanceGrid(const std::vector<Eigen::Vector3d>& vertices,
+                                                              const std::vector<std::array<int, 3>>& faces,
+                                                              const std::vector<Eigen::Vector4d>& planes, double h,
+                                                              double margin);
+
 struct FclCollisionChecker::Geom {
   int link = -1;
   ShapeType type = ShapeType::kBox;
@@ -31,6 +54,8 @@ struct FclCollisionChecker::Geom {
   // Empty otherwise (FCL answers).
   std::vector<std::array<int, 3>> faces;
   std::vector<Eigen::Vector4d> planes;
+  // The hull's distance field (with planes only): built when pointMask first tests the shape, under grids_mutex_.
+  mutable std::shared_ptr<const HullDistanceGrid> distance_grid;
   std::shared_ptr<fcl::CollisionGeometry<double>> geom;
   Eigen::Isometry3d origin = Eigen::Isometry3d::Identity();  // shape in link frame
   Eigen::Vector3d center_local = Eigen::Vector3d::Zero();    // bounding sphere centre, link frame

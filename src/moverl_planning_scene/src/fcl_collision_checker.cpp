@@ -459,6 +459,89 @@ double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vecto
 
 }  // namespace
 
+std::shared_ptr<const HullDistanceGrid> buildHullDistanceGrid(const std::vector<Eigen::Vector3d>& vertices,
+                                                              const std::vector<std::array<int, 3>>& faces,
+                                                              const std::vector<Eigen::Vector4d>& planes, double h,
+                                                              double margin) {
+  auto grid = std::make_shared<HullDistanceGrid>();
+  Eigen::Vector3d lo = vertices.front(), hi = lo;
+  for (const Eigen::Vector3d& v : vertices) {
+    lo = lo.cwiseMin(v);
+    hi = hi.cwiseMax(v);
+  }
+  grid->h = h;
+  grid->inv_h = 1.0 / h;
+  grid->margin = margin;
+  grid->lo = lo - Eigen::Vector3d::Constant(margin);
+  for (int a = 0; a < 3; ++a) grid->n[a] = static_cast<int>(std::ceil((hi[a] - lo[a] + 2.0 * margin) / h)) + 1;
+  grid->d.resize(static_cast<std::size_t>(grid->n[0]) * grid->n[1] * grid->n[2]);
+  std::size_t at = 0;
+  for (int z = 0; z < grid->n[2]; ++z) {
+    for (int y = 0; y < grid->n[1]; ++y) {
+      for (int x = 0; x < grid->n[0]; ++x, ++at) {
+        const Eigen::Vector3d p = grid->lo + h * Eigen::Vector3d(x, y, z);
+        // Inside every face's plane: 0. Outside, the distance is at least the largest of the planes' (each plane
+        // bounds a half-space holding the hull), and it is that when the point lies in front of that plane's face;
+        // otherwise the nearest point lies on one of the faces the point is in front of.
+        double most = 0.0;
+        std::size_t most_face = 0;
+        for (std::size_t f = 0; f < planes.size(); ++f) {
+          const double e = planes[f].head<3>().dot(p) - planes[f][3];
+          if (e > most) {
+            most = e;
+            most_face = f;
+          }
+        }
+        double dist = 0.0;
+        if (most > 0.0) {
+          auto distance2 = [&](std::size_t f) {
+            const auto& t = faces[f];
+            return pointTriangleDistanceSquared(p, vertices[t[0]], vertices[t[1]], vertices[t[2]]);
+          };
+          double nearest2 = distance2(most_face);
+          if (nearest2 > most * most * (1.0 + 1e-12)) {  // not in front of that face: the faces in front of it
+            for (std::size_t f = 0; f < planes.size(); ++f) {
+              if (f != most_face && planes[f].head<3>().dot(p) - planes[f][3] > 0.0) {
+                nearest2 = std::min(nearest2, distance2(f));
+              }
+            }
+          }
+          dist = std::sqrt(nearest2);
+        }
+        float stored = static_cast<float>(dist);
+        if (stored < dist) stored = std::nextafter(stored, std::numeric_limits<float>::infinity());
+        grid->d[at] = stored;
+      }
+    }
+  }
+  return grid;
+}
+
+int HullDistanceGrid::classify(const Eigen::Vector3d& x, double pad) const {
+  std::array<int, 3> i;
+  std::array<double, 3> t;
+  for (int a = 0; a < 3; ++a) {
+    const double g = (x[a] - lo[a]) * inv_h, f = std::floor(g);
+    if (!(f >= 0.0 && f < n[a] - 1)) return pad < margin ? -1 : 0;  // beyond the grid: farther than margin
+    i[a] = static_cast<int>(f);
+    t[a] = g - f;
+  }
+  const std::size_t sy = static_cast<std::size_t>(n[0]), sz = sy * static_cast<std::size_t>(n[1]);
+  const float* c = &d[static_cast<std::size_t>(i[0]) + sy * i[1] + sz * i[2]];
+  const double c000 = c[0], c100 = c[1], c010 = c[sy], c110 = c[sy + 1];
+  const double c001 = c[sz], c101 = c[sz + 1], c011 = c[sz + sy], c111 = c[sz + sy + 1];
+  const double c00 = c000 + (c100 - c000) * t[0], c10 = c010 + (c110 - c010) * t[0];
+  const double c01 = c001 + (c101 - c001) * t[0], c11 = c011 + (c111 - c011) * t[0];
+  const double c0 = c00 + (c10 - c00) * t[1], c1 = c01 + (c11 - c01) * t[1];
+  if (c0 + (c1 - c0) * t[2] <= pad) return 1;
+  // The nearest vertex, less the way to it (a float's rounding of the stored distance: 1e-8 m kept in hand).
+  const int nx = t[0] >= 0.5, ny = t[1] >= 0.5, nz = t[2] >= 0.5;
+  const double ex = nx ? 1.0 - t[0] : t[0], ey = ny ? 1.0 - t[1] : t[1], ez = nz ? 1.0 - t[2] : t[2];
+  const double nearest = c[nx + sy * ny + sz * nz];
+  if (nearest - h * std::sqrt(ex * ex + ey * ey + ez * ez) - 1e-8 > pad) return -1;
+  return 0;
+}
+
 void FclCollisionChecker::linkPointMask(const double* q, int link, const std::vector<Eigen::Vector3d>& points,
                                         double padding, std::vector<std::uint8_t>* mask,
                                         const std::vector<std::uint8_t>* skip) const {
@@ -475,6 +558,12 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
   const double pad = std::max(padding, 1e-6), pad2 = pad * pad;
   auto probe = std::make_shared<fcl::Sphered>(pad);
   fcl::CollisionRequestd req(1, false);
+  // The hulls' distance fields (HullDistanceGrid), built once, when a hull is first tested (about 0.14 s for the
+  // Panda's): vertices 1 cm apart (on the recorded clouds 1 cm and 2 cm spacing filtered as fast, 5 mm slower: its
+  // fields are 8 times larger), reaching 3 cm beyond each hull's box, which covers the self filter's padding and the
+  // known-free pass's (padding + half a cell's diagonal: 2.7 cm with the defaults); a point beyond a field with a
+  // larger pad is left to the faces.
+  constexpr double kGridSpacing = 0.01, kGridMargin = 0.03;
   // Each shape in the base frame: pose, bounding sphere (grown by pad) and, for an exact convex hull, its planes and
   // vertices; the box around all the spheres rejects most of a cloud's points with six comparisons.
   struct Shape {
@@ -484,12 +573,14 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     double r2;
     std::vector<Eigen::Vector4d> planes;
     std::vector<Eigen::Vector3d> vertices;
+    const HullDistanceGrid* grid;  // the hull's distance field (null: none)
+    Eigen::Isometry3d inv;         // base frame -> shape frame
   };
   std::vector<Shape> shapes;
   Eigen::AlignedBox3d reach;
   for (const Geom& g : geoms_) {
     if (link >= 0 && g.link != link) continue;
-    Shape sh{&g, poses[g.link] * g.origin, poses[g.link] * g.center_local, 0.0, {}, {}};
+    Shape sh{&g, poses[g.link] * g.origin, poses[g.link] * g.center_local, 0.0, {}, {}, nullptr, {}};
     const double r = g.radius + pad;
     sh.r2 = r * r;
     reach.extend(sh.center - Eigen::Vector3d::Constant(r));
@@ -500,6 +591,14 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
         sh.planes.emplace_back(n.x(), n.y(), n.z(), pl[3] + n.dot(sh.tf.translation()));
       }
       for (const Eigen::Vector3d& v : g.vertices) sh.vertices.push_back(sh.tf * v);
+      {
+        std::lock_guard<std::mutex> lock(grids_mutex_);
+        if (g.distance_grid == nullptr) {
+          g.distance_grid = buildHullDistanceGrid(g.vertices, g.faces, g.planes, kGridSpacing, kGridMargin);
+        }
+        sh.grid = g.distance_grid.get();  // kept by the shape, which lives as long as the checker
+      }
+      sh.inv = sh.tf.inverse();
     }
     shapes.push_back(std::move(sh));
   }
@@ -533,6 +632,8 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
       fcl::collide(probe.get(), at, sh.g->geom.get(), sh.tf, req, res);
       return res.isCollision();
     }
+    const int bounds = sh.grid->classify(sh.inv * p, pad);
+    if (bounds != 0) return bounds > 0;
     if ((p - memo.in).squaredNorm() <= memo.in2) return true;
     if ((p - memo.out).squaredNorm() <= memo.out2) return false;
     auto distance2 = [&](int f) {  // p's squared distance to face f

@@ -429,7 +429,7 @@ TEST(SelfFilter, HullFacesAgreeWithFclOnThePanda) {
           z(b.min().z(), b.max().z());
       for (int k = 0; k < 1500; ++k) points.emplace_back(x(rng), y(rng), z(rng));
     }
-    for (double pad : {0.001, 0.01, 0.03}) {
+    for (double pad : {0.001, 0.01, 0.03, 0.05}) {
       std::vector<std::uint8_t> fast, oracle, below, above;
       checker.robotPointMask(q.data(), points, pad, &fast);
       checker.linkPointMaskFcl(q.data(), -1, points, pad, &oracle);

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -218,6 +219,7 @@ class FclCollisionChecker : public CollisionChecker {
   const RobotModel& model_;
   FclCheckerOptions options_;
   std::vector<Geom> geoms_;                      // all robot collision shapes
+  mutable std::mutex grids_mutex_;               // guards the shapes' distance_grid, built when first needed
   std::vector<std::vector<int>> link_geoms_;     // per link
   std::vector<AcmReason> acm_;                   // n_links x n_links
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs

@@ -11,9 +11,11 @@ An id may carry launch arguments after commas, e.g. the person sensed by cameras
         MoveRL/PandaReachHuman-v0,obstacles=sensed,camera_rate=10 --steps 300
 
 With a sensed map, the planning scene's own account of its integration time (~octomap_status.integration_time of
-every cloud) is summed too: the shield process's CPU splits into integrating clouds and the rest (the checks); the
-simulator's is mostly rendering then. The steps' verdicts are counted as well (info["verdict"]): a configuration
-whose steps discard more moves does less (no motion, no render) and looks faster than it is.
+every cloud) is summed too; that is wall time, and its pool runs parts of a cloud on a second core, so the shield's
+CPU is also split by thread: the integration's threads name themselves (its loop and its pool's workers,
+THREAD_PREFIX below), and the shield's other threads are its services (the checks) and ROS's own. The simulator's CPU
+is mostly rendering then. The steps' verdicts are counted as well (info["verdict"]): a configuration whose steps
+discard more moves does less (no motion, no render) and looks faster than it is.
 
 --profile NAME (sim, shield, env, ...: a process of the graph, named as in the table) also samples that process
 while it is measured: py-spy (`pip install py-spy`, not part of the set-up) for a Python process, perf for a C++ one;
@@ -37,6 +39,10 @@ import threading
 import time
 
 from moverl_gym.workers import run_json_worker
+
+# The prefix of the names our C++ cores give their threads (moverl_planning_scene: "mps_integrate", the cloud
+# integration's loop; "mps_pool", its worker pool's).
+THREAD_PREFIX = "mps_"
 
 
 def parse_id(text: str) -> tuple[str, dict]:
@@ -122,7 +128,7 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
     import gymnasium as gym
 
     import moverl_gym  # noqa: F401
-    from moverl_gym.proctree import cmdline, context_switches, cpu_seconds, tree
+    from moverl_gym.proctree import cmdline, context_switches, cpu_seconds, thread_cpu_seconds, tree
 
     env_id, launch_args = parse_id(text)
     env = gym.make(env_id, launch_args=launch_args)
@@ -172,14 +178,14 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
             pid = target[0][0]
             folder = tempfile.mkdtemp(prefix="moverl_profile_")
             profiler = Profiler(pid, "python" in cmdline(pid).split()[0], folder)
-        c0, s0 = cpu_seconds(procs), context_switches(procs)
+        c0, s0, n0 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs)
         measuring.set()
         t0 = time.perf_counter()
         run(steps)
         wall = time.perf_counter() - t0
         measuring.clear()
         frames = profiler.stop() if profiler is not None else None
-        c1, s1 = cpu_seconds(procs), context_switches(procs)
+        c1, s1, n1 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs)
     finally:
         env.close()
     per, switches = {}, {}
@@ -189,6 +195,15 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
     for key, n in s1.items():
         if key in s0:
             switches[names[key]] = switches.get(names[key], 0.0) + (n - s0[key]) / steps
+    # The threads our C++ cores name (THREAD_PREFIX...: the integration's own and its pool's), and the rest of their
+    # process: a process's CPU split by what its threads do.
+    threads = {}
+    for key, by_name in n1.items():
+        named = {n: t - n0[key].get(n, 0.0) for n, t in by_name.items() if key in n0 and n.startswith(THREAD_PREFIX)}
+        if named and key in c0:
+            for n, t in named.items():
+                threads[f"{names[key]} {n}"] = 1000.0 * t / steps
+            threads[f"{names[key]} (other threads)"] = 1000.0 * ((c1[key] - c0[key]) - sum(named.values())) / steps
     out = {
         "env_id": text,
         "steps_per_s": steps / wall,
@@ -196,6 +211,7 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
         "total_ms": sum(per.values()),
         "switches_per_step": switches,
         "verdicts": verdicts,
+        "thread_ms_per_step": threads,
     }
     if frames is not None:
         out["profile"] = {"process": profile, "frames": frames}
@@ -257,6 +273,16 @@ def main(argv=None) -> int:
             print(n.ljust(24) + "".join(f"{v:28.3f}" for v in vals))
     totals = [sum(r["total_ms"] for r in results[i]) / len(results[i]) for i in args.ids]
     print("total".ljust(24) + "".join(f"{v:28.3f}" for v in totals))
+    threads = sorted({n for rs in results.values() for r in rs for n in r.get("thread_ms_per_step", {})})
+    if threads:
+        print(
+            "\nCPU ms per env step of the threads that name themselves and the rest of their process, mean over reps:"
+        )
+        print("thread".ljust(32) + "".join(_column(i) for i in args.ids))
+        for n in threads:
+            vals = [sum(r.get("thread_ms_per_step", {}).get(n, 0.0) for r in results[i]) for i in args.ids]
+            vals = [v / len(results[i]) for v, i in zip(vals, args.ids)]
+            print(n.ljust(32) + "".join(f"{v:28.3f}" for v in vals))
     if any("integration_ms_per_step" in r for rs in results.values() for r in rs):
         print("\nthe planning scene's integration of clouds (its ~octomap_status.integration_time), mean over reps:")
         for key, label in (("clouds_per_step", "clouds per step"), ("integration_ms_per_step", "integration ms/step")):

@@ -4,6 +4,7 @@
  */
 #include "moverl_planning_scene/octomap_monitor.h"
 
+#include <pthread.h>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -290,6 +291,9 @@ void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
 }
 
 void OctomapMonitor::integrateLoop() {
+  // Named for the tools that split a process's CPU by thread (step_cost.py), as its pool's workers are
+  // (worker_pool.cpp).
+  pthread_setname_np(pthread_self(), "mps_integrate");
   while (true) {
     sensor_msgs::PointCloud2::ConstPtr msg;
     {

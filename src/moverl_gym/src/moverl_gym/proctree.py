@@ -140,6 +140,30 @@ def cpu_seconds(procs) -> dict[tuple[int, int], float]:
     return out
 
 
+def thread_cpu_seconds(procs) -> dict[tuple[int, int], dict[str, float]]:
+    """User + system CPU seconds so far of each process's threads alive now, summed by thread name (its comm: what the
+    thread named itself, e.g. with pthread_setname_np, else the process's name), keyed by (pid, start); gone processes
+    are left out. A thread that ended took its seconds with it."""
+    out = {}
+    for p in procs:
+        try:
+            with open(f"/proc/{p.pid}/stat", "rb") as f:
+                data = f.read()
+            if int(data[data.rindex(b")") + 2 :].split()[19]) != p.start:
+                continue  # the pid now names another process
+            names: dict[str, float] = {}
+            for task in os.listdir(f"/proc/{p.pid}/task"):
+                with open(f"/proc/{p.pid}/task/{task}/stat", "rb") as f:
+                    data = f.read()
+                name = data[data.index(b"(") + 1 : data.rindex(b")")].decode(errors="replace")
+                fields = data[data.rindex(b")") + 2 :].split()
+                names[name] = names.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / _TICK
+        except (OSError, ValueError):
+            continue
+        out[(p.pid, p.start)] = names
+    return out
+
+
 def memory_bytes(procs) -> dict[str, int]:
     """Summed resident set (rss) and proportional set (pss: shared pages split between their users) of procs."""
     rss = pss = 0

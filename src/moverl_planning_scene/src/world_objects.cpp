@@ -173,30 +173,61 @@ Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { retur
 void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
                                                 std::vector<std::uint8_t>* mask, WorkerPool* pool) const {
   mask->assign(points.size(), 0);
-  std::vector<std::pair<const WorldObject*, Eigen::Isometry3d>> fixed;  // each static object, and its frame's inverse
+  // Each static object as its test: its frame's inverse (centred), and its padded extent there (a box: half sizes +
+  // padding; a sphere: its radius + padding; a cylinder or cone, by its bounding cylinder: half length and radius, each
+  // + padding); the box around it in the base frame (staticObjectBoxes', grown by 1e-9 m against rounding) rejects
+  // most points with six comparisons.
+  struct Fixed {
+    ShapeType type;
+    Eigen::Isometry3d inv;
+    Eigen::Vector3d half;
+    double r;
+    Eigen::AlignedBox3d around;
+  };
+  std::vector<Fixed> fixed;
+  std::vector<Eigen::AlignedBox3d> around;
+  staticObjectBoxes(padding, &around);  // one box per object it masks points on, in world_'s order
+  std::size_t next = 0;
   for (const Obstacle& ob : world_) {
-    if (!ob.source.motion.moving()) fixed.emplace_back(&ob.source, ob.source.pose.inverse());
+    const WorldObject& o = ob.source;
+    if (o.motion.moving()) continue;
+    const auto& d = o.dimensions;
+    Fixed f{o.type, o.pose.inverse(), Eigen::Vector3d::Zero(), 0.0, {}};
+    switch (o.type) {
+      case ShapeType::kBox:
+        f.half = 0.5 * Eigen::Vector3d(d[0], d[1], d[2]);
+        break;
+      case ShapeType::kSphere:
+        f.r = d[0] + padding;
+        break;
+      case ShapeType::kCylinder:
+      case ShapeType::kCone:  // (its bounding cylinder)
+        f.half = Eigen::Vector3d(0.0, 0.0, 0.5 * d[0] + padding);
+        f.r = d[1] + padding;
+        break;
+      default:
+        continue;  // no point is masked on other shapes (staticObjectBoxes leaves them out too)
+    }
+    f.around = around.at(next++);
+    f.around.extend(f.around.min() - Eigen::Vector3d::Constant(1e-9));
+    f.around.extend(f.around.max() + Eigen::Vector3d::Constant(1e-9));
+    fixed.push_back(f);
   }
   WorkerPool::runParts(pool, points.size(), WorkerPool::kCheapPart, [&](std::size_t begin, std::size_t end, int) {
-    for (const auto& [object, inv] : fixed) {
-      const WorldObject& o = *object;
-      const auto& d = o.dimensions;
+    for (const Fixed& f : fixed) {
       for (std::size_t k = begin; k < end; ++k) {
-        if ((*mask)[k] != 0) continue;
-        const Eigen::Vector3d p = inv * points[k];  // in the object's frame (centred)
+        if ((*mask)[k] != 0 || !f.around.contains(points[k])) continue;
+        const Eigen::Vector3d p = f.inv * points[k];  // in the object's frame (centred)
         bool in = false;
-        switch (o.type) {
+        switch (f.type) {
           case ShapeType::kBox:
-            in = (p.cwiseAbs() - 0.5 * Eigen::Vector3d(d[0], d[1], d[2])).maxCoeff() <= padding;
+            in = (p.cwiseAbs() - f.half).maxCoeff() <= padding;
             break;
           case ShapeType::kSphere:
-            in = p.norm() <= d[0] + padding;
+            in = p.norm() <= f.r;
             break;
-          case ShapeType::kCylinder:
-          case ShapeType::kCone:  // (its bounding cylinder)
-            in = std::fabs(p.z()) <= 0.5 * d[0] + padding && p.head<2>().norm() <= d[1] + padding;
-            break;
-          default:
+          default:  // a cylinder or a cone's bounding cylinder
+            in = std::fabs(p.z()) <= f.half.z() && p.head<2>().norm() <= f.r;
             break;
         }
         if (in) (*mask)[k] = 1;

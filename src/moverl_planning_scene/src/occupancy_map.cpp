@@ -298,14 +298,14 @@ void OccupancyMap::growSlots() {
 
 void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                                    const std::vector<std::uint8_t>& robot_mask, const Eigen::Vector3d& origin,
-                                   MapUpdate* out, bool centroids, WorkerPool* pool) {
+                                   MapUpdate* out, bool beams, WorkerPool* pool) {
   out->hits.clear();
   out->misses.clear();
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
   // 1. End points (beyond max_range: cut there, free space only), grouped by cell: one beam per end cell (step 3),
-  //    to the centroid of the cell's points (centroids: order_end_ sums them, order_count_ counts them). order_flags_
+  //    to the centroid of the cell's points (beams: order_end_ sums them, order_count_ counts them). order_flags_
   //    holds the flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels
   //    cast neighbouring beams one after another: cache). The cells are found in a small hash table (slots_), not in
   //    a per-cell array: a cloud's end cells are scattered over the grid, and each would miss the cache.
@@ -332,6 +332,10 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
         flag = kRobot;
       }
       point_flags_[k] = flag;
+      if (flag == 0 && !beams) {  // no beam to cut at max_range: projection sees free space from the depths
+        point_cell_[k] = -1;
+        continue;
+      }
       // The end point's cell from float coordinates, as octomap's keys of point3d (a point on a cell boundary in
       // double may lie across it in float). g++ -O3 was seen to skip the rounding to float otherwise: each float is
       // kept as rounded, in a register (an empty asm that may change it; a volatile's trip through memory cost about a
@@ -368,7 +372,7 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
     if (c < 0) continue;
     if (c == last_cell) {  // the previous point's cell (neighbouring pixels): no look-up
       order_flags_[last_index] |= flag;
-      if (centroids) {
+      if (beams) {
         order_end_[last_index] += end_of(points[k], flag);
         ++order_count_[last_index];
       }
@@ -384,14 +388,14 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       order_slot_.push_back(at);
       order_.push_back(c);
       order_flags_.push_back(0);
-      if (centroids) {
+      if (beams) {
         order_end_.push_back(Eigen::Vector3d::Zero());
         order_count_.push_back(0);
       }
     }
     last_index = n;
     order_flags_[n] |= flag;
-    if (centroids) {
+    if (beams) {
       order_end_[n] += end_of(points[k], flag);
       ++order_count_[n];
     }

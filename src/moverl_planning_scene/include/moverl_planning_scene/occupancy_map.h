@@ -249,12 +249,14 @@ class OccupancyMap {
   }
   /// The log-odds a hit (update > 0) or a miss leaves in a cell that holds v (NaN: never observed).
   float updated(float v, float update) const;
-  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, order_flags_; with
-  ///        centroids, the sums and counts of their points: order_end_, order_count_) and its hits (hit_, out->hits);
-  ///        clears the seen_ marks and out. The points' cells are found in parts on the pool (optional; the same
-  ///        result).
+  /// computeUpdate's and computeUpdateProjective's steps 1-2: the cloud's end cells (order_, order_flags_) and its
+  ///        hits (hit_, out->hits); clears the seen_ marks and out. With beams (ray casting: a beam to each end cell),
+  ///        the sums and counts of each cell's points for its centroid (order_end_, order_count_), and the cells where
+  ///        the beams of points beyond max_range are cut; without (projection, which sees free space from the
+  ///        depths), those points' cells are left out (they carry no flag). The points' cells are found in parts on
+  ///        the pool (optional; the same result).
   void collectEndCells(const std::vector<Eigen::Vector3d>& points, const std::vector<std::uint8_t>& robot_mask,
-                       const Eigen::Vector3d& origin, MapUpdate* out, bool centroids, WorkerPool* pool);
+                       const Eigen::Vector3d& origin, MapUpdate* out, bool beams, WorkerPool* pool);
   /// collectEndCells' table: the slot of cell c (where it is, or the empty one where it goes), and a table twice as
   ///        large (the cells of order_ kept).
   std::size_t slot(std::int64_t c) const;

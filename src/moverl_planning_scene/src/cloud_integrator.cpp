@@ -48,17 +48,20 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   Clock::time_point at = Clock::now();
   if (why != nullptr) why->clear();
   // The points in the sensor frame (contiguous x y z, one per pixel: the pinhole fit), their depths (non-finite: no
-  // return), and the ones with a return in the map frame, in pixel order. Parts of the rows, then of the points, on
-  // the pool.
+  // return), and the ones with a return in the map frame, in pixel order. Parts of the rows on the pool: each row's
+  // points read and the ones with a return counted; then, from each row's first index (the counts before it summed),
+  // their pixels and map-frame points written.
   const std::size_t n = static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
   sensor_xyz_.resize(3 * n);
   depth_.resize(n);
   has_return_.resize(n);
   const std::size_t rows = static_cast<std::size_t>(std::max(0, height));
+  row_first_.assign(rows + 1, 0);
   const std::size_t rows_per_part = WorkerPool::kCheapPart / std::max<std::size_t>(1, std::max(0, width));
   WorkerPool::runParts(pool_.get(), rows, rows_per_part, [&](std::size_t v0, std::size_t v1, int) {
     for (std::size_t v = v0; v < v1; ++v) {
       const std::uint8_t* row = cloud.data + v * cloud.row_step;
+      std::size_t returns = 0;
       for (int u = 0; u < width; ++u) {
         const std::size_t pixel = v * width + u;
         float* s = &sensor_xyz_[3 * pixel];
@@ -68,19 +71,25 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
         std::memcpy(s + 2, point + cloud.z, sizeof(float));
         depth_[pixel] = s[2];
         // NaN marks no return in some drivers
-        has_return_[pixel] = std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2]) ? 1 : 0;
+        const bool finite = std::isfinite(s[0]) && std::isfinite(s[1]) && std::isfinite(s[2]);
+        has_return_[pixel] = finite ? 1 : 0;
+        returns += finite ? 1 : 0;
       }
+      row_first_[v + 1] = returns;
     }
   });
-  pixel_of_.clear();
-  for (std::size_t pixel = 0; pixel < n; ++pixel) {
-    if (has_return_[pixel] != 0) pixel_of_.push_back(static_cast<std::uint32_t>(pixel));
-  }
-  points_.resize(pixel_of_.size());
-  WorkerPool::runParts(pool_.get(), points_.size(), WorkerPool::kCheapPart, [&](std::size_t k0, std::size_t k1, int) {
-    for (std::size_t k = k0; k < k1; ++k) {
-      const float* s = &sensor_xyz_[3 * static_cast<std::size_t>(pixel_of_[k])];
-      points_[k] = sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]);
+  for (std::size_t v = 0; v < rows; ++v) row_first_[v + 1] += row_first_[v];
+  pixel_of_.resize(row_first_[rows]);
+  points_.resize(row_first_[rows]);
+  WorkerPool::runParts(pool_.get(), rows, rows_per_part, [&](std::size_t v0, std::size_t v1, int) {
+    for (std::size_t v = v0; v < v1; ++v) {
+      std::size_t k = row_first_[v];
+      for (std::size_t pixel = v * width, end = pixel + width; pixel < end; ++pixel) {
+        if (has_return_[pixel] == 0) continue;
+        const float* s = &sensor_xyz_[3 * pixel];
+        pixel_of_[k] = static_cast<std::uint32_t>(pixel);
+        points_[k++] = sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]);
+      }
     }
   });
   t.points = since(&at);

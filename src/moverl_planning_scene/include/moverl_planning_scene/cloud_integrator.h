@@ -98,6 +98,7 @@ class CloudIntegrator {
   std::vector<Eigen::Vector3d> points_;
   std::vector<std::uint32_t> pixel_of_;   ///< the pixel of each of points_
   std::vector<std::uint8_t> has_return_;  ///< per pixel: 1 where its point is finite
+  std::vector<std::size_t> row_first_;    ///< per row: the index in points_ of its first point (and the count last)
   std::vector<std::uint8_t> mask_, mask_more_, pixel_mask_;
   /// Unknown-is-occupied: turns free in *update the unobserved cells that reach into the robot's padding (in the
   /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it

@@ -596,7 +596,7 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
         if (g.distance_grid == nullptr) {
           g.distance_grid = buildHullDistanceGrid(g.vertices, g.faces, g.planes, kGridSpacing, kGridMargin);
         }
-        sh.grid = g.distance_grid.get();  // kept by the shape, which lives as long as the checker
+        sh.grid = g.distance_grid.get();  // the shape keeps it while the checker lives
       }
       sh.inv = sh.tf.inverse();
     }

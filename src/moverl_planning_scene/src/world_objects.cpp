@@ -90,6 +90,35 @@ bool sweptGeometry(const WorldObject& o, double p, double lo, double hi,
   }
 }
 
+/// A static object's half extents in its own frame, as staticObjectPointMask tests it (a box: its half sizes; a sphere:
+/// its radius on each axis; a cylinder or a cone, by its bounding cylinder: radius, radius, half length); false for a
+/// shape on which no point is masked.
+bool maskedHalf(const WorldObject& o, Eigen::Vector3d* half) {
+  const auto& d = o.dimensions;
+  switch (o.type) {
+    case ShapeType::kBox:
+      *half = 0.5 * Eigen::Vector3d(d[0], d[1], d[2]);
+      return true;
+    case ShapeType::kSphere:
+      *half = Eigen::Vector3d::Constant(d[0]);
+      return true;
+    case ShapeType::kCylinder:
+    case ShapeType::kCone:
+      *half = Eigen::Vector3d(d[1], d[1], 0.5 * d[0]);
+      return true;
+    default:
+      return false;
+  }
+}
+
+/// The object's half extents grown by padding (>= 0), rotated into the base frame: the box around it there, whose
+/// extent along each axis is |R| * (half + padding).
+Eigen::AlignedBox3d paddedBox(const WorldObject& o, const Eigen::Vector3d& half, double padding) {
+  const Eigen::Vector3d extent =
+      o.pose.linear().cwiseAbs() * (half + Eigen::Vector3d::Constant(std::max(padding, 0.0)));
+  return Eigen::AlignedBox3d(o.pose.translation() - extent, o.pose.translation() + extent);
+}
+
 }  // namespace
 
 std::size_t FclCollisionChecker::worldSize() const { return world_.size(); }
@@ -173,42 +202,21 @@ Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { retur
 void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
                                                 std::vector<std::uint8_t>* mask, WorkerPool* pool) const {
   mask->assign(points.size(), 0);
-  // Each static object as its test: its frame's inverse (centred), and its padded extent there (a box: half sizes +
-  // padding; a sphere: its radius + padding; a cylinder or cone, by its bounding cylinder: half length and radius, each
-  // + padding); the box around it in the base frame (staticObjectBoxes', grown by 1e-9 m against rounding) rejects
-  // most points with six comparisons.
+  // Each static object as its test: its frame's inverse (centred), its half extents there (maskedHalf), and the box
+  // around it grown by the padding in the base frame (paddedBox, and 1e-9 m more against rounding), which rejects most
+  // points with six comparisons.
   struct Fixed {
     ShapeType type;
     Eigen::Isometry3d inv;
     Eigen::Vector3d half;
-    double r;
     Eigen::AlignedBox3d around;
   };
   std::vector<Fixed> fixed;
-  std::vector<Eigen::AlignedBox3d> around;
-  staticObjectBoxes(padding, &around);  // one box per object it masks points on, in world_'s order
-  std::size_t next = 0;
   for (const Obstacle& ob : world_) {
     const WorldObject& o = ob.source;
-    if (o.motion.moving()) continue;
-    const auto& d = o.dimensions;
-    Fixed f{o.type, o.pose.inverse(), Eigen::Vector3d::Zero(), 0.0, {}};
-    switch (o.type) {
-      case ShapeType::kBox:
-        f.half = 0.5 * Eigen::Vector3d(d[0], d[1], d[2]);
-        break;
-      case ShapeType::kSphere:
-        f.r = d[0] + padding;
-        break;
-      case ShapeType::kCylinder:
-      case ShapeType::kCone:  // (its bounding cylinder)
-        f.half = Eigen::Vector3d(0.0, 0.0, 0.5 * d[0] + padding);
-        f.r = d[1] + padding;
-        break;
-      default:
-        continue;  // no point is masked on other shapes (staticObjectBoxes leaves them out too)
-    }
-    f.around = around.at(next++);
+    Fixed f{o.type, o.pose.inverse(), Eigen::Vector3d::Zero(), {}};
+    if (o.motion.moving() || !maskedHalf(o, &f.half)) continue;
+    f.around = paddedBox(o, f.half, padding);
     f.around.extend(f.around.min() - Eigen::Vector3d::Constant(1e-9));
     f.around.extend(f.around.max() + Eigen::Vector3d::Constant(1e-9));
     fixed.push_back(f);
@@ -224,10 +232,10 @@ void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3
             in = (p.cwiseAbs() - f.half).maxCoeff() <= padding;
             break;
           case ShapeType::kSphere:
-            in = p.norm() <= f.r;
+            in = p.norm() <= f.half.x() + padding;
             break;
           default:  // a cylinder or a cone's bounding cylinder
-            in = std::fabs(p.z()) <= f.half.z() && p.head<2>().norm() <= f.r;
+            in = std::fabs(p.z()) <= f.half.z() + padding && p.head<2>().norm() <= f.half.x() + padding;
             break;
         }
         if (in) (*mask)[k] = 1;
@@ -239,28 +247,9 @@ void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3
 void FclCollisionChecker::staticObjectBoxes(double padding, std::vector<Eigen::AlignedBox3d>* boxes) const {
   boxes->clear();
   for (const Obstacle& ob : world_) {
-    const WorldObject& o = ob.source;
-    if (o.motion.moving()) continue;
-    const auto& d = o.dimensions;
-    Eigen::Vector3d half;  // of the shape in its own frame, as staticObjectPointMask tests it
-    switch (o.type) {
-      case ShapeType::kBox:
-        half = 0.5 * Eigen::Vector3d(d[0], d[1], d[2]);
-        break;
-      case ShapeType::kSphere:
-        half = Eigen::Vector3d::Constant(d[0]);
-        break;
-      case ShapeType::kCylinder:
-      case ShapeType::kCone:
-        half = Eigen::Vector3d(d[1], d[1], 0.5 * d[0]);
-        break;
-      default:
-        continue;  // staticObjectPointMask masks no point on other shapes
-    }
-    // The padded box rotated into the base frame: its extent along each axis is |R| * (half + padding).
-    const Eigen::Vector3d extent =
-        o.pose.linear().cwiseAbs() * (half + Eigen::Vector3d::Constant(std::max(padding, 0.0)));
-    boxes->emplace_back(o.pose.translation() - extent, o.pose.translation() + extent);
+    Eigen::Vector3d half;
+    if (!ob.source.motion.moving() && maskedHalf(ob.source, &half))
+      boxes->push_back(paddedBox(ob.source, half, padding));
   }
 }
 

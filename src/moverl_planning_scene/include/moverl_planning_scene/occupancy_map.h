@@ -51,6 +51,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -213,6 +214,12 @@ class OccupancyMap {
   /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
   double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
   const OccupancyMapOptions& options() const { return options_; }
+  /// \brief How many misses take an unobserved cell (at unknown_occupied's prior, or unknown) to clamp_min: until a
+  ///        camera has seen its free space that often, each view changes every cell it sees free (the map's fill).
+  int missesToClampFree() const {
+    const float from = options_.unknown_occupied ? prior_ : 0.0f;
+    return std::max(1, static_cast<int>(std::ceil((clamp_min_ - from) / log_miss_)));
+  }
 
  private:
   /// What computeUpdateProjective keeps of one camera's last view (skip_unchanged_blocks); defined in the .cpp.

@@ -8,6 +8,7 @@
 #include <octomap/OcTree.h>
 
 #include <chrono>
+#include <cmath>
 #include <limits>
 #include <random>
 #include <unordered_map>
@@ -922,4 +923,31 @@ TEST(SensedMargin, AgeAndRule) {
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
+}
+
+TEST(OccupancyMap, MissesToClampFreeCountsTheViewsThatFillTheMap) {
+  // A cell seen free in view after view: at clamp_min after missesToClampFree() views, and not one view earlier (each
+  // of those views still changes it). From unknown_occupied's prior, and from unknown.
+  for (bool unknown_occupied : {true, false}) {
+    mps::OccupancyMapOptions o = mps::panda::mapOptions();
+    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1.0, -1.0, -0.2), Eigen::Vector3d(1.0, 1.0, 1.0));
+    o.unknown_occupied = unknown_occupied;
+    std::string error;
+    auto map = mps::OccupancyMap::create(o, &error);
+    ASSERT_TRUE(map) << error;
+    const int views = map->missesToClampFree();
+    ASSERT_GE(views, 2) << "the shipped log-odds take more than one miss to clamp_min";
+    const float clamp_min = static_cast<float>(std::log(o.clamp_min / (1.0 - o.clamp_min)));
+    const Eigen::Vector3d origin(0.4, 0.0, 0.99), free_cell(0.41, 0.01, 0.51);  // on the beams to the floor
+    const auto floor = plane(0.0, 0.8, -0.4, 0.4, 0.0, 0.01);
+    for (int k = 1; k <= views; ++k) {
+      integrate(map.get(), floor, origin);
+      const float v = map->logOdds(free_cell);
+      if (k < views) {
+        EXPECT_GT(v, clamp_min) << "view " << k << " of " << views << ", unknown_occupied " << unknown_occupied;
+      } else {
+        EXPECT_FLOAT_EQ(v, clamp_min) << "unknown_occupied " << unknown_occupied;
+      }
+    }
+  }
 }

@@ -1,5 +1,6 @@
 #include "moverl_planning_scene/cloud_integrator.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -50,13 +51,31 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   // The points in the sensor frame (contiguous x y z, one per pixel: the pinhole fit), their depths (non-finite: no
   // return), and the ones with a return in the map frame, in pixel order. Parts of the rows on the pool: each row's
   // points read and the ones with a return counted; then, from each row's first index (the counts before it summed),
-  // their pixels and map-frame points written.
+  // their pixels and map-frame points written. Projection fits the pinhole model in the same two passes, while each
+  // row is in the cache: the fit's sums per row in the first (a strided subset of rows and columns, about 4,000
+  // points whatever the image's size), the model from them between the passes (rows in order: as fitPinhole's), and
+  // its check of every point in the second.
+  const bool projective = options_.integration == Integration::kProjective;
+  std::string reason;  // why projection falls back to ray casting
+  bool fitting = false;
+  if (projective) {
+    if (height < 2) {
+      reason = "an unorganized cloud (height 1)";
+    } else {
+      fitting = pinholeImageSize(width, height, &reason);
+    }
+  }
   const std::size_t n = static_cast<std::size_t>(std::max(0, width)) * static_cast<std::size_t>(std::max(0, height));
+  const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(n) / 4000.0)));
   sensor_xyz_.resize(3 * n);
   depth_.resize(n);
   has_return_.resize(n);
   const std::size_t rows = static_cast<std::size_t>(std::max(0, height));
   row_first_.assign(rows + 1, 0);
+  if (fitting) {
+    row_fit_.assign(rows, PinholeFit());
+    row_worst_.assign(rows, 0.0);
+  }
   const std::size_t rows_per_part = WorkerPool::kCheapPart / std::max<std::size_t>(1, std::max(0, width));
   WorkerPool::runParts(pool_.get(), rows, rows_per_part, [&](std::size_t v0, std::size_t v1, int) {
     for (std::size_t v = v0; v < v1; ++v) {
@@ -76,9 +95,18 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
         returns += finite ? 1 : 0;
       }
       row_first_[v + 1] = returns;
+      if (fitting && v % stride == 0)
+        row_fit_[v].addRow(&sensor_xyz_[3 * v * width], static_cast<int>(v), width, stride);
     }
   });
   for (std::size_t v = 0; v < rows; ++v) row_first_[v + 1] += row_first_[v];
+  PinholeCamera fitted;
+  bool fits = false;
+  if (fitting) {
+    PinholeFit fit;
+    for (std::size_t v = 0; v < rows; v += static_cast<std::size_t>(stride)) fit.add(row_fit_[v]);
+    fits = fit.solve(width, height, &fitted, &reason);
+  }
   pixel_of_.resize(row_first_[rows]);
   points_.resize(row_first_[rows]);
   WorkerPool::runParts(pool_.get(), rows, rows_per_part, [&](std::size_t v0, std::size_t v1, int) {
@@ -90,8 +118,13 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
         pixel_of_[k] = static_cast<std::uint32_t>(pixel);
         points_[k++] = sensor_pose * Eigen::Vector3d(s[0], s[1], s[2]);
       }
+      if (fits) {
+        row_worst_[v] =
+            pinholeRowResidual(fitted, &sensor_xyz_[3 * v * width], static_cast<int>(v), kPinholeTolerancePx);
+      }
     }
   });
+  if (fits) fits = pinholeWithin(*std::max_element(row_worst_.begin(), row_worst_.end()), kPinholeTolerancePx, &reason);
   t.points = since(&at);
   mask_.assign(points_.size(), kPointObstacle);
   for (std::size_t c = 0; c < configurations.size(); ++c) {
@@ -117,15 +150,9 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   }
   t.static_filter = since(&at);
   Integration used = Integration::kRayCasting;
-  if (options_.integration == Integration::kProjective) {
-    std::string reason;
-    double residual = 0.0;
-    // A strided subset fits the model (about 20,000 points whatever the image's size); fitPinhole checks every point.
-    const int stride = std::max(1, static_cast<int>(std::sqrt(static_cast<double>(n) / 20000.0)));
-    if (height < 2) {
-      reason = "an unorganized cloud (height 1)";
-    } else if (fitPinhole(sensor_xyz_.data(), width, height, stride, kPinholeTolerancePx, &camera_, &residual,
-                          &reason)) {
+  if (projective) {
+    if (fits) {
+      camera_ = fitted;
       pixel_mask_.assign(n, kPointObstacle);
       WorkerPool::runParts(pool_.get(), points_.size(), WorkerPool::kCheapPart,
                            [&](std::size_t k0, std::size_t k1, int) {

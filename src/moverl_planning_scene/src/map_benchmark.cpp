@@ -476,11 +476,11 @@ int main(int argc, char** argv) {
     Run& r = runs[k];
     std::printf("%s (later clouds; each camera's first view fills the map from unknown and is left out):\n",
                 mps::integrationName(r.integration));
-    report("points into the map frame", r.t_points);
+    const bool projective = r.integration == mps::Integration::kProjective;
+    report(projective ? "points, the pinhole fit" : "points into the map frame", r.t_points);
     report("self filter", r.t_self);
     report("static filter", r.t_static);
-    report(r.integration == mps::Integration::kProjective ? "pinhole fit + update" : "update (ray casting)",
-           r.t_update);
+    report(projective ? "update (projective)" : "update (ray casting)", r.t_update);
     report("known free (unknown_occupied)", r.t_known_free);
     report("apply", r.t_apply);
     report("total", r.t_total);
@@ -517,7 +517,7 @@ int main(int argc, char** argv) {
   }
   if (identity) {
     std::printf("projective, every block evaluated (skip_unchanged_blocks off, the same clouds):\n");
-    report("pinhole fit + update", reference_update);
+    report("update (projective)", reference_update);
     report("total", reference_total);
     std::printf("identity (skip_unchanged_blocks against every block evaluated): %zu of %zu updates differ\n",
                 identity_failures, clouds.size());

@@ -629,3 +629,55 @@ TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   EXPECT_FALSE(mps::parseIntegration("voxblox", &parsed, &error));
   EXPECT_NE(error.find("projective, ray_casting"), std::string::npos) << error;
 }
+
+TEST(CloudIntegrator, FitsThePinholeAsFitPinholeAndChecksEveryPoint) {
+  // The integrator fits the model in its passes over the points (a strided subset) and checks every point: the same
+  // intrinsics as fitPinhole's, and a cloud whose odd columns stray from their rays (between a stride of 2) refused.
+  const std::string urdf = MOVERL_PANDA_URDF;
+  std::string error;
+  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf), mps::panda::options(urdf), &error);
+  ASSERT_TRUE(scene) << error;
+  auto map = makeMap();
+  mps::CloudIntegratorOptions io;
+  io.integration = mps::Integration::kProjective;
+  io.self_filter_padding = 0.01;
+  io.static_filter_padding = 0.003;
+  io.threads = 2;
+  mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
+  const mps::PinholeCamera camera{200, 150, 120.0, 125.0, 99.5, 74.5};  // 30,000 points: fitted on a stride
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> z(0.5, 3.0);
+  auto xyz = image(camera, [&](int, int) { return z(rng); });
+  for (std::size_t k = 0; k < xyz.size(); k += 33) xyz[k] = std::numeric_limits<float>::quiet_NaN();  // no returns
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
+  const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
+  mps::CloudView view;
+  view.width = camera.width;
+  view.height = camera.height;
+  view.row_step = 12 * static_cast<std::size_t>(camera.width);
+  mps::MapUpdate u;
+  std::string why;
+  view.data = reinterpret_cast<const std::uint8_t*>(xyz.data());
+  ASSERT_EQ(integrator.compute(view, pose, home, &u, nullptr, &why), mps::Integration::kProjective) << why;
+  mps::PinholeCamera fit;
+  double residual = 0.0;
+  ASSERT_TRUE(
+      mps::fitPinhole(xyz.data(), camera.width, camera.height, 1, mps::kPinholeTolerancePx, &fit, &residual, &why));
+  EXPECT_NEAR(integrator.camera().fx, fit.fx, 1e-6);
+  EXPECT_NEAR(integrator.camera().fy, fit.fy, 1e-6);
+  EXPECT_NEAR(integrator.camera().cx, fit.cx, 1e-6);
+  EXPECT_NEAR(integrator.camera().cy, fit.cy, 1e-6);
+  // The odd columns 0.2 px off their rays (x scaled about the principal point).
+  auto off = xyz;
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 1; u < camera.width; u += 2) {
+      float* p = &off[3 * (static_cast<std::size_t>(v) * camera.width + u)];
+      p[0] += static_cast<float>(0.2 / camera.fx * p[2]);
+    }
+  }
+  view.data = reinterpret_cast<const std::uint8_t*>(off.data());
+  EXPECT_EQ(integrator.compute(view, pose, home, &u, nullptr, &why), mps::Integration::kRayCasting);
+  EXPECT_NE(why.find("px"), std::string::npos) << why;
+  EXPECT_FALSE(
+      mps::fitPinhole(off.data(), camera.width, camera.height, 2, mps::kPinholeTolerancePx, &fit, &residual, &why));
+}

@@ -56,10 +56,10 @@ struct CloudIntegratorOptions {
 
 /// \brief Where one cloud's time went (s, wall clock of the calling thread).
 struct CloudTiming {
-  double points = 0.0;         ///< into the map frame
+  double points = 0.0;         ///< into the map frame (projective: with the pinhole fit and its check)
   double self_filter = 0.0;    ///< robotPointMask over the configurations
   double static_filter = 0.0;  ///< staticObjectPointMask
-  double update = 0.0;         ///< the pinhole fit and the map's update (computeUpdate or computeUpdateProjective)
+  double update = 0.0;         ///< the map's update (computeUpdate or computeUpdateProjective)
   double known_free = 0.0;     ///< unknown_occupied: the unobserved cells inside the robot and static objects freed
   double total() const { return points + self_filter + static_filter + update + known_free; }
 };
@@ -99,6 +99,8 @@ class CloudIntegrator {
   std::vector<std::uint32_t> pixel_of_;   ///< the pixel of each of points_
   std::vector<std::uint8_t> has_return_;  ///< per pixel: 1 where its point is finite
   std::vector<std::size_t> row_first_;    ///< per row: the index in points_ of its first point (and the count last)
+  std::vector<PinholeFit> row_fit_;       ///< projective: per row, its points' sums for the pinhole fit
+  std::vector<double> row_worst_;         ///< projective: per row, pinholeRowResidual of its points
   std::vector<std::uint8_t> mask_, mask_more_, pixel_mask_;
   /// Unknown-is-occupied: turns free in *update the unobserved cells that reach into the robot's padding (in the
   /// cloud's configurations: no camera sees them, the robot stands there; left occupied they would block it where it

@@ -29,6 +29,29 @@ struct PinholeCamera {
 /// \brief The widest and tallest image fitPinhole fits (the projective update keeps pixel rectangles in 16 bits).
 constexpr int kMaxPinholeSide = 32767;
 
+/// \brief The least-squares sums of a pinhole fit (x / z = a u + b per axis), row by row: the rows' sums added in
+///        row order give the same intrinsics however the rows were shared out (fitPinhole, CloudIntegrator's passes).
+struct PinholeFit {
+  double n = 0, su = 0, suu = 0, sx = 0, sux = 0, sv = 0, svv = 0, sy = 0, svy = 0;
+  /// Adds row v's points (width of them, x y z each) in every stride-th column (no return: skipped).
+  void addRow(const float* row_xyz, int v, int width, int stride);
+  void add(const PinholeFit& other);
+  /// The intrinsics of an image width x height; false with *why when too few points fall on distinct rows and
+  /// columns, or when they do not lie on an optical frame's rays.
+  bool solve(int width, int height, PinholeCamera* out, std::string* why) const;
+};
+
+/// \brief True when an image width x height can be fitted (at least 2 x 2, at most kMaxPinholeSide a side); else
+///        false with *why.
+bool pinholeImageSize(int width, int height, std::string* why);
+
+/// \brief The largest distance (pixels) from its pixel's ray of row v's points (width of them) that lie farther than
+///        `tolerance`; 0 when none does.
+double pinholeRowResidual(const PinholeCamera& camera, const float* row_xyz, int v, double tolerance);
+
+/// \brief True when `worst` (pinholeRowResidual's largest over the rows) is within `tolerance`; else false with *why.
+bool pinholeWithin(double worst, double tolerance, std::string* why);
+
 /// \brief Fits the pinhole model of an organized cloud: xyz holds width * height points (x, y, z, row-major, optical
 ///        frame; non-finite or z <= 0: no return, skipped). Every `stride`-th row and column take part (1: all).
 ///        False with *why for an image wider or taller than kMaxPinholeSide, when too few points fall on distinct rows

@@ -188,8 +188,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->block_ended_.assign(static_cast<std::size_t>(blocks), 0);
   for (int n = 0; n < kBlockCells; ++n) {
     constexpr int mask = (1 << kBlockShift) - 1;
-    m->cell_offset_[n] =
-        ((n >> (2 * kBlockShift)) * m->size_[1] + ((n >> kBlockShift) & mask)) * m->size_[2] + (n & mask);
+    m->cell_offset_[n] = m->cellId(n >> (2 * kBlockShift), (n >> kBlockShift) & mask, n & mask);
   }
   m->super_count_.assign(static_cast<std::size_t>(supers), 0);
   m->super_dirty_.assign(static_cast<std::size_t>(supers), 0);
@@ -265,14 +264,16 @@ OccupancyMap::~OccupancyMap() = default;
 
 inline std::int64_t OccupancyMap::blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
   constexpr std::int64_t sub = (1 << kSubShift) - 1;
-  const std::int64_t super = ((x >> kSubShift) * supers_[1] + (y >> kSubShift)) * supers_[2] + (z >> kSubShift);
+  const std::int64_t super = superIndex(x >> kSubShift, y >> kSubShift, z >> kSubShift);
   return (super << (3 * kSubShift)) | (((x & sub) << (2 * kSubShift)) | ((y & sub) << kSubShift) | (z & sub));
 }
 
 void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super, std::uint64_t* bit) const {
-  const std::int64_t k = c % size_[2], j = (c / size_[2]) % size_[1], i = c / (size_[1] * size_[2]);
+  std::int64_t at[3];
+  unravel(c, size_, at);
+  const std::int64_t i = at[0], j = at[1], k = at[2];
   *block = blockIndex(i >> kBlockShift, j >> kBlockShift, k >> kBlockShift);
-  *super = ((i >> kSuperShift) * supers_[1] + (j >> kSuperShift)) * supers_[2] + (k >> kSuperShift);
+  *super = superIndex(i >> kSuperShift, j >> kSuperShift, k >> kSuperShift);
   constexpr std::int64_t m = (1 << kBlockShift) - 1;
   if (bit != nullptr) *bit = std::uint64_t{1} << ((((i & m) << kBlockShift | (j & m)) << kBlockShift) | (k & m));
 }
@@ -436,8 +437,9 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
   for (std::size_t n = 0; n < order_.size(); ++n) {
     const std::int64_t c_end = order_[n];
     // The centroid of the points that end in the cell, kept inside it (a lone point: the point itself).
-    const std::int64_t ek = c_end % size_[2], ej = (c_end / size_[2]) % size_[1], ei = c_end / (size_[1] * size_[2]);
-    const Eigen::Array3d lo = centre(ei, ej, ek).array() - 0.5 * options_.resolution;
+    std::int64_t e[3];
+    unravel(c_end, size_, e);
+    const Eigen::Array3d lo = centre(e[0], e[1], e[2]).array() - 0.5 * options_.resolution;
     const double inset = 1e-6 * options_.resolution;
     const Eigen::Vector3d end =
         (order_end_[n].array() / order_count_[n]).max(lo + inset).min(lo + (options_.resolution - inset)).matrix();
@@ -468,7 +470,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       }
     }
     if (!inside) continue;
-    std::int64_t k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+    std::int64_t k = cellId(at[0], at[1], at[2]);
     const double res = options_.resolution;
     for (;;) {
       const bool at_last = at[0] == last[0] && at[1] == last[1] && at[2] == last[2];
@@ -507,12 +509,12 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
           if (out) break;
           if (!same) {
             for (int i = 0; i < 3; ++i) at[i] = next[i];
-            k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+            k = cellId(at[0], at[1], at[2]);
             continue;
           }
           // Rounding kept the point in the block: fall back to the cell steps from it.
           for (int i = 0; i < 3; ++i) at[i] = next[i];
-          k = (at[0] * size_[1] + at[1]) * size_[2] + at[2];
+          k = cellId(at[0], at[1], at[2]);
         }
       } else {
         const std::uint64_t bit = std::uint64_t{1} << (k & 63);
@@ -865,9 +867,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       sc.misses.push_back(static_cast<std::uint64_t>(k));  // (never a cell clamped free: block_clamped_ leaves those)
     };
     std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3];
-    s[2] = si % supers_[2];
-    s[1] = (si / supers_[2]) % supers_[1];
-    s[0] = si / (supers_[1] * supers_[2]);
+    unravel(si, supers_, s);
     Footprint& f = sc.f;
     for (int i = 0; i < 3; ++i) {
       sa[i] = s[i] << kSuperShift;
@@ -880,7 +880,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     auto repeat = [&](std::uint64_t bits, std::int64_t bi) {
       ++sc.reused;
       const std::uint64_t still = bits & ~block_clamped_[bi];
-      const std::int64_t k0 = (ba[0] * size_[1] + ba[1]) * size_[2] + ba[2];
+      const std::int64_t k0 = cellId(ba[0], ba[1], ba[2]);
       for (std::uint64_t todo = still & ~block_ended_[bi]; todo != 0; todo &= todo - 1) {
         see(k0 + cell_offset_[__builtin_ctzll(todo)]);
       }
@@ -970,7 +970,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           }
           // The cells neither clamped free nor hit nor seen free already (a block's words: no test per cell), each
           // at its offset from the block's first cell (its id, its centre in the optical frame, its projection).
-          const std::int64_t k0 = (ba[0] * size_[1] + ba[1]) * size_[2] + ba[2];
+          const std::int64_t k0 = cellId(ba[0], ba[1], ba[2]);
           for (std::uint64_t todo = ~(block_clamped_[bi] | block_ended_[bi]); todo != 0; todo &= todo - 1) {
             const int n = __builtin_ctzll(todo);
             const std::int64_t k = k0 + cell_offset_[n];
@@ -1207,8 +1207,7 @@ void OccupancyMap::fillUnobserved(bool on) {
     for (at[1] = 0; at[1] < supers_[1]; ++at[1]) {
       for (at[2] = 0; at[2] < supers_[2]; ++at[2]) {
         for (int i = 0; i < 3; ++i) n[i] = std::min(size_[i], (at[i] + 1) << kSuperShift) - (at[i] << kSuperShift);
-        super_dirty_[(at[0] * supers_[1] + at[1]) * supers_[2] + at[2]] =
-            static_cast<std::uint16_t>(n[0] * n[1] * n[2]);
+        super_dirty_[superIndex(at[0], at[1], at[2])] = static_cast<std::uint16_t>(n[0] * n[1] * n[2]);
       }
     }
   }
@@ -1255,7 +1254,7 @@ void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<E
   // Each row of cells along z a word of observed_ at a time: a robot's boxes are mostly observed (every cloud asks).
   for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
     for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
-      const std::int64_t row = (i * size_[1] + j) * size_[2], first = row + lo[2], last = row + hi[2];
+      const std::int64_t row = cellId(i, j, 0), first = row + lo[2], last = row + hi[2];
       for (std::int64_t word = first >> 6; word <= last >> 6; ++word) {
         std::uint64_t unseen = ~observed_[static_cast<std::size_t>(word)];
         if (word == first >> 6) unseen &= ~std::uint64_t{0} << (first & 63);
@@ -1298,7 +1297,7 @@ void OccupancyMap::occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::ve
     while (bits != 0) {
       const auto c = static_cast<std::int64_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits)));
       bits &= bits - 1;
-      centers->push_back(centre(c / (size_[1] * size_[2]), (c / size_[2]) % size_[1], c % size_[2]));
+      centers->push_back(cellCentre(static_cast<std::uint64_t>(c)));
       if (sizes != nullptr) sizes->push_back(options_.resolution);
     }
   }
@@ -1372,7 +1371,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
   for (s[0] = lo[0] >> kSuperShift; s[0] <= hi[0] >> kSuperShift; ++s[0]) {
     for (s[1] = lo[1] >> kSuperShift; s[1] <= hi[1] >> kSuperShift; ++s[1]) {
       for (s[2] = lo[2] >> kSuperShift; s[2] <= hi[2] >> kSuperShift; ++s[2]) {
-        const std::int64_t sc = super_count((s[0] * supers_[1] + s[1]) * supers_[2] + s[2]);
+        const std::int64_t sc = super_count(superIndex(s[0], s[1], s[2]));
         if (sc == 0) continue;
         const std::int64_t cells = span(s, kSuperShift, sa, sb);
         const Eigen::AlignedBox3d super_box = box(sa, sb);
@@ -1397,7 +1396,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
               for (std::int64_t i = std::max(lo[0], ba[0]); i <= std::min(hi[0], bb[0]); ++i) {
                 for (std::int64_t j = std::max(lo[1], ba[1]); j <= std::min(hi[1], bb[1]); ++j) {
                   for (std::int64_t k = std::max(lo[2], ba[2]); k <= std::min(hi[2], bb[2]); ++k) {
-                    if (!cell_counts((i * size_[1] + j) * size_[2] + k)) continue;
+                    if (!cell_counts(cellId(i, j, k))) continue;
                     const std::int64_t c[3] = {i, j, k};
                     const Eigen::AlignedBox3d cell_box = box(c, c);
                     if (near(cell_box) && visit(cell_box)) return true;

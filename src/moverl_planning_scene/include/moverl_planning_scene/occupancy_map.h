@@ -208,8 +208,9 @@ class OccupancyMap {
                      CellClass which = CellClass::kAll) const;
   /// \brief The centre of the cell with id `key` (MapUpdate's ids), map frame.
   Eigen::Vector3d cellCentre(std::uint64_t key) const {
-    const auto c = static_cast<std::int64_t>(key);
-    return centre(c / (size_[1] * size_[2]), (c / size_[2]) % size_[1], c % size_[2]);
+    std::int64_t at[3];
+    unravel(static_cast<std::int64_t>(key), size_, at);
+    return centre(at[0], at[1], at[2]);
   }
   /// \brief A bound (m) on how far the centre of a cell lies from any point of it: half its diagonal.
   double cellHalfDiagonal() const { return 0.5 * std::sqrt(3.0) * options_.resolution; }
@@ -237,7 +238,21 @@ class OccupancyMap {
   std::int64_t cellOf(const Eigen::Vector3d& p) const {
     const std::int64_t i = indexOf(p.x(), 0), j = indexOf(p.y(), 1), k = indexOf(p.z(), 2);
     if (i < 0 || j < 0 || k < 0 || i >= size_[0] || j >= size_[1] || k >= size_[2]) return -1;
+    return cellId(i, j, k);
+  }
+  /// The id of the cell at grid indices (i, j, k) (MapUpdate's keys; value_'s index): x-major, z fastest.
+  std::int64_t cellId(std::int64_t i, std::int64_t j, std::int64_t k) const {
     return (i * size_[1] + j) * size_[2] + k;
+  }
+  /// The index of the superblock at superblock coordinates (x, y, z), in the same order.
+  std::int64_t superIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    return (x * supers_[1] + y) * supers_[2] + z;
+  }
+  /// The indices (at) of index c of a grid of dims, as cellId and superIndex order them.
+  static void unravel(std::int64_t c, const std::int64_t* dims, std::int64_t* at) {
+    at[2] = c % dims[2];
+    at[1] = (c / dims[2]) % dims[1];
+    at[0] = c / (dims[1] * dims[2]);
   }
   /// Grid index of a coordinate along axis i (may lie outside [0, size); a coordinate beyond +-1e15 cells, or NaN,
   /// lies outside). floor without libm's call (the baseline x86-64 build has no rounding instruction; every point of
@@ -318,7 +333,7 @@ class OccupancyMap {
   /// (hit_ and seen_'s bits of the cloud's end cells; zero again after the update)
   std::vector<std::uint64_t> block_ended_;
   /// Each cell of a block (its bit in those words) as an offset of its id from the block's first cell's.
-  std::int64_t cell_offset_[64] = {};
+  std::int64_t cell_offset_[8 * sizeof(std::uint64_t)] = {};
   std::vector<std::uint16_t> super_dirty_;  ///< per superblock: its cells not at clamp_min (unknown ones included)
   /// computeUpdateProjective's scratch: pyramids of each pixel's free depth (max_depth_, level 0: the free depths) and
   /// of the same with robot pixels at their reach (min_depth_: they hide nothing beside)

@@ -457,6 +457,25 @@ double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vecto
   return (ap - ab * (vb * denom) - ac * (vc * denom)).squaredNorm();
 }
 
+/// The squared distance from p, outside a convex hull, to the hull: to the nearest of the faces `front`, the faces
+/// whose planes p lies in front of (the nearest point of a convex polytope to a point outside lies on such a face); or
+/// to the first of them found within stop2 (*which: that face, else the nearest).
+double frontFacesDistance2(const Eigen::Vector3d& p, const std::vector<Eigen::Vector3d>& vertices,
+                           const std::vector<std::array<int, 3>>& faces, const std::vector<int>& front, double stop2,
+                           int* which) {
+  double nearest2 = std::numeric_limits<double>::infinity();
+  for (int f : front) {
+    const auto& t = faces[static_cast<std::size_t>(f)];
+    const double d2 = pointTriangleDistanceSquared(p, vertices[t[0]], vertices[t[1]], vertices[t[2]]);
+    if (d2 < nearest2) {
+      nearest2 = d2;
+      *which = f;
+    }
+    if (d2 <= stop2) break;
+  }
+  return nearest2;
+}
+
 }  // namespace
 
 std::shared_ptr<const HullDistanceGrid> buildHullDistanceGrid(const std::vector<Eigen::Vector3d>& vertices,
@@ -476,37 +495,30 @@ std::shared_ptr<const HullDistanceGrid> buildHullDistanceGrid(const std::vector<
   for (int a = 0; a < 3; ++a) grid->n[a] = static_cast<int>(std::ceil((hi[a] - lo[a] + 2.0 * margin) / h)) + 1;
   grid->d.resize(static_cast<std::size_t>(grid->n[0]) * grid->n[1] * grid->n[2]);
   std::size_t at = 0;
+  std::vector<int> front;
   for (int z = 0; z < grid->n[2]; ++z) {
     for (int y = 0; y < grid->n[1]; ++y) {
       for (int x = 0; x < grid->n[0]; ++x, ++at) {
         const Eigen::Vector3d p = grid->lo + h * Eigen::Vector3d(x, y, z);
         // Inside every face's plane: 0. Outside, the distance is at least the largest of the planes' (each plane
-        // bounds a half-space holding the hull), and it is that when the point lies in front of that plane's face;
-        // otherwise the nearest point lies on one of the faces the point is in front of.
+        // bounds a half-space holding the hull), and it is that when the point lies in front of that plane's face
+        // (tried first); otherwise the nearest of the faces the point is in front of.
         double most = 0.0;
-        std::size_t most_face = 0;
+        int most_face = -1;
+        front.clear();
         for (std::size_t f = 0; f < planes.size(); ++f) {
           const double e = planes[f].head<3>().dot(p) - planes[f][3];
           if (e > most) {
             most = e;
-            most_face = f;
+            most_face = static_cast<int>(f);
           }
+          if (e > 0.0) front.push_back(static_cast<int>(f));
         }
         double dist = 0.0;
-        if (most > 0.0) {
-          auto distance2 = [&](std::size_t f) {
-            const auto& t = faces[f];
-            return pointTriangleDistanceSquared(p, vertices[t[0]], vertices[t[1]], vertices[t[2]]);
-          };
-          double nearest2 = distance2(most_face);
-          if (nearest2 > most * most * (1.0 + 1e-12)) {  // not in front of that face: the faces in front of it
-            for (std::size_t f = 0; f < planes.size(); ++f) {
-              if (f != most_face && planes[f].head<3>().dot(p) - planes[f][3] > 0.0) {
-                nearest2 = std::min(nearest2, distance2(f));
-              }
-            }
-          }
-          dist = std::sqrt(nearest2);
+        if (most_face >= 0) {
+          std::swap(front.front(), *std::find(front.begin(), front.end(), most_face));
+          int nearest_face = -1;
+          dist = std::sqrt(frontFacesDistance2(p, vertices, faces, front, most * most * (1.0 + 1e-12), &nearest_face));
         }
         float stored = static_cast<float>(dist);
         if (stored < dist) stored = std::nextafter(stored, std::numeric_limits<float>::infinity());
@@ -636,12 +648,9 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
     if (bounds != 0) return bounds > 0;
     if ((p - memo.in).squaredNorm() <= memo.in2) return true;
     if ((p - memo.out).squaredNorm() <= memo.out2) return false;
-    auto distance2 = [&](int f) {  // p's squared distance to face f
-      const auto& t = sh.g->faces[static_cast<std::size_t>(f)];
-      return pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
-    };
     if (memo.near >= 0) {
-      const double d2 = distance2(memo.near);
+      const auto& t = sh.g->faces[static_cast<std::size_t>(memo.near)];
+      const double d2 = pointTriangleDistanceSquared(p, sh.vertices[t[0]], sh.vertices[t[1]], sh.vertices[t[2]]);
       if (d2 <= pad2) {
         remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
         return true;
@@ -669,17 +678,14 @@ void FclCollisionChecker::pointMask(const double* q, int link, const std::vector
       memo.near = most_face;  // the face nearest the point's plane-wise: likely its neighbours' within pad
       return true;
     }
-    double nearest2 = std::numeric_limits<double>::infinity();
-    for (int f : front) {
-      const double d2 = distance2(f);
-      if (d2 <= pad2) {
-        remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
-        memo.near = f;
-        return true;
-      }
-      nearest2 = std::min(nearest2, d2);
+    int face = -1;
+    const double d2 = frontFacesDistance2(p, sh.vertices, sh.g->faces, front, pad2, &face);
+    if (d2 <= pad2) {
+      remember(&memo.in, &memo.in2, p, pad - std::sqrt(d2));
+      memo.near = face;
+      return true;
     }
-    remember(&memo.out, &memo.out2, p, std::sqrt(nearest2) - pad);  // the nearest point lies on a front face
+    remember(&memo.out, &memo.out2, p, std::sqrt(d2) - pad);
     return false;
   };
   auto test = [&](std::size_t begin, std::size_t end) {

@@ -78,7 +78,19 @@ bool pinholeImageSize(int width, int height, std::string* why) {
 }
 
 double pinholeRowResidual(const PinholeCamera& c, const float* row_xyz, int v, double tolerance) {
-  // |fx x / z + cx - u| <= tolerance as |fx x + (cx - u) z| <= tolerance z: no division unless over.
+  // |fx x / z + cx - u| <= tolerance as |fx x + (cx - u) z| <= tolerance z: no division. First whether any point is
+  // over, without a branch per point (a value minus itself is 0 only when finite; a NaN fails every comparison); the
+  // distances only for a row that has one.
+  const double fx = c.fx, fy = c.fy, cx = c.cx, cy = c.cy - v;
+  bool over = false;
+  double cu = cx;  // cx - u
+  for (int u = 0; u < c.width; ++u, cu -= 1.0) {
+    const float* p = row_xyz + 3 * static_cast<long>(u);
+    const double x = p[0], y = p[1], z = p[2], tz = tolerance * z;
+    const bool valid = (x - x == 0.0) & (y - y == 0.0) & (z - z == 0.0) & (z > 0.0);
+    over |= valid & ((std::fabs(fx * x + cu * z) > tz) | (std::fabs(fy * y + cy * z) > tz));
+  }
+  if (!over) return 0.0;
   double worst = 0.0;
   for (int u = 0; u < c.width; ++u) {
     const float* p = row_xyz + 3 * static_cast<long>(u);

@@ -97,6 +97,7 @@ TEST(Pinhole, FitsAnOrganizedCloudAndItsHoles) {
   std::uniform_real_distribution<double> z(0.3, 3.0);
   auto xyz = image(kCamera, [&](int, int) { return z(rng); });
   for (std::size_t k = 0; k < xyz.size(); k += 21) xyz[k] = std::numeric_limits<float>::quiet_NaN();  // no returns
+  for (std::size_t k = 10; k < xyz.size(); k += 37) xyz[k] = std::numeric_limits<float>::infinity();  // nor these
   mps::PinholeCamera fit;
   double residual = 0.0;
   std::string why;

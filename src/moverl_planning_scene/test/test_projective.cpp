@@ -592,23 +592,34 @@ TEST(Projective, ACellThePointsStopHittingIsLookedAtAgainThoughTheDepthsStay) {
   EXPECT_EQ(views(true), every);
 }
 
-TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
-  const std::string urdf = MOVERL_PANDA_URDF;
-  std::string error;
-  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf), mps::panda::options(urdf), &error);
-  ASSERT_TRUE(scene) << error;
-  auto map = makeMap();
+/// The Panda's scene, a map and a projective CloudIntegrator's options on two threads; a camera looking along x.
+class Integrating : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string urdf = MOVERL_PANDA_URDF;
+    std::string error;
+    scene = mps::PlanningScene::create(mps::panda::readFile(urdf), mps::panda::options(urdf), &error);
+    ASSERT_TRUE(scene) << error;
+    map = makeMap();
+    io.integration = mps::Integration::kProjective;
+    io.self_filter_padding = 0.01;
+    io.static_filter_padding = 0.003;
+    io.threads = 2;
+  }
+  std::unique_ptr<mps::PlanningScene> scene;
+  std::unique_ptr<mps::OccupancyMap> map;
   mps::CloudIntegratorOptions io;
-  io.integration = mps::Integration::kProjective;
-  io.self_filter_padding = 0.01;
-  io.static_filter_padding = 0.003;
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
+  const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
+};
+
+TEST_F(Integrating, FallsBackToRayCastingForAnUnorganizedCloud) {
+  std::string error;
   io.threads = 0;
   EXPECT_THROW(mps::CloudIntegrator(map.get(), &scene->checker(), nullptr, io), std::invalid_argument);
   io.threads = 2;
   mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
-  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
   const auto xyz = image(kCamera, [](int, int) { return 2.0; });
-  const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
   mps::MapUpdate u;
   std::string why;
   mps::CloudView view;
@@ -631,27 +642,15 @@ TEST(CloudIntegrator, FallsBackToRayCastingForAnUnorganizedCloud) {
   EXPECT_NE(error.find("projective, ray_casting"), std::string::npos) << error;
 }
 
-TEST(CloudIntegrator, FitsThePinholeAsFitPinholeAndChecksEveryPoint) {
+TEST_F(Integrating, FitsThePinholeAsFitPinholeAndChecksEveryPoint) {
   // The integrator fits the model in its passes over the points (a strided subset) and checks every point: the same
   // intrinsics as fitPinhole's, and a cloud whose odd columns stray from their rays (between a stride of 2) refused.
-  const std::string urdf = MOVERL_PANDA_URDF;
-  std::string error;
-  auto scene = mps::PlanningScene::create(mps::panda::readFile(urdf), mps::panda::options(urdf), &error);
-  ASSERT_TRUE(scene) << error;
-  auto map = makeMap();
-  mps::CloudIntegratorOptions io;
-  io.integration = mps::Integration::kProjective;
-  io.self_filter_padding = 0.01;
-  io.static_filter_padding = 0.003;
-  io.threads = 2;
   mps::CloudIntegrator integrator(map.get(), &scene->checker(), nullptr, io);
   const mps::PinholeCamera camera{200, 150, 120.0, 125.0, 99.5, 74.5};  // 30,000 points: fitted on a stride
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> z(0.5, 3.0);
   auto xyz = image(camera, [&](int, int) { return z(rng); });
   for (std::size_t k = 0; k < xyz.size(); k += 33) xyz[k] = std::numeric_limits<float>::quiet_NaN();  // no returns
-  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(-0.4, 0.0, 0.5));
-  const std::vector<std::vector<double>> home = {{0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785}};
   mps::CloudView view;
   view.width = camera.width;
   view.height = camera.height;

@@ -95,8 +95,9 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
         returns += finite ? 1 : 0;
       }
       row_first_[v + 1] = returns;
-      if (fitting && v % stride == 0)
+      if (fitting && v % stride == 0) {
         row_fit_[v].addRow(&sensor_xyz_[3 * v * width], static_cast<int>(v), width, stride);
+      }
     }
   });
   for (std::size_t v = 0; v < rows; ++v) row_first_[v + 1] += row_first_[v];

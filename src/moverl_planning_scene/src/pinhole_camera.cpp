@@ -70,8 +70,9 @@ bool pinholeImageSize(int width, int height, std::string* why) {
     return false;
   }
   if (width > kMaxPinholeSide || height > kMaxPinholeSide) {
-    if (why != nullptr)
+    if (why != nullptr) {
       *why = "an organized cloud of at most " + std::to_string(kMaxPinholeSide) + " points a side is fitted";
+    }
     return false;
   }
   return true;
@@ -83,7 +84,7 @@ double pinholeRowResidual(const PinholeCamera& c, const float* row_xyz, int v, d
   // distances only for a row that has one.
   const double fx = c.fx, fy = c.fy, cx = c.cx, cy = c.cy - v;
   bool over = false;
-  double cu = cx;  // cx - u
+  double cu = cx;  // cx - u (carried along: up to rounding in its last bits, far below any tolerance)
   for (int u = 0; u < c.width; ++u, cu -= 1.0) {
     const float* p = row_xyz + 3 * static_cast<long>(u);
     const double x = p[0], y = p[1], z = p[2], tz = tolerance * z;

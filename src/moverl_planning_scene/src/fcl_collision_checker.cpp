@@ -459,7 +459,7 @@ double pointTriangleDistanceSquared(const Eigen::Vector3d& p, const Eigen::Vecto
 
 /// The squared distance from p, outside a convex hull, to the hull: to the nearest of the faces `front`, the faces
 /// whose planes p lies in front of (the nearest point of a convex polytope to a point outside lies on such a face); or
-/// to the first of them found within stop2 (*which: that face, else the nearest).
+/// to the first of them found within stop2 (*which, if given: that face, else the nearest).
 double frontFacesDistance2(const Eigen::Vector3d& p, const std::vector<Eigen::Vector3d>& vertices,
                            const std::vector<std::array<int, 3>>& faces, const std::vector<int>& front, double stop2,
                            int* which) {
@@ -469,7 +469,7 @@ double frontFacesDistance2(const Eigen::Vector3d& p, const std::vector<Eigen::Ve
     const double d2 = pointTriangleDistanceSquared(p, vertices[t[0]], vertices[t[1]], vertices[t[2]]);
     if (d2 < nearest2) {
       nearest2 = d2;
-      *which = f;
+      if (which != nullptr) *which = f;
     }
     if (d2 <= stop2) break;
   }
@@ -517,8 +517,7 @@ std::shared_ptr<const HullDistanceGrid> buildHullDistanceGrid(const std::vector<
         double dist = 0.0;
         if (most_face >= 0) {
           std::swap(front.front(), *std::find(front.begin(), front.end(), most_face));
-          int nearest_face = -1;
-          dist = std::sqrt(frontFacesDistance2(p, vertices, faces, front, most * most * (1.0 + 1e-12), &nearest_face));
+          dist = std::sqrt(frontFacesDistance2(p, vertices, faces, front, most * most * (1.0 + 1e-12), nullptr));
         }
         float stored = static_cast<float>(dist);
         if (stored < dist) stored = std::nextafter(stored, std::numeric_limits<float>::infinity());

@@ -383,13 +383,14 @@ int main(int argc, char** argv) {
   mps::MapUpdate u;
   std::vector<Eigen::Vector3d> centers;
   for (const Cloud& c : clouds) {
-    const bool first = std::find(first_seen.begin(), first_seen.end(), c.camera) == first_seen.end();
-    if (first) {
+    const auto camera =
+        static_cast<std::size_t>(std::find(first_seen.begin(), first_seen.end(), c.camera) - first_seen.begin());
+    if (camera == first_seen.size()) {
       first_seen.push_back(c.camera);
       views_of.push_back(0);
     }
-    const int view_index = views_of[static_cast<std::size_t>(std::find(first_seen.begin(), first_seen.end(), c.camera) -
-                                                             first_seen.begin())]++;
+    const int view_index = views_of[camera]++;
+    const bool first = view_index == 0;
     // The two integrations take turns going first (the first warms the caches for the second's filters).
     for (int turn = 0; turn < 2; ++turn) {
       Run& r = runs[(turn + compared) % 2];

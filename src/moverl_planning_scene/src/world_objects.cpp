@@ -248,8 +248,9 @@ void FclCollisionChecker::staticObjectBoxes(double padding, std::vector<Eigen::A
   boxes->clear();
   for (const Obstacle& ob : world_) {
     Eigen::Vector3d half;
-    if (!ob.source.motion.moving() && maskedHalf(ob.source, &half))
+    if (!ob.source.motion.moving() && maskedHalf(ob.source, &half)) {
       boxes->push_back(paddedBox(ob.source, half, padding));
+    }
   }
 }
 

@@ -115,6 +115,29 @@ def test_output(recording):
     assert "6 clouds (3 cameras x 2 instants)" in stdout
 
 
+def test_arm_swing(recording, tmp_path):
+    """--arm-swing: each cloud is rendered with the arm where the swing puts it at its instant (the joints recorded are
+    home_j + A sin(2 pi t / (2 + 0.5 j) + j), within the limits), and the cameras see it there: the clouds differ from
+    the arm at home's at the same instants, by the robot's pixels only (the rest of the room is the same)."""
+    home_dir, home_doc, _ = recording
+    out = tmp_path / "swing"
+    swing = 0.3
+    r = run("--world", "human", "--out", out, "--times", *TIMES, "--size", f"{WIDTH}x{HEIGHT}", "--arm-swing", swing)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "swinging 0.3 rad about home" in r.stdout, r.stdout
+    doc = yaml.safe_load((out / "recording.yaml").read_text())
+    home = load_robot_config(robot_config_file("panda"))["home"]
+    changed = 0
+    for c, h in zip(doc["clouds"], home_doc["clouds"]):
+        want = [q + swing * math.sin(2.0 * math.pi * c["t"] / (2.0 + 0.5 * j) + j) for j, q in enumerate(home)]
+        np.testing.assert_allclose(finite_numbers(c["joints"], len(home)), want, atol=1e-9)
+        pts = np.fromfile(out / c["file"], dtype="<f4")
+        differ = np.any(pts.reshape(-1, 3) != np.fromfile(home_dir / h["file"], dtype="<f4").reshape(-1, 3), axis=1)
+        assert differ.sum() < 0.5 * len(differ), c  # the arm's pixels, not the room
+        changed += int(differ.sum())
+    assert changed > 50, changed
+
+
 def test_replaces_a_previous_recording(recording, tmp_path):
     out = tmp_path / "again"
     r = run("--world", "human", "--out", out, "--times", 0, 0.5, "--size", "16x12")
@@ -147,6 +170,7 @@ def test_refusals(tmp_path):
         (["--robot", "nope"], ["--robot", "panda", "xarm6"]),
         (["--world", "nope"], ["--world", "human", "table", "case"]),
         (["--robot-visuals", "mesh"], ["visual", "collision"]),
+        (["--arm-swing", "-0.1"], ["--arm-swing", ">= 0"]),
     ):
         r = run("--out", tmp_path / "b", *args)
         assert r.returncode == 2 and all(w in r.stderr for w in words), (args, r.stderr)

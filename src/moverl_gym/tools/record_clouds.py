@@ -1,11 +1,15 @@
 #!/usr/bin/env python3
 """Record the point clouds a world's simulated depth cameras produce, exactly as the simulator publishes them on
 ~points (Simulator.render_points in a Simulator built as the sim node builds it), with the robot at its
-config's home and the world's moving obstacles where their motions put them at each instant, into a directory a C++
-benchmark reads. In this process, no ROS.
+config's home (or swinging about it: --arm-swing) and the world's moving obstacles where their motions put them at each
+instant, into a directory a C++ benchmark reads. In this process, no ROS.
 
     python src/moverl_gym/tools/record_clouds.py --world human --out /tmp/rec_human --duration 6 --rate 2
     python src/moverl_gym/tools/record_clouds.py --world human --out /tmp/rec_640 --size 640x480 --times 0 0.5 1.0
+
+--arm-swing A (rad) moves the arm as an agent's actions move it while the cameras look: each controlled joint j at
+home_j + A sin(2 pi t / T_j + j), T_j = 2 + 0.5 j s, clipped to its limits (the robot's pixels change from view to
+view, as in a rollout; at home they stay).
 
 Instants: --times (simulated seconds), or t = 0, 1/R, 2/R, ... < D (--duration D --rate R, the same for every camera).
 Every camera renders at every instant. t is simulated time since the simulator started, which is also the motion time
@@ -56,17 +60,6 @@ def parse_size(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
-def nonnegative_time(text: str) -> float:
-    """A finite number of seconds >= 0 (argparse type)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"expected a finite time >= 0 (s), got {text!r}")
-    return value
-
-
 def positive_number(text: str) -> float:
     """A finite number > 0 (argparse type)."""
     try:
@@ -81,6 +74,30 @@ def positive_number(text: str) -> float:
 def instants(duration: float, rate: float) -> list[float]:
     """t = k / rate for k = 0, 1, ... while t < duration (a t within a nanosecond of duration is left out)."""
     return [k / rate for k in range(max(1, math.ceil(duration * rate - 1e-9)))]
+
+
+ARM_PERIOD_S, ARM_PERIOD_STEP_S = 2.0, 0.5  # joint j's swing period: ARM_PERIOD_S + j * ARM_PERIOD_STEP_S
+
+
+def arm_at(home, lower, upper, swing: float, t: float) -> list[float]:
+    """The joints at instant t with --arm-swing `swing` (rad): home_j + swing sin(2 pi t / T_j + j), clipped to
+    [lower_j, upper_j]; home itself when swing is 0."""
+    out = []
+    for j, (h, lo, hi) in enumerate(zip(home, lower, upper)):
+        q = h + swing * math.sin(2.0 * math.pi * t / (ARM_PERIOD_S + j * ARM_PERIOD_STEP_S) + j)
+        out.append(float(min(max(q, lo), hi)))
+    return out
+
+
+def nonnegative_number(text: str) -> float:
+    """A finite number >= 0 (argparse type: seconds of --times, radians of --arm-swing)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
 
 
 def names_in(folder: Path) -> list[str]:
@@ -151,7 +168,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True, type=Path, help="directory to write (created; see above)")
     p.add_argument("--robot", default="panda", choices=robots, help="config/robots/<robot>.yaml (default panda)")
     p.add_argument(
-        "--times", nargs="+", type=nonnegative_time, metavar="T", help="the instants (simulated s); not with --duration"
+        "--times",
+        nargs="+",
+        type=nonnegative_number,
+        metavar="T",
+        help="the instants (simulated s); not with --duration",
     )
     p.add_argument(
         "--duration",
@@ -166,6 +187,13 @@ def main(argv=None) -> int:
         type=parse_size,
         metavar="WxH",
         help="every camera's image size, its vertical fov kept (default: each camera's own from the world file)",
+    )
+    p.add_argument(
+        "--arm-swing",
+        type=nonnegative_number,
+        default=0.0,
+        metavar="RAD",
+        help="swing every controlled joint about home by up to RAD (see above; default 0: the arm at home)",
     )
     default_looks = sim_settings()["robot_visuals"]
     p.add_argument(
@@ -224,11 +252,13 @@ def main(argv=None) -> int:
         poses = [in_base(base_pose, *cam.pose) for cam in cameras]
         clouds, render_ms = [], []
         print(
-            f"{wpath}: {len(cameras)} cameras x {len(times)} instants, robot {rc['name']} at home "
+            f"{wpath}: {len(cameras)} cameras x {len(times)} instants, robot {rc['name']} "
+            f"{'swinging ' + format(args.arm_swing, 'g') + ' rad about home' if args.arm_swing else 'at home'} "
             f"({args.robot_visuals} meshes) -> {args.out}"
         )
         for t in times:
-            joints = [float(v) for v in sim.reset_robot(rc["home"])]
+            pose = arm_at(rc["home"], sim.lower, sim.upper, args.arm_swing, t)
+            joints = [float(v) for v in sim.reset_robot(pose)]
             sim.place_obstacles(t - sim.motion_epoch)  # the moving obstacles where their motions put them at t
             for cam, (xyz, quat) in zip(cameras, poses):
                 r0 = time.perf_counter()

@@ -8,7 +8,8 @@
  * images the sim node publishes, with the robot's configuration and the world's static objects), or synthetic: the
  * cameras of a world file render by ray casting the table top of worlds/table.yaml, the floor, and a standing person
  * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
- * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda.
+ * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda
+ * (the bounds with the largest margin the world's speed bound asks for).
  *
  * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--resolution M] [--check]
  *                      [--identity]
@@ -37,6 +38,7 @@
 #include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
+#include "moverl_planning_scene/sensed_margin.h"
 #include "moverl_planning_scene/tunables.h"
 
 namespace mps = moverl_planning_scene;
@@ -323,17 +325,24 @@ int main(int argc, char** argv) {
     return 1;
   }
   io.filter_static = true;  // obstacles: sensed (the world's static objects are known)
-  // The world's sensing: unknown_occupied (the world file's, default on, as moverl_sim.world reads it).
+  // The margin rule's tunables, and the world's sensing: its speed bound (replaces octomap/speed_bound) and
+  // unknown_occupied (default on), as moverl_sim.world reads them and the scene node takes them.
+  mps::SensedMarginRule rule;
   try {
+    rule.speed_bound = tunables->require<double>("octomap/speed_bound");
+    rule.latency = tunables->require<double>("octomap/latency");
+    rule.plan_horizon = tunables->require<double>("octomap/plan_horizon");
+    rule.max_age = tunables->require<double>("octomap/max_age");
     const YAML::Node sensing = YAML::LoadFile(world)["sensing"];
     mo.unknown_occupied = !(sensing && sensing["unknown_occupied"]) || sensing["unknown_occupied"].as<bool>();
+    if (sensing && sensing["speed_bound"]) rule.speed_bound = sensing["speed_bound"].as<double>();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s: %s\n", world.c_str(), e.what());
     return 1;
   }
-  // As OctomapMonitor::init sets them (without the predictive margin's slack).
-  const double reach = scene->checker().reachRadius() + scene->checker().options().padding + 2 * mo.resolution;
-  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  // The box the scene node maps (OctomapMonitor::init): the robot's padded reach and the largest margin a check uses.
+  mo.bounds = mps::sensedMapBounds(scene->checker().reachRadius() + scene->checker().options().padding,
+                                   rule.largestMargin(mo.resolution));
   struct Run {
     mps::Integration integration;
     std::unique_ptr<mps::OccupancyMap> map;
@@ -368,10 +377,10 @@ int main(int argc, char** argv) {
     reference = std::make_unique<mps::CloudIntegrator>(reference_map.get(), &scene->checker(), nullptr, io);
   }
   std::printf(
-      "%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m; live filters (self, static%s); %d "
-      "thread%s\n",
-      source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, reach,
-      mo.unknown_occupied ? ", known free: unknown_occupied" : "", runs[0].integrator->threads(),
+      "%s: %zu clouds of %d x %d px; map resolution %.3f m within +-%.2f m (the robot's reach, and a margin for "
+      "%.2f m/s); live filters (self, static%s); %d thread%s\n",
+      source.c_str(), clouds.size(), clouds[0].width, clouds[0].height, mo.resolution, mo.bounds.max().x(),
+      rule.speed_bound, mo.unknown_occupied ? ", known free: unknown_occupied" : "", runs[0].integrator->threads(),
       runs[0].integrator->threads() == 1 ? "" : "s");
   std::vector<std::string> first_seen;
   std::vector<int> views_of;  // per camera in first_seen, its clouds so far

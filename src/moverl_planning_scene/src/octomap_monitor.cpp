@@ -143,12 +143,9 @@ bool OctomapMonitor::init(std::string* error) {
   // Map only what the robot can reach (padded), plus the largest predictive margin a query may use: something
   // farther away cannot touch the robot within the margin's time. Beams are clipped there, which keeps integration
   // fast. A margin beyond this slack is refused (margins()): the map cannot see that far.
-  const double speed = speed_bound_;
-  const double slack =
-      speed > 0.0 ? std::min(FclCollisionChecker::kMaxMargin, speed * (max_age_ + plan_horizon_ + latency_)) : 0.0;
-  max_margin_ = slack + 2 * mo.resolution;
-  const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding + max_margin_;
-  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-reach), Eigen::Vector3d::Constant(reach));
+  max_margin_ = marginRule().largestMargin(mo.resolution);
+  mo.bounds = sensedMapBounds(scene_->checker().reachRadius() + scene_->checker().options().padding, max_margin_);
+  const double reach = mo.bounds.max().x();
   mo.unknown_occupied = unknown_occupied_;
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
@@ -451,13 +448,7 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   }
   const bool none = cameras_.empty() && frame_stamps_.empty();
   lock.unlock();
-  SensedMarginRule rule;
-  rule.speed_bound = speed_bound_;
-  rule.latency = latency_;
-  rule.plan_horizon = plan_horizon_;
-  rule.max_age = max_age_;
-  rule.max_margin = std::min(FclCollisionChecker::kMaxMargin, max_margin_);
-  if (rule.compute(map_age, duration, out, why)) return true;
+  if (marginRule().compute(map_age, duration, out, why)) return true;
   if (!std::isfinite(map_age)) {
     *why = none ? "no camera has been heard from: nothing is known to be free"
                 : "camera " + deciding +
@@ -467,6 +458,16 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     *why += " (the oldest view: camera " + deciding + ")";
   }
   return false;
+}
+
+SensedMarginRule OctomapMonitor::marginRule() const {
+  SensedMarginRule rule;
+  rule.speed_bound = speed_bound_;
+  rule.latency = latency_;
+  rule.plan_horizon = plan_horizon_;
+  rule.max_age = max_age_;
+  rule.max_margin = std::min(FclCollisionChecker::kMaxMargin, max_margin_);
+  return rule;
 }
 
 ros::Time OctomapMonitor::newestStamp() {

@@ -56,4 +56,16 @@ bool SensedMarginRule::compute(double map_age, double duration, SensedMargins* o
   return true;
 }
 
+double SensedMarginRule::largestMargin(double resolution) const {
+  const double slack = speed_bound > 0.0
+                           ? std::min(FclCollisionChecker::kMaxMargin, speed_bound * (max_age + plan_horizon + latency))
+                           : 0.0;
+  return slack + 2 * resolution;
+}
+
+Eigen::AlignedBox3d sensedMapBounds(double reach_radius, double largest_margin) {
+  const double half = reach_radius + largest_margin;
+  return Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-half), Eigen::Vector3d::Constant(half));
+}
+
 }  // namespace moverl_planning_scene

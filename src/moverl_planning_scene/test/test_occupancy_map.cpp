@@ -920,6 +920,32 @@ TEST(SensedMargin, AgeAndRule) {
   EXPECT_EQ(m.end, 0.0);
 }
 
+TEST(SensedMargin, TheMapReachesTheLargestMarginAnyCheckUses) {
+  // The sensed map covers the robot's padded reach plus largestMargin: the margin of a check whose map is as old as
+  // max_age allows, for a plan as long as plan_horizon (the widest any check asks for), fits within it.
+  const double inf = std::numeric_limits<double>::infinity(), res = 0.02;
+  mps::SensedMarginRule rule;
+  rule.speed_bound = 0.16;  // worlds/human.yaml's
+  rule.latency = 0.03;
+  rule.plan_horizon = 1.0;
+  rule.max_age = 1.0;
+  EXPECT_NEAR(rule.largestMargin(res), 0.16 * 2.03 + 2 * res, 1e-12);
+  rule.max_margin = rule.largestMargin(res);
+  mps::SensedMargins m;
+  std::string why;
+  ASSERT_TRUE(rule.compute(rule.max_age, inf, &m, &why)) << why;  // the oldest map, a plan
+  EXPECT_LE(m.plan, rule.max_margin);
+  EXPECT_LE(m.end, rule.max_margin);
+  EXPECT_GT(m.plan + 2 * res, rule.max_margin - 1e-12);  // and no wider than that (two cells)
+  rule.speed_bound = 0.0;                                // no speed bound: two cells
+  EXPECT_DOUBLE_EQ(rule.largestMargin(res), 2 * res);
+  rule.speed_bound = 1.6;  // 1.6 x 2.03 m: the checker's largest margin
+  EXPECT_DOUBLE_EQ(rule.largestMargin(res), mps::FclCollisionChecker::kMaxMargin + 2 * res);
+  const Eigen::AlignedBox3d box = mps::sensedMapBounds(1.2, 0.3648);
+  EXPECT_TRUE(box.min().isApprox(Eigen::Vector3d::Constant(-1.5648)));
+  EXPECT_TRUE(box.max().isApprox(Eigen::Vector3d::Constant(1.5648)));
+}
+
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();

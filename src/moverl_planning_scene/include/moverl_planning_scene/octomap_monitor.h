@@ -33,6 +33,7 @@
 #include "moverl_planning_scene/joint_state_history.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
+#include "moverl_planning_scene/sensed_margin.h"
 
 namespace moverl_planning_scene {
 
@@ -126,6 +127,8 @@ class OctomapMonitor {
   std::atomic<bool> static_known_free_{false};  // the static objects changed: tell the integrator (next cloud)
   double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
   double max_margin_ = 0.0;  // the largest margin the mapped box covers (beyond the robot's padded reach)
+  /// The margin rule of these tunables and speed bound (max_margin: max_margin_, within the checker's largest).
+  SensedMarginRule marginRule() const;
   std::mutex stamps_mutex_;  // guards frame_stamps_; stamps_cv_ is notified after every integrated cloud
   std::condition_variable stamps_cv_;
   std::map<std::string, ros::Time> frame_stamps_;  // each camera frame's last integrated cloud stamp

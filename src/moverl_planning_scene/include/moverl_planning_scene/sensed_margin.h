@@ -6,6 +6,7 @@
  */
 #pragma once
 
+#include <Eigen/Geometry>
 #include <limits>
 #include <string>
 #include <vector>
@@ -46,6 +47,18 @@ struct SensedMarginRule {
   ///        *why when the map is blind or older than max_age, or the end's margin exceeds max_margin. A plan's margin
   ///        beyond max_margin is infinite: no plan can be checked (straight moves still can).
   bool compute(double map_age, double duration, SensedMargins* out, std::string* why) const;
+
+  /// \brief The largest margin a check may use: how far an obstacle may come within the oldest map a check accepts
+  ///        and the longest plan, speed_bound x (max_age + plan_horizon + latency) (at most
+  ///        FclCollisionChecker::kMaxMargin; 0 without a speed bound), plus two cells of `resolution` (m). max_margin
+  ///        is set from it; the sensed map reaches that far beyond the robot (sensedMapBounds).
+  double largestMargin(double resolution) const;
 };
+
+/// \brief The box the sensed map covers, centred on the base link (m): everything the robot can reach with its padding
+///        (reach_radius: FclCollisionChecker::reachRadius() + padding), widened by the largest margin a check may use
+///        (SensedMarginRule::largestMargin). Something farther away cannot touch the robot within that margin's time,
+///        so beams are clipped there. OctomapMonitor maps it; map_benchmark maps the same.
+Eigen::AlignedBox3d sensedMapBounds(double reach_radius, double largest_margin);
 
 }  // namespace moverl_planning_scene

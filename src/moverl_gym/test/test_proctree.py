@@ -39,6 +39,9 @@ def test_a_process_cpu_is_split_by_its_threads_names():
         assert rest < 0.3  # the interpreter's start; its main thread sleeps
         # The threads' seconds add up to the process's (the spinning thread is still alive: it took nothing with it).
         assert sum(by_name.values()) == pytest.approx(cpu_seconds(procs)[(child.pid, procs[0].start)], abs=0.03)
+        # Only the threads that named themselves: the burner, not the main thread (the interpreter's name).
+        renamed = thread_cpu_seconds(procs, renamed_only=True)[(child.pid, procs[0].start)]
+        assert list(renamed) == ["mps_burner"] and renamed["mps_burner"] == by_name["mps_burner"]
     finally:
         child.kill()
         child.wait(timeout=10)

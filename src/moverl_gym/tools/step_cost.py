@@ -12,10 +12,10 @@ An id may carry launch arguments after commas, e.g. the person sensed by cameras
 
 With a sensed map, the planning scene's own account of its integration time (~octomap_status.integration_time of
 every cloud) is summed too; that is wall time, and its pool runs parts of a cloud on a second core, so the shield's
-CPU is also split by thread: the integration's threads name themselves (its loop and its pool's workers,
-THREAD_PREFIX below), and the shield's other threads are its services (the checks) and ROS's own. The simulator's CPU
-is mostly rendering then. The steps' verdicts are counted as well (info["verdict"]): a configuration whose steps
-discard more moves does less (no motion, no render) and looks faster than it is.
+CPU is also split by thread: the integration's threads name themselves (its loop and its pool's workers; any thread
+whose name is not its process's is listed), and the shield's other threads are its services (the checks) and ROS's
+own. The simulator's CPU is mostly rendering then. The steps' verdicts are counted as well (info["verdict"]): a
+configuration whose steps discard more moves does less (no motion, no render) and looks faster than it is.
 
 --profile NAME (sim, shield, env, ...: a process of the graph, named as in the table) also samples that process
 while it is measured: py-spy (`pip install py-spy`, not part of the set-up) for a Python process, perf for a C++ one;
@@ -39,10 +39,6 @@ import threading
 import time
 
 from moverl_gym.workers import run_json_worker
-
-# The prefix of the names our C++ cores give their threads (moverl_planning_scene: "mps_integrate", the cloud
-# integration's loop; "mps_pool", its worker pool's).
-THREAD_PREFIX = "mps_"
 
 
 def parse_id(text: str) -> tuple[str, dict]:
@@ -178,14 +174,14 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
             pid = target[0][0]
             folder = tempfile.mkdtemp(prefix="moverl_profile_")
             profiler = Profiler(pid, "python" in cmdline(pid).split()[0], folder)
-        c0, s0, n0 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs)
+        c0, s0, n0 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs, renamed_only=True)
         measuring.set()
         t0 = time.perf_counter()
         run(steps)
         wall = time.perf_counter() - t0
         measuring.clear()
         frames = profiler.stop() if profiler is not None else None
-        c1, s1, n1 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs)
+        c1, s1, n1 = cpu_seconds(procs), context_switches(procs), thread_cpu_seconds(procs, renamed_only=True)
     finally:
         env.close()
     per, switches = {}, {}
@@ -195,11 +191,11 @@ def worker(text: str, steps: int, seed: int, profile: str | None = None) -> dict
     for key, n in s1.items():
         if key in s0:
             switches[names[key]] = switches.get(names[key], 0.0) + (n - s0[key]) / steps
-    # The threads our C++ cores name (THREAD_PREFIX...: the integration's own and its pool's), and the rest of their
-    # process: a process's CPU split by what its threads do.
+    # The threads that name themselves (moverl_planning_scene's integration loop and its pool's workers), and the rest
+    # of their process: a process's CPU split by what its threads do.
     threads = {}
     for key, by_name in n1.items():
-        named = {n: t - n0[key].get(n, 0.0) for n, t in by_name.items() if key in n0 and n.startswith(THREAD_PREFIX)}
+        named = {n: t - n0[key].get(n, 0.0) for n, t in by_name.items() if key in n0}
         if named and key in c0:
             for n, t in named.items():
                 threads[f"{names[key]} {n}"] = 1000.0 * t / steps

@@ -140,10 +140,11 @@ def cpu_seconds(procs) -> dict[tuple[int, int], float]:
     return out
 
 
-def thread_cpu_seconds(procs) -> dict[tuple[int, int], dict[str, float]]:
+def thread_cpu_seconds(procs, renamed_only: bool = False) -> dict[tuple[int, int], dict[str, float]]:
     """User + system CPU seconds so far of each process's threads alive now, summed by thread name (its comm: what the
     thread named itself, e.g. with pthread_setname_np, else the process's name), keyed by (pid, start); gone processes
-    are left out. A thread that ended took its seconds with it."""
+    are left out. A thread that ended took its seconds with it. renamed_only: only the threads that named themselves
+    (a name other than the process's main thread's)."""
     out = {}
     for p in procs:
         try:
@@ -152,12 +153,17 @@ def thread_cpu_seconds(procs) -> dict[tuple[int, int], dict[str, float]]:
             if int(data[data.rindex(b")") + 2 :].split()[19]) != p.start:
                 continue  # the pid now names another process
             names: dict[str, float] = {}
+            main = None  # the main thread's name (its task id is the pid)
             for task in os.listdir(f"/proc/{p.pid}/task"):
                 with open(f"/proc/{p.pid}/task/{task}/stat", "rb") as f:
                     data = f.read()
                 name = data[data.index(b"(") + 1 : data.rindex(b")")].decode(errors="replace")
                 fields = data[data.rindex(b")") + 2 :].split()
                 names[name] = names.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / _TICK
+                if task == str(p.pid):
+                    main = name
+            if renamed_only:
+                names = {n: t for n, t in names.items() if n != main}
         except (OSError, ValueError):
             continue
         out[(p.pid, p.start)] = names

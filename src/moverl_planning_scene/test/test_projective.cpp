@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <set>
@@ -640,6 +641,68 @@ TEST_F(Integrating, FallsBackToRayCastingForAnUnorganizedCloud) {
   mps::Integration parsed;
   EXPECT_FALSE(mps::parseIntegration("voxblox", &parsed, &error));
   EXPECT_NE(error.find("projective, ray_casting"), std::string::npos) << error;
+}
+
+TEST_F(Integrating, ReadsAPackedCloudInPlaceAsItCopiesAnyOtherLayout) {
+  // Packed float32 x, y, z is read where it lies; any other layout (points of 16 bytes with the fields shuffled and
+  // rows padded, or a packed cloud at an address a float may not be read from) is copied first. The same cloud gives
+  // the same intrinsics and the same update, views after view, either way.
+  const mps::PinholeCamera camera{120, 90, 100.0, 100.0, 59.5, 44.5};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> z(0.5, 3.0);
+  auto xyz = image(camera, [&](int, int) { return z(rng); });
+  for (std::size_t k = 0; k < xyz.size(); k += 29) xyz[k] = std::numeric_limits<float>::quiet_NaN();  // no returns
+  const std::size_t n = static_cast<std::size_t>(camera.width) * camera.height;
+  // 16 bytes a point: z, a pad, x, y; 8 bytes of padding after each row.
+  const std::size_t row_step = 16 * static_cast<std::size_t>(camera.width) + 8;
+  std::vector<std::uint8_t> shuffled(row_step * camera.height, 0);
+  for (std::size_t k = 0; k < n; ++k) {
+    std::uint8_t* at = &shuffled[(k / camera.width) * row_step + (k % camera.width) * 16];
+    std::memcpy(at, &xyz[3 * k + 2], 4);
+    std::memcpy(at + 8, &xyz[3 * k], 4);
+    std::memcpy(at + 12, &xyz[3 * k + 1], 4);
+  }
+  std::vector<std::uint8_t> unaligned(12 * n + 1);
+  std::memcpy(unaligned.data() + 1, xyz.data(), 12 * n);
+  mps::CloudView packed;
+  packed.data = reinterpret_cast<const std::uint8_t*>(xyz.data());
+  packed.width = camera.width;
+  packed.height = camera.height;
+  packed.row_step = 12 * static_cast<std::size_t>(camera.width);
+  mps::CloudView other = packed;
+  other.data = shuffled.data();
+  other.point_step = 16;
+  other.row_step = row_step;
+  other.x = 8;
+  other.y = 12;
+  other.z = 0;
+  mps::CloudView odd = packed;
+  odd.data = unaligned.data() + 1;
+  auto run = [&](const mps::CloudView& view) {
+    auto m = makeMap();
+    mps::CloudIntegrator integrator(m.get(), &scene->checker(), nullptr, io);
+    std::vector<mps::MapUpdate> updates(3);
+    std::string why;
+    for (auto& u : updates) {
+      EXPECT_EQ(integrator.compute(view, pose, home, &u, nullptr, &why), mps::Integration::kProjective) << why;
+      m->apply(u);
+    }
+    return std::make_pair(integrator.camera(), updates);
+  };
+  const auto a = run(packed);
+  EXPECT_GT(a.second[0].misses.size(), 1000u);
+  EXPECT_GT(a.second[0].hits.size(), 100u);
+  for (const auto& view : {other, odd}) {
+    const auto b = run(view);
+    EXPECT_EQ(b.first.fx, a.first.fx);
+    EXPECT_EQ(b.first.cx, a.first.cx);
+    EXPECT_EQ(b.first.fy, a.first.fy);
+    EXPECT_EQ(b.first.cy, a.first.cy);
+    for (std::size_t k = 0; k < a.second.size(); ++k) {
+      EXPECT_EQ(b.second[k].hits, a.second[k].hits) << "view " << k;
+      EXPECT_EQ(b.second[k].misses, a.second[k].misses) << "view " << k;
+    }
+  }
 }
 
 TEST_F(Integrating, FitsThePinholeAsFitPinholeAndChecksEveryPoint) {

@@ -255,7 +255,6 @@ struct OccupancyMap::View {
 /// Cache-line aligned: the workers' counters must not share a line.
 struct alignas(64) OccupancyMap::Scratch {
   std::vector<std::uint64_t> misses;
-  std::vector<std::size_t> marked;  ///< words of seen_ this worker found zero (OccupancyMap::marked_words_)
   std::size_t free_cells = 0, reused = 0;
   Footprint f;
   CellProjection cells[kBlockCells];  ///< a block's cell projections when the view keeps none
@@ -402,15 +401,9 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       ++order_count_[n];
     }
   }
-  // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit", zero but for the last cloud's (the words
-  //    it listed; the whole grid when they were many, as ray casting's beams set).
-  if (marked_words_.size() > seen_.size() / 16) {
-    std::fill(seen_.begin(), seen_.end(), 0);
-    std::fill(hit_.begin(), hit_.end(), 0);
-  } else {
-    for (std::size_t w : marked_words_) seen_[w] = hit_[w] = 0;
-  }
-  marked_words_.clear();
+  // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
+  std::fill(seen_.begin(), seen_.end(), 0);
+  std::fill(hit_.begin(), hit_.end(), 0);
   // Hits first (occupied wins: a cell hit by one beam stays occupied even when others cross it). A cell that holds an
   // obstacle point is hit even when robot or fixture points end in it too: something else is there (a hand next to a
   // link).
@@ -418,7 +411,7 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   for (std::size_t n = 0; n < order_.size(); ++n) {
     if ((order_flags_[n] & kHit) == 0) continue;
     const std::int64_t c = order_[n];
-    mark(&hit_, c);
+    setBit(&hit_, c);
     ++hit_cells;
     if (!(value_[c] == clamp_max_)) out->hits.push_back(static_cast<std::uint64_t>(c));  // a hit changes it
   }
@@ -525,8 +518,9 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
         }
       } else {
         const std::uint64_t bit = std::uint64_t{1} << (k & 63);
-        if ((seen_[k >> 6] & bit) == 0 && (hit_[k >> 6] & bit) == 0) {
-          mark(&seen_, k);
+        std::uint64_t& seen = seen_[k >> 6];
+        if ((seen & bit) == 0 && (hit_[k >> 6] & bit) == 0) {
+          seen |= bit;
           ++free_cells;
           // A free cell already clamped at clamp_min does not change: nothing to apply (a bit, not the value: the
           // values are 4 bytes a cell, too many for the cache).
@@ -608,7 +602,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   }
   std::size_t free_cells = 0;
   auto see = [&](std::int64_t k) {
-    mark(&seen_, k);
+    setBit(&seen_, k);
     ++free_cells;
     if (!testBit(clamped_, k)) out->misses.push_back(static_cast<std::uint64_t>(k));
   };
@@ -858,7 +852,6 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   const int workers = pool == nullptr ? 1 : pool->threads();
   if (static_cast<int>(scratch_.size()) < workers) scratch_.resize(static_cast<std::size_t>(workers));
   for (int k = 0; k < workers; ++k) {
-    scratch_[k].marked.clear();
     scratch_[k].misses.clear();
     scratch_[k].free_cells = 0;
     scratch_[k].reused = 0;
@@ -869,10 +862,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     const std::size_t misses_before = sc.misses.size();
     const std::int64_t si = tasks_[task];
     auto see = [&](std::int64_t k) {
-      const std::size_t word = static_cast<std::size_t>(k >> 6);
-      if (__atomic_fetch_or(&seen_[word], std::uint64_t{1} << (k & 63), __ATOMIC_RELAXED) == 0) {
-        sc.marked.push_back(word);  // the worker that found it zero lists it
-      }
+      __atomic_fetch_or(&seen_[static_cast<std::size_t>(k >> 6)], std::uint64_t{1} << (k & 63), __ATOMIC_RELAXED);
       ++sc.free_cells;
       sc.misses.push_back(static_cast<std::uint64_t>(k));  // (never a cell clamped free: block_clamped_ leaves those)
     };
@@ -1083,7 +1073,6 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   for (int k = 0; k < workers; ++k) {
     free_cells += scratch_[k].free_cells;
     reused += scratch_[k].reused;
-    marked_words_.insert(marked_words_.end(), scratch_[k].marked.begin(), scratch_[k].marked.end());
   }
   for (const TaskMisses& t : task_misses_) {
     const std::vector<std::uint64_t>& m = scratch_[static_cast<std::size_t>(t.worker)].misses;
@@ -1114,12 +1103,6 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
 }
 
 // As octomap's updateNode: a new node starts at log-odds 0, then the update is added and clamped.
-void OccupancyMap::mark(std::vector<std::uint64_t>* bits, std::int64_t k) {
-  std::uint64_t& word = (*bits)[static_cast<std::size_t>(k >> 6)];
-  if (word == 0) marked_words_.push_back(static_cast<std::size_t>(k >> 6));
-  word |= std::uint64_t{1} << (k & 63);
-}
-
 float OccupancyMap::updated(float v, float update) const {
   const float base = std::isnan(v) ? 0.0f : v;
   return std::min(std::max(base + update, clamp_min_), clamp_max_);
@@ -1160,7 +1143,7 @@ void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdat
         testBit(seen_, c)) {
       continue;
     }
-    mark(&seen_, c);
+    setBit(&seen_, c);
     out->misses.push_back(key);  // prior + one miss: free
     ++out->stats.known_free;
     ++out->stats.changed_cells;

@@ -61,14 +61,11 @@ double sphereOrWall(const mps::PinholeCamera& c, int u, int v, const Eigen::Vect
   return s > 0 && s < wall ? s : wall;
 }
 
-/// A map of 2 cm cells, max range 3 m, over `bounds` (default: x from -0.5 to 2.5 m, y and z within 1 m).
-std::unique_ptr<mps::OccupancyMap> makeMap(bool unknown_occupied = false, bool skip_unchanged_blocks = true,
-                                           const Eigen::AlignedBox3d& bounds = Eigen::AlignedBox3d(
-                                               Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0))) {
+std::unique_ptr<mps::OccupancyMap> makeMap(bool unknown_occupied = false, bool skip_unchanged_blocks = true) {
   mps::OccupancyMapOptions o = mps::panda::mapOptions();
   o.resolution = 0.02;
   o.max_range = 3.0;
-  o.bounds = bounds;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
   o.unknown_occupied = unknown_occupied;
   o.skip_unchanged_blocks = skip_unchanged_blocks;
   std::string error;
@@ -566,15 +563,13 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
 
 TEST(Projective, ACloudsUpdateDoesNotDependOnTheMarksOfTheCloudBefore) {
   // An update marks the cells it hits and sees free (a cell counts once a cloud); the next cloud starts with none
-  // marked, though only the words the last one marked are cleared. A map that computed the first cloud (its marks
-  // left) and one that only applied its update (the same values, no marks) give the next cloud the same update,
-  // whichever integration computes either. The next cloud, from another pose: a wall of fixture points (the cells
-  // where they end are seen free) where the first saw a ball, and free space before it. The box is as large as the
-  // Panda's sensed map is (about 2^24 cells), and the first cloud coarse: it marks fewer than a sixteenth of the words,
-  // which are cleared one by one (more, and the whole grid is cleared).
+  // marked. A map that computed the first cloud (its marks left) and one that only applied its update (the same
+  // values, no marks) give the next cloud the same update, whichever integration computes either. The next cloud,
+  // from another pose: a wall of fixture points (the cells where they end are seen free) where the first saw a ball,
+  // and free space before it.
   const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
   const Eigen::Isometry3d moved = lookingAlongX(Eigen::Vector3d(0.0, 0.1, 0.05));
-  const mps::PinholeCamera small{40, 30, 25.0, 26.0, 19.5, 14.5};  // kCamera's view, coarser: fewer marks
+  const mps::PinholeCamera small{40, 30, 25.0, 26.0, 19.5, 14.5};  // kCamera's view, coarser
   const auto ball =
       image(small, [&](int u, int v) { return sphereOrWall(small, u, v, Eigen::Vector3d(0.1, 0.0, 1.2), 0.25, 2.2); });
   const auto wall = image(kCamera, [](int, int) { return 1.3; });
@@ -582,9 +577,8 @@ TEST(Projective, ACloudsUpdateDoesNotDependOnTheMarksOfTheCloudBefore) {
   const std::vector<std::uint8_t> fixture(wall_points.size(), mps::kPointOnFixture);
   for (bool first_projective : {true, false}) {
     for (bool next_projective : {true, false}) {
-      const Eigen::AlignedBox3d box(Eigen::Vector3d::Constant(-2.5), Eigen::Vector3d::Constant(2.5));
-      auto computed = makeMap(true, true, box);
-      auto applied = makeMap(true, true, box);
+      auto computed = makeMap(true);
+      auto applied = makeMap(true);
       mps::MapUpdate u;
       if (first_projective) {
         computed->computeUpdateProjective(mapPoints(ball, pose), {}, depths(ball), {}, small, pose, &u);

@@ -301,13 +301,8 @@ class OccupancyMap {
   double max_range2_ = 0.0;             ///< options_.max_range squared
   std::int64_t offset_[3] = {0, 0, 0};  ///< floor(x / resolution) of the grid's cell 0, per axis
   std::int64_t size_[3] = {0, 0, 0};
-  std::vector<float> value_;               ///< log-odds of each cell; NaN: never observed
-  std::vector<std::uint64_t> seen_, hit_;  ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
-  /// The words of seen_ and hit_ this cloud's marks may have set (each listed when a mark finds it zero): the next
-  /// cloud zeroes those, not the whole grid's (two bits a cell: 1.6 MB for the Panda's sensed map, 0.2 ms a cloud).
-  std::vector<std::size_t> marked_words_;
-  /// Sets cell k's bit in `bits` (seen_ or hit_), listing its word in marked_words_ when it was zero.
-  void mark(std::vector<std::uint64_t>* bits, std::int64_t k);
+  std::vector<float> value_;                ///< log-odds of each cell; NaN: never observed
+  std::vector<std::uint64_t> seen_, hit_;   ///< computeUpdate's scratch: a bit per cell (seen free, hit this cloud)
   std::vector<std::int64_t> order_;         ///< computeUpdate's scratch: the end cells, in the order of their points
   std::vector<std::uint8_t> order_flags_;   ///< computeUpdate's scratch: the flags of the points ending in each
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points

@@ -314,25 +314,25 @@ int main(int argc, char** argv) {
   }
   mps::OccupancyMapOptions mo;
   mps::CloudIntegratorOptions io;
+  mps::SensedMarginRule rule;  // the margin's tunables (the box the node maps, below)
   try {
     mps::readOccupancyMapTunables(*tunables, &mo);
     io.self_filter_padding = tunables->require<double>("octomap/self_filter_padding");
     io.static_filter_padding = tunables->require<double>("octomap/static_filter_padding");
     io.threads = threads > 0 ? threads : tunables->require<int>("octomap/integration_threads");
     if (resolution > 0.0) mo.resolution = resolution;
+    rule.speed_bound = tunables->require<double>("octomap/speed_bound");
+    rule.latency = tunables->require<double>("octomap/latency");
+    rule.plan_horizon = tunables->require<double>("octomap/plan_horizon");
+    rule.max_age = tunables->require<double>("octomap/max_age");
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
   }
   io.filter_static = true;  // obstacles: sensed (the world's static objects are known)
-  // The margin rule's tunables, and the world's sensing: its speed bound (replaces octomap/speed_bound) and
-  // unknown_occupied (default on), as moverl_sim.world reads them and the scene node takes them.
-  mps::SensedMarginRule rule;
+  // The world's sensing: its speed bound (replaces octomap/speed_bound) and unknown_occupied (default on), as
+  // moverl_sim.world reads them and the scene node takes them.
   try {
-    rule.speed_bound = tunables->require<double>("octomap/speed_bound");
-    rule.latency = tunables->require<double>("octomap/latency");
-    rule.plan_horizon = tunables->require<double>("octomap/plan_horizon");
-    rule.max_age = tunables->require<double>("octomap/max_age");
     const YAML::Node sensing = YAML::LoadFile(world)["sensing"];
     mo.unknown_occupied = !(sensing && sensing["unknown_occupied"]) || sensing["unknown_occupied"].as<bool>();
     if (sensing && sensing["speed_bound"]) rule.speed_bound = sensing["speed_bound"].as<double>();

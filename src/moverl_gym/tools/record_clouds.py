@@ -60,15 +60,25 @@ def parse_size(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
-def positive_number(text: str) -> float:
-    """A finite number > 0 (argparse type)."""
+def finite_number(text: str, zero_allowed: bool) -> float:
+    """A finite number > 0 (>= 0 when zero_allowed), for argparse: raises ArgumentTypeError naming the bound."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    if not (math.isfinite(value) and (value >= 0.0 if zero_allowed else value > 0.0)):
+        raise argparse.ArgumentTypeError(f"expected a finite number {'>=' if zero_allowed else '>'} 0, got {text!r}")
     return value
+
+
+def positive_number(text: str) -> float:
+    """A finite number > 0 (argparse type: --duration, --rate)."""
+    return finite_number(text, zero_allowed=False)
+
+
+def nonnegative_number(text: str) -> float:
+    """A finite number >= 0 (argparse type: seconds of --times, radians of --arm-swing)."""
+    return finite_number(text, zero_allowed=True)
 
 
 def instants(duration: float, rate: float) -> list[float]:
@@ -87,17 +97,6 @@ def arm_at(home, lower, upper, swing: float, t: float) -> list[float]:
         q = h + swing * math.sin(2.0 * math.pi * t / (ARM_PERIOD_S + j * ARM_PERIOD_STEP_S) + j)
         out.append(float(min(max(q, lo), hi)))
     return out
-
-
-def nonnegative_number(text: str) -> float:
-    """A finite number >= 0 (argparse type: seconds of --times, radians of --arm-swing)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
-    return value
 
 
 def names_in(folder: Path) -> list[str]:

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <type_traits>
 
 #include "moverl_planning_scene/worker_pool.h"
@@ -310,33 +311,45 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   //    holds the flags of each cell's points, order_ the cells in the order of their first point (neighbouring pixels
   //    cast neighbouring beams one after another: cache). The cells are found in a small hash table (slots_), not in
   //    a per-cell array: a cloud's end cells are scattered over the grid, and each would miss the cache.
-  //    Each point's cell and flags first (point_cell_, point_flags_: kInvalidPoint for a non-finite one), in parts on
-  //    the pool; then the table, in the points' order.
+  //    Each point's cell and flags first (point_cell_, point_flags_: kInvalidPoint for a non-finite one; without beams
+  //    a run of points per cell), in parts on the pool; then the table, in the points' order.
   point_cell_.resize(points.size());
   point_flags_.resize(points.size());
   auto end_of = [&](const Eigen::Vector3d& p, std::uint8_t flags) -> Eigen::Vector3d {
     return flags == 0 ? Eigen::Vector3d(origin + (p - origin) * (options_.max_range / (p - origin).norm())) : p;
   };
+  // Without beams a part also folds its points into runs (the points that end in one cell one after another, invalid
+  // points and points without a cell skipped: neighbouring pixels), written over its own first elements of point_cell_
+  // and point_flags_, and counts its points' kinds: the table below then looks up a run, not a point (a 640x480 cloud
+  // has several points per run). The runs keep the points' order, so the table is the same.
+  struct PartRuns {
+    std::size_t begin, runs;
+    std::size_t invalid, beyond_range, fixture, robot;
+  };
+  std::vector<PartRuns> parts;
+  std::mutex parts_mutex;
   WorkerPool::runParts(pool, points.size(), WorkerPool::kCheapPart, [&](std::size_t begin, std::size_t end, int) {
+    PartRuns part{begin, begin, 0, 0, 0, 0};
+    std::int32_t last_cell = -1;
     for (std::size_t k = begin; k < end; ++k) {
       const Eigen::Vector3d& p = points[k];
       if (!p.allFinite()) {
-        point_flags_[k] = kInvalidPoint;
+        if (beams) point_flags_[k] = kInvalidPoint;
+        ++part.invalid;
         continue;
       }
       std::uint8_t flag = kHit;
       if ((p - origin).squaredNorm() > max_range2_) {
         flag = 0;
+        ++part.beyond_range;
       } else if (masked && robot_mask[k] == kPointOnFixture) {
         flag = kFixture;
+        ++part.fixture;
       } else if (masked && robot_mask[k] != kPointObstacle) {
         flag = kRobot;
+        ++part.robot;
       }
-      point_flags_[k] = flag;
-      if (flag == 0 && !beams) {  // no beam to cut at max_range: projection sees free space from the depths
-        point_cell_[k] = -1;
-        continue;
-      }
+      if (flag == 0 && !beams) continue;  // no beam to cut at max_range: projection sees free space from the depths
       // The end point's cell from float coordinates, as octomap's keys of point3d (a point on a cell boundary in
       // double may lie across it in float). g++ -O3 was seen to skip the rounding to float otherwise: each float is
       // kept as rounded, in a register (an empty asm that may change it; a volatile's trip through memory cost about a
@@ -349,57 +362,78 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
       const volatile float fx = static_cast<float>(e.x()), fy = static_cast<float>(e.y()),
                            fz = static_cast<float>(e.z());
 #endif
-      point_cell_[k] = static_cast<std::int32_t>(cellOf(Eigen::Vector3d(fx, fy, fz)));  // -1 outside (kMaxCells)
+      const auto c = static_cast<std::int32_t>(cellOf(Eigen::Vector3d(fx, fy, fz)));  // -1 outside (kMaxCells)
+      if (beams) {
+        point_flags_[k] = flag;
+        point_cell_[k] = c;
+      } else if (c < 0) {
+        continue;
+      } else if (c == last_cell) {
+        point_flags_[part.runs - 1] |= flag;
+      } else {
+        point_cell_[part.runs] = c;  // part.runs <= k: this part's points before k are read already
+        point_flags_[part.runs] = flag;
+        ++part.runs;
+        last_cell = c;
+      }
     }
+    const std::lock_guard<std::mutex> lock(parts_mutex);
+    parts.push_back(part);
   });
+  for (const PartRuns& part : parts) {
+    out->stats.invalid += part.invalid;
+    out->stats.beyond_range += part.beyond_range;
+    out->stats.fixture += part.fixture;
+    out->stats.robot += part.robot;
+  }
   for (std::size_t at : order_slot_) slots_[at].key = -1;  // the last cloud's (by place: a probe needs the chain)
   order_slot_.clear();
   order_.clear();
   order_flags_.clear();
   order_end_.clear();
   order_count_.clear();
-  std::int64_t last_cell = -1;
-  std::uint32_t last_index = 0;
-  for (std::size_t k = 0; k < points.size(); ++k) {
-    const std::uint8_t flag = point_flags_[k];
-    if (flag == kInvalidPoint) {
-      ++out->stats.invalid;
-      continue;
-    }
-    out->stats.beyond_range += flag == 0 ? 1 : 0;
-    out->stats.fixture += flag == kFixture ? 1 : 0;
-    out->stats.robot += flag == kRobot ? 1 : 0;
-    const std::int64_t c = point_cell_[k];
-    if (c < 0) continue;
-    if (c == last_cell) {  // the previous point's cell (neighbouring pixels): no look-up
-      order_flags_[last_index] |= flag;
-      if (beams) {
-        order_end_[last_index] += end_of(points[k], flag);
-        ++order_count_[last_index];
-      }
-      continue;
-    }
+  // Cell c's index in order_, added there (flags 0) when it is new.
+  auto index_of = [&](std::int64_t c) -> std::uint32_t {
     if (2 * (order_.size() + 1) > slots_.size()) growSlots();
     const std::size_t at = slot(c);
-    std::uint32_t n = slots_[at].index;
-    last_cell = c;
-    if (slots_[at].key != c) {
-      n = static_cast<std::uint32_t>(order_.size());
-      slots_[at] = {static_cast<std::int32_t>(c), n};
-      order_slot_.push_back(at);
-      order_.push_back(c);
-      order_flags_.push_back(0);
-      if (beams) {
-        order_end_.push_back(Eigen::Vector3d::Zero());
-        order_count_.push_back(0);
+    if (slots_[at].key == c) return slots_[at].index;
+    const auto n = static_cast<std::uint32_t>(order_.size());
+    slots_[at] = {static_cast<std::int32_t>(c), n};
+    order_slot_.push_back(at);
+    order_.push_back(c);
+    order_flags_.push_back(0);
+    if (beams) {
+      order_end_.push_back(Eigen::Vector3d::Zero());
+      order_count_.push_back(0);
+    }
+    return n;
+  };
+  std::int64_t last_cell = -1;
+  std::uint32_t last_index = 0;
+  if (!beams) {
+    std::sort(parts.begin(), parts.end(), [](const PartRuns& a, const PartRuns& b) { return a.begin < b.begin; });
+    for (const PartRuns& part : parts) {
+      for (std::size_t r = part.begin; r < part.runs; ++r) {
+        const std::int64_t c = point_cell_[r];
+        if (c != last_cell) {  // (a part's last run and the next part's first may share a cell)
+          last_index = index_of(c);
+          last_cell = c;
+        }
+        order_flags_[last_index] |= point_flags_[r];
       }
     }
-    last_index = n;
-    order_flags_[n] |= flag;
-    if (beams) {
-      order_end_[n] += end_of(points[k], flag);
-      ++order_count_[n];
+  }
+  for (std::size_t k = 0; beams && k < points.size(); ++k) {
+    const std::uint8_t flag = point_flags_[k];
+    const std::int64_t c = point_cell_[k];
+    if (flag == kInvalidPoint || c < 0) continue;
+    if (c != last_cell) {  // not the previous point's cell (neighbouring pixels): a look-up
+      last_index = index_of(c);
+      last_cell = c;
     }
+    order_flags_[last_index] |= flag;
+    order_end_[last_index] += end_of(points[k], flag);
+    ++order_count_[last_index];
   }
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
   std::fill(seen_.begin(), seen_.end(), 0);

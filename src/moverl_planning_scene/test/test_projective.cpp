@@ -547,6 +547,7 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
         EXPECT_EQ(u->stats.changed_cells, ua.stats.changed_cells);
         EXPECT_EQ(u->stats.hit_cells, ua.stats.hit_cells);
         EXPECT_EQ(u->stats.robot, ua.stats.robot);
+        EXPECT_EQ(u->stats.fixture, ua.stats.fixture);
         EXPECT_EQ(u->stats.beyond_range, ua.stats.beyond_range);
         EXPECT_EQ(u->stats.invalid, ua.stats.invalid);
       }
@@ -559,6 +560,61 @@ TEST(Projective, AnyNumberOfWorkersGivesTheSameUpdates) {
   }
   EXPECT_GT(misses, 10000u);  // there was work to share
   EXPECT_GT(known_free, 1000u);
+}
+
+TEST(Projective, FindsTheEndCellsRayCastingFindsInTheSameOrderWhateverTheParts) {
+  // Both integrations hit the cells where obstacle points end, in the order of their first points, and count the
+  // points of each kind. The projective one folds each part's points into runs of one cell first, on the pool; a run
+  // may go on across the parts' seam. A 320 x 240 cloud (several parts) with points of every kind mixed in rows:
+  // non-finite ones, beyond max_range, on the robot, on a fixture, obstacles.
+  mps::PinholeCamera camera = kCamera;
+  camera.width *= 4;
+  camera.height *= 4;
+  camera.fx *= 4;
+  camera.fy *= 4;
+  camera.cx = (camera.cx + 0.5) * 4 - 0.5;
+  camera.cy = (camera.cy + 0.5) * 4 - 0.5;
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const Eigen::Vector3d ball(0.1, 0.0, 1.2);
+  auto kind = [&](int u, int v) -> std::uint8_t {
+    if (v % 50 < 10 && u >= 160) return mps::kPointOnFixture;
+    if (v % 50 < 10 && u % 3 != 0) return mps::kPointOnRobot;  // an obstacle point in every third: hands and links
+    return mps::kPointObstacle;
+  };
+  // Far (beyond max_range, 3 m) in the top rows' right half; a ball before a wall elsewhere.
+  const auto xyz = image(
+      camera, [&](int u, int v) { return v < 30 && u > 200 ? 3.5 : sphereOrWall(camera, u, v, ball, 0.25, 2.2); });
+  std::vector<Eigen::Vector3d> points;
+  std::vector<std::uint8_t> mask, pixel_mask;
+  for (int v = 0; v < camera.height; ++v) {
+    for (int u = 0; u < camera.width; ++u) {
+      const std::size_t k = 3 * (static_cast<std::size_t>(v) * camera.width + u);
+      pixel_mask.push_back(kind(u, v));
+      mask.push_back(kind(u, v));
+      points.push_back((u + 3 * v) % 23 == 0 ? Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN())
+                                             : Eigen::Vector3d(pose * Eigen::Vector3d(xyz[k], xyz[k + 1], xyz[k + 2])));
+    }
+  }
+  ASSERT_GE(points.size(), 4 * mps::WorkerPool::kCheapPart);
+  mps::WorkerPool three(3);
+  auto cast = makeMap(), alone = makeMap(), shared = makeMap();
+  mps::MapUpdate uc, ua, us;
+  cast->computeUpdate(points, mask, pose.translation(), &uc);
+  alone->computeUpdateProjective(points, mask, depths(xyz), pixel_mask, camera, pose, &ua);
+  shared->computeUpdateProjective(points, mask, depths(xyz), pixel_mask, camera, pose, &us, &three);
+  EXPECT_GT(uc.stats.invalid, 1000u);
+  EXPECT_GT(uc.stats.beyond_range, 1000u);
+  EXPECT_GT(uc.stats.robot, 1000u);
+  EXPECT_GT(uc.stats.fixture, 1000u);
+  EXPECT_GT(uc.hits.size(), 100u);
+  for (const mps::MapUpdate* u : {&ua, &us}) {
+    EXPECT_EQ(u->hits, uc.hits);
+    EXPECT_EQ(u->stats.hit_cells, uc.stats.hit_cells);
+    EXPECT_EQ(u->stats.invalid, uc.stats.invalid);
+    EXPECT_EQ(u->stats.beyond_range, uc.stats.beyond_range);
+    EXPECT_EQ(u->stats.robot, uc.stats.robot);
+    EXPECT_EQ(u->stats.fixture, uc.stats.fixture);
+  }
 }
 
 TEST(Projective, ACloudsUpdateDoesNotDependOnTheMarksOfTheCloudBefore) {

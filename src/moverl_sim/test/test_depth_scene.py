@@ -181,28 +181,76 @@ def test_the_scene_refuses_to_draw_a_world_it_was_not_built_for(panda_urdf, tabl
         sim.close()
 
 
-def test_a_robot_with_a_mesh_it_cannot_read_falls_back_to_tinyrenderer(tmp_path, table_world):
-    """A URDF whose visual mesh is COLLADA (common in ROS packages; PyBullet reads it, the rasterizer does not): the
-    simulator is still built, its cameras drawn by TinyRenderer, and it says why (the node warns with it)."""
-    from moverl_sim.core import Simulator
-    from moverl_sim.settings import sim_settings
+DAE_FIXTURES = os.path.join(
+    os.path.dirname(__file__), "..", "..", "moverl_planning_scene", "test", "fixtures", "geometry", "meshes"
+)
 
-    dae = os.path.join(
-        os.path.dirname(__file__), "..", "..", "moverl_planning_scene", "test", "fixtures", "geometry", "meshes"
-    )
-    urdf = tmp_path / "dae_visual.urdf"
+
+def _mesh_robot(tmp_path, mesh_path, scale=1.0):
+    """A URDF of two links: a box, and a link drawn as the mesh (scaled) on a revolute joint."""
+    urdf = tmp_path / ("robot_%s.urdf" % os.path.basename(mesh_path))
     box = '<geometry><box size="0.1 0.1 0.1"/></geometry>'
     urdf.write_text(
         f'<robot name="v"><link name="a"><visual>{box}</visual><collision>{box}</collision></link>'
         '<joint name="j" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
         '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
-        f'<link name="b"><visual><geometry><mesh filename="{os.path.abspath(dae)}/blob.dae"/></geometry></visual>'
-        f"<collision>{box}</collision></link></robot>"
+        f'<link name="b"><visual><geometry><mesh filename="{os.path.abspath(mesh_path)}" '
+        f'scale="{scale} {scale} {scale}"/></geometry></visual><collision>{box}</collision></link></robot>'
     )
-    sim = Simulator(str(urdf), ["j"], "a", None, table_world, **{**sim_settings(), "camera_renderer": "raster"})
+    return str(urdf)
+
+
+@pytest.mark.parametrize("mesh", ["blob.dae", "blob_nested.dae"])
+def test_a_robots_collada_mesh_is_drawn_as_tinyrenderer_draws_it(tmp_path, table_world, mesh):
+    """A URDF whose visual mesh is COLLADA (common in ROS packages): the rasterizer draws it (moverl_sim.meshes reads
+    it with its unit, millimetres here, and its nodes' transforms, nested in blob_nested.dae), where PyBullet's
+    TinyRenderer draws it: the same pixels see the link at the same depth but for the rims."""
+    from moverl_sim.core import Simulator
+    from moverl_sim.settings import sim_settings
+
+    urdf = _mesh_robot(tmp_path, os.path.join(DAE_FIXTURES, mesh), scale=5.0)
+    sim = Simulator(urdf, ["j"], "a", None, table_world, **{**sim_settings(), "camera_renderer": "raster"})
+    try:
+        assert sim.camera_renderer == "raster" and sim.camera_renderer_fallback is None
+        mine, theirs, same_depth = 0, 0, []
+        for spec in table_world.cameras:
+            cam = Camera(spec)
+            depth, seg = sim.render_segmented(cam)
+            ref, ref_seg = cam.render_segmented(sim.client_id)
+            link_b = ((link_body >> 24) - 1 == 0 for link_body in (seg, ref_seg))
+            a, b = ((s >= 0) & ((s & 0xFFFFFF) == sim.robot) & lb for s, lb in zip((seg, ref_seg), link_b))
+            mine, theirs = mine + a.sum(), theirs + b.sum()
+            same_depth.append(np.abs(depth[a & b] - ref[a & b]) <= 1e-3)
+            assert (a & b).sum() >= 0.97 * max(a.sum(), b.sum()), spec.id
+        assert theirs > 300  # the blob, 0.27 m across, in view
+        assert np.mean(np.concatenate(same_depth)) >= 0.99
+    finally:
+        sim.close()
+
+
+def test_a_robot_with_a_mesh_it_cannot_read_falls_back_to_tinyrenderer(tmp_path, table_world):
+    """A URDF whose visual mesh the rasterizer cannot read (here a COLLADA file without a visual scene; PyBullet
+    loads it and draws nothing): the simulator is still built, its cameras drawn by TinyRenderer, and it says why (the
+    node warns with it)."""
+    from moverl_sim.core import Simulator
+    from moverl_sim.settings import sim_settings
+
+    with open(os.path.join(DAE_FIXTURES, "blob.dae"), encoding="utf-8") as fh:
+        text = fh.read()
+    no_scene = tmp_path / "no_scene.dae"
+    no_scene.write_text(text[: text.index("<scene>")] + "</COLLADA>\n")
+    sim = Simulator(
+        _mesh_robot(tmp_path, str(no_scene)),
+        ["j"],
+        "a",
+        None,
+        table_world,
+        **{**sim_settings(), "camera_renderer": "raster"},
+    )
     try:
         assert sim.camera_renderer == "tinyrenderer"
-        assert "blob.dae" in sim.camera_renderer_fallback and "TinyRenderer" in sim.camera_renderer_fallback
+        assert "no_scene.dae" in sim.camera_renderer_fallback and "TinyRenderer" in sim.camera_renderer_fallback
+        assert "no visual scene" in sim.camera_renderer_fallback
         cam = Camera(table_world.cameras[0])
         assert np.array_equal(sim.render_depth(cam), cam.render_depth(sim.client_id))
     finally:

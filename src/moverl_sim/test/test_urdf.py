@@ -3,6 +3,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 from conftest import PANDA_URI, PKG_DIR
 
@@ -194,10 +195,65 @@ def test_simplified_visuals_decimate_every_visual_mesh(tmp_path):
     broken.write_text("v 0 0 0\nf 1 2 3\n")
     with pytest.raises(ValueError, match="broken.obj"):
         meshes.read_mesh(str(broken))
-    with pytest.raises(ValueError, match="only .obj, .stl"):
-        meshes.read_mesh(str(tmp_path / "x.dae"))
+    with pytest.raises(ValueError, match="only .obj, .stl, .dae"):
+        meshes.read_mesh(str(tmp_path / "x.ply"))
     with pytest.raises(ValueError, match="max_faces"):
         meshes.simplified(v, faces, 3)
+
+
+GEOMETRY_FIXTURES = os.path.join(
+    os.path.dirname(__file__), "..", "..", "moverl_planning_scene", "test", "fixtures", "geometry", "meshes"
+)
+
+
+def _canonical(faces):
+    """Triangles as a sorted list, each rotated to start at its smallest index (its winding kept)."""
+    return sorted(tuple(np.roll(t, -int(np.argmin(t)))) for t in faces.tolist())
+
+
+def test_a_collada_mesh_is_read_in_metres_where_its_nodes_place_it():
+    """COLLADA as PyBullet reads it: the triangles of the visual scene's geometries, moved by their nodes' transforms
+    (nested: the child's, then the parent's) and scaled by the file's <unit> (millimetres here). blob.stl is the same
+    blob in metres, where no node placed it: the same points, the same triangles, the same winding."""
+    from moverl_sim import meshes
+
+    ref, ref_faces = meshes.read_mesh(os.path.join(GEOMETRY_FIXTURES, "blob.stl"))
+    rotation = np.array([[0.877583, -0.479426, 0.0], [0.479426, 0.877583, 0.0], [0.0, 0.0, 1.0]])
+    for name, child_mm in (("blob.dae", [0, 0, 0]), ("blob_nested.dae", [0, 15, -10])):
+        v, faces = meshes.read_mesh(os.path.join(GEOMETRY_FIXTURES, name))
+        want = (ref + 0.001 * np.array(child_mm)) @ rotation.T + 0.001 * np.array([10, -5, 20])
+        distance = np.linalg.norm(v[:, None, :] - want[None, :, :], axis=2)
+        assert distance.min(axis=1).max() < 1e-6, name  # float32 STL against 4 decimals of millimetres
+        assert len(v) == len(want)
+        assert _canonical(distance.argmin(axis=1)[faces]) == _canonical(ref_faces), name
+
+
+def test_a_collada_visual_is_simplified_and_one_it_cannot_read_is_left_to_pybullet(tmp_path):
+    """simplified_visuals decimates a COLLADA visual as it does an OBJ (written in metres: the OBJ has no unit), and
+    leaves a COLLADA file it cannot read as it is (here one without a visual scene): PyBullet reads COLLADA itself."""
+    from moverl_sim import meshes
+    from moverl_sim.urdf import simplified_visuals
+
+    blob = os.path.abspath(os.path.join(GEOMETRY_FIXTURES, "blob.dae"))
+    with open(blob, encoding="utf-8") as fh:
+        text = fh.read()
+    no_scene = tmp_path / "no_scene.dae"
+    no_scene.write_text(text[: text.index("<scene>")] + "</COLLADA>\n")
+    with pytest.raises(ValueError, match="no visual scene"):
+        meshes.read_mesh(str(no_scene))
+    urdf = '<robot name="r">%s</robot>' % "".join(
+        f'<link name="l{k}"><visual><geometry><mesh filename="{path}"/></geometry></visual></link>'
+        for k, path in enumerate((blob, str(no_scene)))
+    )
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    names = [m.get("filename") for m in ET.fromstring(simplified_visuals(urdf, str(out_dir), 50)).iter("mesh")]
+    assert names[0].startswith(str(out_dir)) and names[0].endswith(".obj")
+    assert names[1] == str(no_scene)
+    v0, _ = meshes.read_mesh(blob)
+    v1, f1 = meshes.read_mesh(names[0])
+    assert len(f1) <= 50
+    assert (v1.min(axis=0) >= v0.min(axis=0) - 0.003).all() and (v1.max(axis=0) <= v0.max(axis=0) + 0.003).all()
 
 
 def test_simulator_refuses_a_visual_mesh_it_cannot_simplify(tmp_path):

@@ -230,9 +230,9 @@ class Simulator:
         (its collision shapes); required, config/sim.yaml's robot_visuals (and simplified_faces).
     camera_renderer: what draws the depth cameras' images (render_depth): "raster" (moverl_sim.depth_scene: a
         depth-only rasterizer of the visual shapes, read once here) or "tinyrenderer" (PyBullet's); required,
-        config/sim.yaml's camera_renderer. A world raster cannot draw (a visual mesh of another format than OBJ or
-        STL, e.g. COLLADA) falls back to TinyRenderer: self.camera_renderer says which draws, and
-        self.camera_renderer_fallback why (the node warns).
+        config/sim.yaml's camera_renderer. A world raster cannot draw (a visual mesh of another format than OBJ, STL
+        or COLLADA, or a file moverl_sim.meshes cannot read) falls back to TinyRenderer: self.camera_renderer says
+        which draws, and self.camera_renderer_fallback why (the node warns).
     """
 
     def __init__(
@@ -324,7 +324,9 @@ class Simulator:
                 if camera_renderer == "raster":
                     try:
                         self._depth_scene = DepthScene.from_client(p._client)
-                    except ValueError as exc:  # a shape it does not draw (a COLLADA mesh): PyBullet's renderer does
+                    except (
+                        ValueError
+                    ) as exc:  # a shape it does not draw (a mesh it cannot read): PyBullet's renderer does
                         self.camera_renderer = "tinyrenderer"
                         self.camera_renderer_fallback = "%s; PyBullet's TinyRenderer draws the cameras" % exc
             except UrdfError as exc:  # a mesh that cannot be read or simplified: the caller's ValueError

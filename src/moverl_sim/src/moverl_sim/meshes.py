@@ -5,20 +5,23 @@ triangles: PyBullet's TinyRenderer spends nine tenths of an image on them (docs/
 a quadric-error simplification of itself (fast_simplification, the decimation of pyvista) with at most ``faces``
 triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the depths move) and
 the Panda's 160x120 image costs about a quarter (4.7 ms against 18). Meshes this module reads: Wavefront OBJ
-(vertices and faces; texture and normal indices ignored) and STL (ASCII or binary); any other format is drawn as it is.
+(vertices and faces; texture and normal indices ignored), STL (ASCII or binary) and COLLADA (pycollada: the triangles
+of the visual scene's geometries, placed by their nodes' transforms and scaled by the file's <unit>, its <up_axis> not
+applied, as PyBullet reads them); any other format is drawn as it is.
 """
 
 from __future__ import annotations
 
 import os
 import struct
+import warnings
 
 import numpy as np
 
 __all__ = ["read_mesh", "write_obj", "simplified", "SIMPLIFIABLE"]
 
 #: Mesh file suffixes this module reads (lower case).
-SIMPLIFIABLE = (".obj", ".stl")
+SIMPLIFIABLE = (".obj", ".stl", ".dae")
 
 
 def _read_obj(path: str) -> tuple[np.ndarray, np.ndarray]:
@@ -59,13 +62,54 @@ def _read_stl(path: str) -> tuple[np.ndarray, np.ndarray]:
     return vertices, inverse.reshape(-1, 3).astype(np.int64)
 
 
+def _dae_corners(dae) -> list:
+    """The corners of every triangle of the visual scene's geometries (each instance placed by its nodes' transforms,
+    in document order), a k x 3 array per primitive; None without a visual scene."""
+    if dae.scene is None:
+        return None
+    corners = []
+    for geometry in dae.scene.objects("geometry"):
+        for primitive in geometry.primitives():
+            if hasattr(primitive, "triangleset"):  # polygons and polylists, as triangle fans
+                primitive = primitive.triangleset()
+            if not hasattr(primitive, "vertex_index") or primitive.vertex is None or len(primitive.vertex_index) == 0:
+                continue  # lines, or an empty set
+            corners.append(np.asarray(primitive.vertex, dtype=float)[np.asarray(primitive.vertex_index).reshape(-1)])
+    return corners
+
+
+def _read_dae(path: str) -> tuple[np.ndarray, np.ndarray]:
+    import collada  # imported where used: only a robot with COLLADA visuals needs it
+
+    try:
+        with warnings.catch_warnings():  # pycollada builds numpy.matrix objects (a PendingDeprecationWarning)
+            warnings.simplefilter("ignore", PendingDeprecationWarning)
+            # Unsupported parts (materials, animations, ...) and references to what the file lacks are skipped, as
+            # PyBullet skips them: only the geometry is read.
+            dae = collada.Collada(path, ignore=[collada.common.DaeUnsupportedError, collada.common.DaeBrokenRefError])
+            corners = _dae_corners(dae)
+    except OSError:
+        raise
+    except Exception as exc:  # pycollada's parse errors are of several kinds: one ValueError naming the file
+        raise ValueError("%s: not a COLLADA file pycollada can read: %s" % (path, exc)) from None
+    if corners is None:
+        raise ValueError("%s: no visual scene (<scene>): nothing would be drawn" % path)
+    if not corners:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    # Shared corners become one vertex (the decimation needs the mesh's connectivity); <unit> in metres.
+    vertices, inverse = np.unique(
+        np.concatenate(corners) * (dae.assetInfo.unitmeter or 1.0), axis=0, return_inverse=True
+    )
+    return vertices, inverse.reshape(-1, 3).astype(np.int64)
+
+
 def read_mesh(path: str) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices n x 3, triangles m x 3 vertex indices) of an OBJ or STL file; ValueError for another format or a
-    file without triangles."""
+    """(vertices n x 3, triangles m x 3 vertex indices) of an OBJ, STL or COLLADA file, in metres where the file says
+    its unit (COLLADA); ValueError for another format or a file without triangles."""
     suffix = os.path.splitext(path)[1].lower()
     if suffix not in SIMPLIFIABLE:
         raise ValueError("%s: a mesh of this format is not read here (only %s)" % (path, ", ".join(SIMPLIFIABLE)))
-    vertices, faces = _read_obj(path) if suffix == ".obj" else _read_stl(path)
+    vertices, faces = {".obj": _read_obj, ".stl": _read_stl, ".dae": _read_dae}[suffix](path)
     if len(faces) == 0 or (faces.size and (faces.min() < 0 or faces.max() >= len(vertices))):
         raise ValueError("%s: no triangles, or faces that name missing vertices" % path)
     return vertices, faces

@@ -227,11 +227,13 @@ def collision_as_visual(text, base_dir=None, source="robot description"):
 
 
 def simplified_visuals(text, out_dir, max_faces, base_dir=None, source="robot description"):
-    """URDF text whose visual meshes (OBJ, STL) are drawn simplified: each is read, decimated to at most about
-    max_faces triangles (moverl_sim.meshes) and written to ``out_dir`` as an OBJ the text names (absolute paths), so
-    that a renderer draws a fraction of the triangles with the same silhouette to within millimetres (the simulator's
-    depth cameras; render_cost.py measures it). Collision shapes, primitives and meshes of other formats stay as they
-    are. ``out_dir`` must exist and outlive the loading of the text."""
+    """URDF text whose visual meshes (OBJ, STL, COLLADA) are drawn simplified: each is read, decimated to at most
+    about max_faces triangles (moverl_sim.meshes) and written to ``out_dir`` as an OBJ the text names (absolute paths),
+    so that a renderer draws a fraction of the triangles with the same silhouette to within millimetres (the
+    simulator's depth cameras; render_cost.py measures it). Collision shapes, primitives and meshes of other formats
+    stay as they are, and so does a COLLADA file moverl_sim.meshes cannot read (PyBullet reads COLLADA with its own
+    reader; the depth cameras' rasterizer then says why TinyRenderer draws them). A mesh of another kind that cannot be
+    read is refused. ``out_dir`` must exist and outlive the loading of the text."""
     from . import meshes
 
     root = _parse_urdf(rewrite_mesh_paths(text, base_dir, source), source)
@@ -244,14 +246,18 @@ def simplified_visuals(text, out_dir, max_faces, base_dir=None, source="robot de
             if path not in written:
                 try:
                     vertices, faces = meshes.read_mesh(path)
-                    if len(faces) <= max_faces:  # small enough: drawn as it is
-                        written[path] = path
-                        continue
-                    vertices, faces = meshes.simplified(vertices, faces, max_faces)
+                    small = len(faces) <= max_faces  # drawn as it is
+                    if not small:
+                        vertices, faces = meshes.simplified(vertices, faces, max_faces)
                 except (OSError, ValueError) as exc:
-                    raise UrdfError("%s: visual mesh %s cannot be simplified: %s" % (source, path, exc)) from None
-                written[path] = os.path.join(out_dir, "%d_%s.obj" % (len(written), os.path.basename(path)))
-                meshes.write_obj(written[path], vertices, faces)
+                    if not (path.lower().endswith(".dae") and isinstance(exc, ValueError)):
+                        raise UrdfError("%s: visual mesh %s cannot be simplified: %s" % (source, path, exc)) from None
+                    small = True  # a COLLADA file PyBullet's own reader draws
+                if small:
+                    written[path] = path
+                else:
+                    written[path] = os.path.join(out_dir, "%d_%s.obj" % (len(written), os.path.basename(path)))
+                    meshes.write_obj(written[path], vertices, faces)
             mesh.set("filename", written[path])
     return '<?xml version="1.0" ?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 

@@ -61,10 +61,10 @@ def check(world, ids, rows, mode):
     for t, age, seen, lost in rows:
         assert lost == int(np.count_nonzero(age > 0.5))
         for k in range(4):
-            if not np.isfinite(age[k]) or t - age[k] <= 0.0:
-                # No pose yet, or one measured before the reset restarted the walk (the person teleported), or at
-                # that very instant: a measurement due at the reset's sim time may have been taken just before it,
-                # of the old walk (the tracker's 30 Hz grid meets the reset's substep one time in eight).
+            if not np.isfinite(age[k]) or t - age[k] < 0.0:
+                # No pose yet, or one measured before the reset restarted the walk (the person teleported). One
+                # measured at that very instant is of the new walk: the simulator takes it again after the teleport
+                # (Tracker.retake_from; the tracker's 30 Hz grid meets the reset's substep one time in eight).
                 continue
             ages.append(age[k])
             measured = truth(world, ids, t - age[k])[3 * k : 3 * k + 3]

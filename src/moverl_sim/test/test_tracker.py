@@ -60,6 +60,40 @@ def test_seeded_and_noise_free_when_asked():
     assert all(m.pose == walk(m.stamp)[m.id] for _, m in exact)
 
 
+@pytest.mark.parametrize("start", [0.0, 0.1])
+def test_what_it_measured_at_a_reset_of_the_truth_is_taken_again_from_the_new_truth(start):
+    """The simulator's reset teleports the objects at time `at` (their motions restart): the measurements stamped at
+    or after it, taken before the teleport and not delivered yet, are dropped and taken again from the new truth;
+    the ones before it are delivered as they were."""
+    opts = dict(OPTIONS, noise=0.0, dropout=0.0, latency=0.1)
+    tracker = Tracker(["a", "b"], TrackerOptions(**opts), start=start)
+    at = start + 45 / 30  # a measurement time, as the sum the tracker computes it from
+    now = 0.0
+    while now < at:  # up to the reset's instant: the measurement due then is taken, from the old truth
+        now = min(at, now + 0.05)
+        tracker.advance(now, walk)
+    assert any(m.stamp == at for _, m in tracker._pending)
+
+    def moved(t):  # after the teleport: every object 1 m further along x
+        return {oid: (p[0] + 1.0, *p[1:]) for oid, p in walk(t).items()}
+
+    # Pending: the measurements of the last 0.1 s (the latency), 2 objects each; the ones at `at` are dropped.
+    waiting = [m for _, m in tracker._pending if m.stamp < at]
+    assert len(waiting) >= 2
+    assert tracker.retake_from(at) == 2
+    delivered = []
+    while now < at + 1.0:
+        now += 0.05
+        delivered += tracker.advance(now, moved)
+    before = [m for m in delivered if m.stamp < at]
+    after = [m for m in delivered if m.stamp >= at]
+    assert before == waiting and all(m.pose == walk(m.stamp)[m.id] for m in before)
+    assert min(m.stamp for m in after) == at  # taken again
+    assert all(m.pose == moved(m.stamp)[m.id] for m in after)
+    stamps = sorted(m.stamp for m in delivered if m.id == "a")
+    assert max(abs(b - a - 1 / 30) for a, b in zip(stamps, stamps[1:])) < 1e-9  # none twice, none missed
+
+
 def test_a_clock_that_jumps_does_not_flood():
     tracker = Tracker(["a", "b"], TrackerOptions(**dict(OPTIONS, dropout=0.0, latency=0.0)))
     out = tracker.advance(100.0, walk)

@@ -139,6 +139,24 @@ class Tracker:
         """The clock's time of the next measurement."""
         return self._start + self._k * self._period
 
+    def retake_from(self, at: float) -> int:
+        """The truth jumped at time `at` (the simulator's reset teleports the objects to the start of their motions):
+        the measurements stamped at or after `at` not yet delivered were taken from the old truth, so they are dropped,
+        and the next advance() takes them again from the new one (a real tracker sees no teleport; a measurement due
+        at the reset's instant was taken just before it). Returns how many were dropped. `taken` counts a measurement
+        taken again twice."""
+        kept = collections.deque(item for item in self._pending if item[1].stamp < at)
+        dropped = len(self._pending) - len(kept)
+        self._pending = kept
+        # The first measurement time at or after `at` (the float product checked both ways).
+        k = max(0, math.ceil((at - self._start) / self._period))
+        while k > 0 and self._start + (k - 1) * self._period >= at:
+            k -= 1
+        while self._start + k * self._period < at:
+            k += 1
+        self._k = min(self._k, k)
+        return dropped
+
     def advance(self, now: float, truth) -> list:
         """Take the measurements due up to `now` and return those delivered by `now` (oldest first).
 

@@ -83,7 +83,12 @@ int main(int argc, char** argv) {
   std::printf("\n");
 
   const std::vector<double> home = {0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785};
-  scene->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
+  mps::WorldObject table;  // worlds/table.yaml's table top
+  if (!mps::loadWorldBox(MOVERL_CONFIG_DIR "/../worlds/table.yaml", "table", &table, &error)) {
+    std::fprintf(stderr, "error: %s\n", error.c_str());
+    return 1;
+  }
+  scene->setWorld({table}, &error);
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> jitter(-0.5, 0.5);
   auto near_home = [&] {
@@ -115,14 +120,14 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;
   }
-  all_pairs->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
+  all_pairs->setWorld({table}, &error);
   // validateMotion on a scene of its own: a scene reuses the culling of the segment it checked last.
   auto motions = mps::PlanningScene::create(urdf.str(), o, &error);
   if (!motions) {
     std::fprintf(stderr, "error: %s\n", error.c_str());
     return 1;
   }
-  motions->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015)}, &error);
+  motions->setWorld({table}, &error);
   std::uniform_int_distribution<int> sign(0, 1);
   // Moves from random states near home, and a walk as an env steps (each move starts where the last one ended, back
   // near home every 50 moves or after a colliding one): the culling's memory of the last move is of use there.
@@ -182,8 +187,7 @@ int main(int argc, char** argv) {
 
   // Planning around a 5 mm wall (OMPL's random numbers come from one global stream: two scenes planning in turn get
   // different samples, so this is not a comparison of the two).
-  scene->setWorld({box("table", 1.5, 0.8, 0.03, 0.35, 0.0, -0.015), box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)},
-                  &error);
+  scene->setWorld({table, box("wall", 0.4, 0.005, 0.5, 0.45, 0.0, 0.45)}, &error);
   std::vector<double> a = home, b = home;
   a[0] = -0.8;
   b[0] = 0.8;

@@ -103,6 +103,40 @@ bool loadRobotConfig(const std::string& path, RobotModelOptions* o, std::string*
   return true;
 }
 
+bool loadWorldBox(const std::string& path, const std::string& id, WorldObject* box, std::string* error) {
+  try {
+    const YAML::Node objects = YAML::LoadFile(path)["objects"];
+    if (!objects || !objects.IsSequence()) throw std::runtime_error("no objects: list");
+    std::string ids;
+    for (const auto& o : objects) {
+      const auto oid = o["id"].as<std::string>();
+      if (oid != id) {
+        ids += (ids.empty() ? "" : ", ") + oid;
+        continue;
+      }
+      if (o["shape"].as<std::string>() != "box") throw std::runtime_error("object " + id + " is not a box");
+      const auto size = o["size"].as<std::vector<double>>();
+      const auto xyz = o["xyz"].as<std::vector<double>>();
+      const auto rpy = o["rpy"] ? o["rpy"].as<std::vector<double>>() : std::vector<double>(3, 0.0);
+      if (size.size() != 3 || xyz.size() != 3 || rpy.size() != 3) {
+        throw std::runtime_error("object " + id + ": size, xyz and rpy take 3 numbers each");
+      }
+      box->id = id;
+      box->type = ShapeType::kBox;
+      box->dimensions = size;
+      box->pose = Eigen::Translation3d(xyz[0], xyz[1], xyz[2]) * Eigen::AngleAxisd(rpy[2], Eigen::Vector3d::UnitZ()) *
+                  Eigen::AngleAxisd(rpy[1], Eigen::Vector3d::UnitY()) *
+                  Eigen::AngleAxisd(rpy[0], Eigen::Vector3d::UnitX());
+      box->motion = ObstacleMotion();
+      return true;
+    }
+    throw std::runtime_error("no object " + id + " (objects: " + ids + ")");
+  } catch (const std::exception& e) {
+    if (error != nullptr) *error = path + ": " + e.what();
+    return false;
+  }
+}
+
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
   o->resolution = t.require<double>("octomap/resolution");
   o->max_range = t.require<double>("octomap/max_range");

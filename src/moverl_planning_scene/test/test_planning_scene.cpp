@@ -820,3 +820,40 @@ TEST(ObstacleMotion, DisplacementMatchesTheSharedCases) {
   }
   EXPECT_EQ(cases, 40);
 }
+
+TEST(WorldFile, ABoxIsReadAsTheWorldServerPlacesItAndAnythingElseIsRefusedNamingIt) {
+  // The tools' table: worlds/table.yaml's (scene_benchmark places it so), and a rotated box of a file written here
+  // (rpy fixed-axis roll, pitch, yaw, as the world files and URDF).
+  mps::WorldObject table;
+  std::string error;
+  ASSERT_TRUE(mps::loadWorldBox(MOVERL_CONFIG_DIR "/../worlds/table.yaml", "table", &table, &error)) << error;
+  EXPECT_EQ(table.id, "table");
+  EXPECT_EQ(table.type, mps::ShapeType::kBox);
+  EXPECT_EQ(table.dimensions.size(), 3u);
+  const std::string path = ::testing::TempDir() + "/world_box_test.yaml";
+  {
+    std::ofstream out(path);
+    out << "objects:\n"
+           "  - {id: ball, shape: sphere, size: [0.1], xyz: [0, 0, 0]}\n"
+           "  - {id: tilted, shape: box, size: [0.2, 0.1, 0.05], xyz: [1, 2, 3], rpy: [0.3, -0.2, 1.1]}\n"
+           "  - {id: flat, shape: box, size: [0.2, 0.1], xyz: [0, 0, 0]}\n";
+  }
+  mps::WorldObject tilted;
+  ASSERT_TRUE(mps::loadWorldBox(path, "tilted", &tilted, &error)) << error;
+  EXPECT_EQ(tilted.dimensions, (std::vector<double>{0.2, 0.1, 0.05}));
+  const Eigen::Matrix3d r =
+      (Eigen::AngleAxisd(1.1, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()) *
+       Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  EXPECT_TRUE(tilted.pose.linear().isApprox(r));
+  EXPECT_TRUE(tilted.pose.translation().isApprox(Eigen::Vector3d(1, 2, 3)));
+  mps::WorldObject none;
+  EXPECT_FALSE(mps::loadWorldBox(path, "table", &none, &error));
+  EXPECT_NE(error.find("no object table (objects: ball, tilted, flat)"), std::string::npos) << error;
+  EXPECT_FALSE(mps::loadWorldBox(path, "ball", &none, &error));
+  EXPECT_NE(error.find("ball is not a box"), std::string::npos) << error;
+  EXPECT_FALSE(mps::loadWorldBox(path, "flat", &none, &error));
+  EXPECT_NE(error.find("3 numbers"), std::string::npos) << error;
+  EXPECT_FALSE(mps::loadWorldBox(path + ".missing", "table", &none, &error));
+  EXPECT_NE(error.find(".missing"), std::string::npos) << error;
+}

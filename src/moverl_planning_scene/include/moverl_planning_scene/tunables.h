@@ -66,5 +66,9 @@ void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
 ///        fixed_joint_positions), for tools and tests without a ROS parameter server; *urdf_uri gets robot/urdf as
 ///        written (the caller resolves it). False with *error naming a missing or malformed key.
 bool loadRobotConfig(const std::string& path, RobotModelOptions* o, std::string* urdf_uri, std::string* error);
+/// \brief A box of a world file (worlds/<name>.yaml: the object `id`, shape box, size, xyz and rpy as written there;
+///        a motion is not read: its pose at motion time 0), for tools and tests that place the world's table without
+///        the world server. False with *error naming the file and what is missing or not a box (the ids it has).
+bool loadWorldBox(const std::string& path, const std::string& id, WorldObject* box, std::string* error);
 
 }  // namespace moverl_planning_scene

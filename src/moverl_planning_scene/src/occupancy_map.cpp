@@ -410,7 +410,20 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   };
   std::int64_t last_cell = -1;
   std::uint32_t last_index = 0;
-  if (!beams) {
+  if (beams) {
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      const std::uint8_t flag = point_flags_[k];
+      const std::int64_t c = point_cell_[k];
+      if (flag == kInvalidPoint || c < 0) continue;
+      if (c != last_cell) {  // not the previous point's cell (neighbouring pixels): a look-up
+        last_index = index_of(c);
+        last_cell = c;
+      }
+      order_flags_[last_index] |= flag;
+      order_end_[last_index] += end_of(points[k], flag);
+      ++order_count_[last_index];
+    }
+  } else {
     std::sort(parts.begin(), parts.end(), [](const PartRuns& a, const PartRuns& b) { return a.begin < b.begin; });
     for (const PartRuns& part : parts) {
       for (std::size_t r = part.begin; r < part.runs; ++r) {
@@ -422,18 +435,6 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
         order_flags_[last_index] |= point_flags_[r];
       }
     }
-  }
-  for (std::size_t k = 0; beams && k < points.size(); ++k) {
-    const std::uint8_t flag = point_flags_[k];
-    const std::int64_t c = point_cell_[k];
-    if (flag == kInvalidPoint || c < 0) continue;
-    if (c != last_cell) {  // not the previous point's cell (neighbouring pixels): a look-up
-      last_index = index_of(c);
-      last_cell = c;
-    }
-    order_flags_[last_index] |= flag;
-    order_end_[last_index] += end_of(points[k], flag);
-    ++order_count_[last_index];
   }
   // 2. This cloud's marks: a bit per cell for "seen free" and one for "hit".
   std::fill(seen_.begin(), seen_.end(), 0);

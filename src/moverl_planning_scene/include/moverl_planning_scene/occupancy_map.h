@@ -307,8 +307,10 @@ class OccupancyMap {
   std::vector<std::uint8_t> order_flags_;   ///< computeUpdate's scratch: the flags of the points ending in each
   std::vector<Eigen::Vector3d> order_end_;  ///< computeUpdate's scratch: the sum of each end cell's points
   std::vector<std::uint32_t> order_count_;  ///< computeUpdate's scratch: how many points end in each end cell
-  std::vector<std::int32_t> point_cell_;    ///< collectEndCells' scratch: each point's end cell (-1: outside)
-  std::vector<std::uint8_t> point_flags_;   ///< ... and its flags
+  /// collectEndCells' scratch: each point's end cell (-1: outside) and its flags; without beams each part's runs of
+  /// points that end in one cell, at the part's first elements
+  std::vector<std::int32_t> point_cell_;
+  std::vector<std::uint8_t> point_flags_;
   /// computeUpdate's scratch: the end cells' index in order_, an open-addressing table keyed by cell id (-1: empty),
   /// a power of two twice as large as the most end cells a cloud had (small: the grid's cells are many). Key and index
   /// side by side in 8 bytes (the map has fewer than 2^31 cells): a look-up touches one cache line, and a 160x120

@@ -7,10 +7,13 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <random>
 #include <sstream>
+
+#include <unistd.h>
 
 #include "moverl_planning_scene/planning_scene.h"
 #include "panda_support.h"
@@ -830,7 +833,8 @@ TEST(WorldFile, ABoxIsReadAsTheWorldServerPlacesItAndAnythingElseIsRefusedNaming
   EXPECT_EQ(table.id, "table");
   EXPECT_EQ(table.type, mps::ShapeType::kBox);
   EXPECT_EQ(table.dimensions.size(), 3u);
-  const std::string path = ::testing::TempDir() + "/world_box_test.yaml";
+  // This process's own file (several test runs may share the machine), removed at the end.
+  const std::string path = ::testing::TempDir() + "moverl_world_box_" + std::to_string(::getpid()) + ".yaml";
   {
     std::ofstream out(path);
     out << "objects:\n"
@@ -856,4 +860,5 @@ TEST(WorldFile, ABoxIsReadAsTheWorldServerPlacesItAndAnythingElseIsRefusedNaming
   EXPECT_NE(error.find("3 numbers"), std::string::npos) << error;
   EXPECT_FALSE(mps::loadWorldBox(path + ".missing", "table", &none, &error));
   EXPECT_NE(error.find(".missing"), std::string::npos) << error;
+  std::remove(path.c_str());
 }

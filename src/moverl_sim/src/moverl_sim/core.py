@@ -324,9 +324,7 @@ class Simulator:
                 if camera_renderer == "raster":
                     try:
                         self._depth_scene = DepthScene.from_client(p._client)
-                    except (
-                        ValueError
-                    ) as exc:  # a shape it does not draw (a mesh it cannot read): PyBullet's renderer does
+                    except ValueError as exc:  # a shape it does not draw, a mesh it cannot read: PyBullet draws
                         self.camera_renderer = "tinyrenderer"
                         self.camera_renderer_fallback = "%s; PyBullet's TinyRenderer draws the cameras" % exc
             except UrdfError as exc:  # a mesh that cannot be read or simplified: the caller's ValueError

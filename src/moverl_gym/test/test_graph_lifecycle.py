@@ -55,8 +55,14 @@ def test_taken_port_is_retried_sockets_are_loopback_and_close_leaves_nothing(mon
     held.listen()
     taken = held.getsockname()[1]
     try:
-        with pytest.raises(graph.GraphError, match=f"master port {taken} is taken"):
-            graph.LaunchedGraph({"world_file": str(world_file("table"))}, port=taken)  # a fixed port: no retry
+        t0 = time.monotonic()
+        # A fixed port (a process's later graphs reuse its first one's): tried again for a while, then refused,
+        # naming who listens there (this process).
+        with pytest.raises(
+            graph.GraphError, match=rf"master port {taken} is taken by another process \({os.getpid()}/"
+        ):
+            graph.LaunchedGraph({"world_file": str(world_file("table"))}, port=taken)
+        assert graph.TAKEN_PORT_WAIT - 0.6 <= time.monotonic() - t0 < graph.TAKEN_PORT_WAIT + 15.0
         picks, free_port = iter([taken]), graph.free_port
         monkeypatch.setattr(graph, "free_port", lambda: next(picks, None) or free_port())
         g = graph.LaunchedGraph({"world_file": str(world_file("table"))}, wait_for=ros.REQUIRED_SERVICES)

@@ -40,6 +40,9 @@ GRACE = 5.0
 #: Seconds after the SIGKILLs for the processes to be gone before close() gives up and raises.
 KILL_TIMEOUT = 5.0
 SHIM = "libmoverl_loopback.so"
+#: Seconds a graph waits for its fixed master port (a process's later graphs reuse its first one's: rospy binds the
+#: process to one master) while another process listens on it: one that is exiting lets go within this.
+TAKEN_PORT_WAIT = 3.0
 
 
 class GraphError(RuntimeError):
@@ -149,10 +152,11 @@ class LaunchedGraph:
         return env
 
     def _start(self, launch_args: dict, port: int | None, wait_for, timeout: float, attempts: int) -> None:
-        deadline = time.monotonic() + timeout
+        start = time.monotonic()
+        deadline = start + timeout
         host = self.expose or "127.0.0.1"
-        taken = []
-        for _ in range(attempts if port is None else 1):
+        taken = []  # (port, the processes that listened on it)
+        while True:
             self.port = port or free_port()
             self.uri = f"http://{host}:{self.port}"
             spec = dict(
@@ -195,14 +199,19 @@ class LaunchedGraph:
             if not (event and event[0] == "taken"):
                 why = " ".join(event) if event else "the graph's reaper exited" if ended else "timeout"
                 raise GraphError(f"the ROS master did not start on port {self.port} ({why}):\n{self.log_tail()}")
-            taken.append(self.port)
-        else:
-            if port is not None:
+            taken.append((self.port, " ".join(event[2:]) or "a process this one cannot see"))
+            if port is None and len(taken) >= attempts:
                 raise GraphError(
-                    f"master port {port} is taken by another process; this process's rospy node is "
+                    "master ports %s were all taken by other processes before the master bound them (by %s)"
+                    % ([p for p, _ in taken], "; ".join(who for _, who in taken))
+                )
+            if port is not None and time.monotonic() + 0.5 > min(deadline, start + TAKEN_PORT_WAIT):
+                raise GraphError(
+                    f"master port {port} is taken by another process ({taken[-1][1]}); this process's rospy node is "
                     "bound to that port (one master per process): start the env in a fresh process"
                 )
-            raise GraphError(f"master ports {taken} were all taken by other processes before the master bound them")
+            if port is not None:
+                time.sleep(0.5)  # a process that is exiting lets go of it
         self._wait(wait_for, deadline, timeout)
 
     def _wait(self, services, deadline: float, timeout: float) -> None:

@@ -25,13 +25,14 @@ Why a process between the env and roslaunch (moverl_gym.graph starts one per gra
 * The master is started here before roslaunch, and the reaper checks that the master answering on the port is
   its own child: if roslaunch found someone else's master on the port (a free port can be taken before it is
   used) it would launch our nodes into that graph, and rosmaster whose port is taken hangs instead of exiting.
-  A taken port is reported ("taken") and the owner retries on another one. roslaunch starts rosout only with a
-  master of its own, so rosout is started here too.
+  A taken port is reported ("taken", with the processes listening there) and the owner retries on another one
+  (or, on the fixed port a process's later graphs reuse, on the same one for a few seconds). roslaunch starts
+  rosout only with a master of its own, so rosout is started here too.
 
 Run by moverl_gym.graph as `python3 -I -S reaper.py '<json spec>'` with the graph's environment: standard
 library only, so it starts quickly and shares nothing with the env. Status lines on stdout, one event each:
-`master <pid>`, `taken <port>`, `master-exit <code>`, `launch <pid>`, `exit <code>` (roslaunch ended by
-itself), `error <message>` (a command could not be started), `down <seconds> <n sigkilled> <n left>` and
+`master <pid>`, `taken <port> [<pid>/<name> ...]`, `master-exit <code>`, `launch <pid>`, `exit <code>` (roslaunch
+ended by itself), `error <message>` (a command could not be started), `down <seconds> <n sigkilled> <n left>` and
 `killed <pid> <name>` / `left <pid> <name>` lines before it.
 The functions below (process table, graph processes, listening sockets, stop_processes) are also used by the
 owner and the tests.
@@ -265,6 +266,15 @@ def open_sockets() -> list[tuple[str, str, int, int]]:
     return out
 
 
+def socket_holders(inodes: set[int]) -> list[str]:
+    """'pid/name' of every process (that /proc shows us) holding one of these socket inodes."""
+    out = []
+    for pid, p in sorted(proc_table().items()):
+        if socket_inodes(pid) & inodes:
+            out.append("%d/%s" % (pid, p.name.replace(" ", "_")))
+    return out
+
+
 def listening_sockets(procs: Iterable[Proc]) -> list[Socket]:
     """The listening TCP and bound UDP sockets the given processes hold."""
     owner = {}
@@ -422,8 +432,9 @@ class _Supervisor:
             # rosmaster does not exit when its port is taken (its server thread dies, the process hangs): a
             # listener on the port that is not the master's means the port is someone else's.
             mine = socket_inodes(master.pid)
-            if any(p == port and inode not in mine for _, _, p, inode in open_sockets()):
-                self.say("taken", port)
+            others = {inode for _, _, p, inode in open_sockets() if p == port and inode not in mine}
+            if others:
+                self.say("taken", port, *socket_holders(others))  # who listens there: pid/name each
                 return False
             if time.monotonic() > deadline:
                 self.say("master-exit", "timeout")

@@ -200,17 +200,18 @@ class LaunchedGraph:
                 why = " ".join(event) if event else "the graph's reaper exited" if ended else "timeout"
                 raise GraphError(f"the ROS master did not start on port {self.port} ({why}):\n{self.log_tail()}")
             taken.append((self.port, " ".join(event[2:]) or "a process this one cannot see"))
-            if port is None and len(taken) >= attempts:
-                raise GraphError(
-                    "master ports %s were all taken by other processes before the master bound them (by %s)"
-                    % ([p for p, _ in taken], "; ".join(who for _, who in taken))
-                )
-            if port is not None and time.monotonic() + 0.5 > min(deadline, start + TAKEN_PORT_WAIT):
+            if port is None:
+                if len(taken) >= attempts:
+                    raise GraphError(
+                        "master ports %s were all taken by other processes before the master bound them (by %s)"
+                        % ([p for p, _ in taken], "; ".join(who for _, who in taken))
+                    )
+            elif time.monotonic() + 0.5 > min(deadline, start + TAKEN_PORT_WAIT):
                 raise GraphError(
                     f"master port {port} is taken by another process ({taken[-1][1]}); this process's rospy node is "
                     "bound to that port (one master per process): start the env in a fresh process"
                 )
-            if port is not None:
+            else:
                 time.sleep(0.5)  # a process that is exiting lets go of it
         self._wait(wait_for, deadline, timeout)
 

@@ -266,15 +266,6 @@ def open_sockets() -> list[tuple[str, str, int, int]]:
     return out
 
 
-def socket_holders(inodes: set[int]) -> list[str]:
-    """'pid/name' of every process (that /proc shows us) holding one of these socket inodes."""
-    out = []
-    for pid, p in sorted(proc_table().items()):
-        if socket_inodes(pid) & inodes:
-            out.append("%d/%s" % (pid, p.name.replace(" ", "_")))
-    return out
-
-
 def listening_sockets(procs: Iterable[Proc]) -> list[Socket]:
     """The listening TCP and bound UDP sockets the given processes hold."""
     owner = {}
@@ -432,9 +423,13 @@ class _Supervisor:
             # rosmaster does not exit when its port is taken (its server thread dies, the process hangs): a
             # listener on the port that is not the master's means the port is someone else's.
             mine = socket_inodes(master.pid)
-            others = {inode for _, _, p, inode in open_sockets() if p == port and inode not in mine}
-            if others:
-                self.say("taken", port, *socket_holders(others))  # who listens there: pid/name each
+            if any(p == port and inode not in mine for _, _, p, inode in open_sockets()):
+                holders = listening_sockets(proc_table().values())  # who listens there (a scan of /proc: once)
+                self.say(
+                    "taken",
+                    port,
+                    *(f"{h.pid}/{h.name.replace(' ', '_')}" for h in holders if h.port == port and h.pid != master.pid),
+                )
                 return False
             if time.monotonic() > deadline:
                 self.say("master-exit", "timeout")

@@ -67,9 +67,11 @@ void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied,
   static_known_free_ = true;  // the static objects may have changed
   if (unknown_occupied_.exchange(unknown_occupied) == unknown_occupied || !map_) return;
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+  if (lag_) publishHeld(nullptr);  // the updates computed before the change, first (as map_ had them)
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->setUnknownOccupied(unknown_occupied);
+    if (checked_map_) checked_map_->setUnknownOccupied(unknown_occupied);
   }
   publishStatus(last_cloud_stamp_, last_cloud_frame_);  // the unobserved count changed
 }
@@ -113,6 +115,7 @@ bool OctomapMonitor::init(std::string* error) {
     max_age_ = requiredParam<double>(pnh_, "octomap/max_age", kYaml);
     stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
     lockstep_ = requiredParam<bool>(pnh_, "octomap/lockstep", kYaml);
+    lag_ = lockstep_ && requiredParam<bool>(pnh_, "octomap/lockstep_lag", kYaml);
     integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
     threads = requiredParam<int>(pnh_, "octomap/integration_threads", kYaml);
   } catch (const std::exception& e) {
@@ -149,6 +152,10 @@ bool OctomapMonitor::init(std::string* error) {
   mo.unknown_occupied = unknown_occupied_;
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
+  if (lag_) {
+    checked_map_ = OccupancyMap::create(mo, error);
+    if (!checked_map_) return false;
+  }
   CloudIntegratorOptions io;
   io.self_filter_padding = self_filter_padding_;
   io.static_filter_padding = static_filter_padding_;
@@ -158,7 +165,7 @@ bool OctomapMonitor::init(std::string* error) {
   cloud_integrator_ = std::make_unique<CloudIntegrator>(map_.get(), &scene_->checker(), scene_mutex_, io);
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
-    scene_->checker().setOccupancy(map_.get());
+    scene_->checker().setOccupancy(lag_ ? checked_map_.get() : map_.get());
   }
   joints_ = scene_->model().jointNames();
   tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(30.0));
@@ -312,11 +319,14 @@ void OctomapMonitor::integrateLoop() {
       msg = pick->second.front();
       pick->second.pop_front();
       if (pick->second.empty()) pending_.erase(pick);
+      integrating_ = true;
+      in_flight_ = msg->header.stamp;
     }
     integrate(msg);
     {
       std::lock_guard<std::mutex> lock(pending_mutex_);
       --outstanding_;  // integrated or dropped: either way no longer on its way into the map
+      integrating_ = false;
     }
     idle_cv_.notify_all();
   }
@@ -388,12 +398,17 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     map_->apply(update_);
   }
   ++clouds_;
-  {
-    std::lock_guard<std::mutex> lock(stamps_mutex_);
-    ros::Time& seen = frame_stamps_[msg->header.frame_id];
-    seen = std::max(seen, msg->header.stamp);  // clouds of one camera may arrive out of order
+  if (lag_) {
+    bool checked = false;
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      held_.push_back({msg->header.stamp, msg->header.frame_id, update_});
+      checked = !std::isnan(previous_check_);
+    }
+    if (!checked) publishHeld(nullptr);  // before the first check (start-up): at once, as the first check would
+  } else {
+    markSeen(msg->header.frame_id, msg->header.stamp);
   }
-  stamps_cv_.notify_all();
   last_integration_ = (ros::WallTime::now() - t0).toSec();
   last_cloud_stamp_ = msg->header.stamp;
   last_cloud_frame_ = msg->header.frame_id;
@@ -401,20 +416,59 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
-void OctomapMonitor::awaitPending(std::chrono::steady_clock::time_point deadline) {
+void OctomapMonitor::markSeen(const std::string& frame, const ros::Time& stamp) {
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    ros::Time& last = frame_stamps_[frame];
+    last = std::max(last, stamp);  // clouds of one camera may arrive out of order
+  }
+  stamps_cv_.notify_all();
+}
+
+void OctomapMonitor::publishHeld(const ros::Time* cutoff) {
+  std::lock_guard<std::mutex> publishing(publish_mutex_);
+  std::vector<Held> out;
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    while (!held_.empty() && (cutoff == nullptr || held_.front().stamp <= *cutoff)) {
+      out.push_back(std::move(held_.front()));
+      held_.pop_front();
+    }
+  }
+  if (out.empty()) return;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    for (const Held& h : out) checked_map_->apply(h.update);
+  }
+  for (const Held& h : out) markSeen(h.frame, h.stamp);
+}
+
+void OctomapMonitor::awaitPending(const ros::Time* cutoff, std::chrono::steady_clock::time_point deadline) {
   // Lockstep: simulated time stands still between steps, so the clouds rendered up to this state are all in, or on
   // their way. Integrating them first makes the map as old as the cameras make it, not as old as this machine's
   // integration lags (which would widen the margin and discard more moves on a faster simulator: the answers would
   // depend on the machine).
   if (!lockstep_) return;
   std::unique_lock<std::mutex> pending(pending_mutex_);
-  idle_cv_.wait_until(pending, deadline, [&] { return stop_ || outstanding_ == 0; });
+  idle_cv_.wait_until(pending, deadline, [&] {
+    if (stop_) return true;
+    if (cutoff == nullptr) return outstanding_ == 0;
+    if (integrating_ && in_flight_ <= *cutoff) return false;
+    for (const auto& p : pending_) {
+      for (const auto& m : p.second) {
+        if (m->header.stamp <= *cutoff) return false;
+      }
+    }
+    return true;
+  });
 }
 
 void OctomapMonitor::awaitIntegration(double max_wait) {
   const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
-  awaitPending(std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+  awaitPending(nullptr,
+               std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                                       std::chrono::duration<double>(std::max(0.0, wait))));
+  if (lag_) publishHeld(nullptr);
 }
 
 bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMargins* out, std::string* why,
@@ -439,9 +493,24 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                              std::chrono::duration<double>(std::max(0.0, wait)));
-  awaitPending(deadline);
+  // octomap/lockstep_lag: the clouds up to the previous check's state (the later ones are integrated meanwhile).
+  ros::Time cutoff = stamp;
+  if (lag_) {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    cutoff = ros::Time(lockstepMapCutoff(previous_check_, stamp.toSec(), epoch.toSec()));
+    previous_check_ = std::isnan(previous_check_) ? stamp.toSec() : std::max(previous_check_, stamp.toSec());
+  }
+  awaitPending(lag_ ? &cutoff : nullptr, deadline);
+  if (lag_) publishHeld(&cutoff);
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
+  if (map_age > max_age_ && cutoff < stamp) {  // too old without the later clouds: all of them
+    lock.unlock();
+    awaitPending(nullptr, deadline);
+    publishHeld(nullptr);
+    lock.lock();
+    map_age = age();
+  }
   if (map_age > max_age_ && wait > 0.0) {
     stamps_cv_.wait_until(lock, deadline, [&] { return age() <= max_age_; });
     map_age = age();
@@ -479,9 +548,15 @@ ros::Time OctomapMonitor::newestStamp() {
 
 bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&) {
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
+  std::lock_guard<std::mutex> publishing(publish_mutex_);  // no held update goes in after the clear
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     map_->clear();
+    if (checked_map_) checked_map_->clear();
+  }
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    held_.clear();  // views from before the clear
   }
   static_known_free_ = true;
   {

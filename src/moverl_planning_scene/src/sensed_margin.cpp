@@ -11,7 +11,7 @@ double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double
   std::string oldest_frame;
   double oldest = kInf;
   for (const CameraSeen& c : cameras) {
-    if (!(c.stamp >= epoch - 1e-3)) {  // never heard from, or seen only before the motions restarted
+    if (!(c.stamp >= epoch - kEpochSlack)) {  // never heard from, or seen only before the motions restarted
       if (deciding != nullptr) *deciding = c.frame;
       return kInf;
     }
@@ -23,6 +23,11 @@ double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double
   if (deciding != nullptr) *deciding = oldest_frame;
   if (cameras.empty()) return kInf;  // nothing seen (start, clear)
   return std::max(0.0, stamp - oldest);
+}
+
+double lockstepMapCutoff(double previous, double stamp, double epoch) {
+  if (!(previous < stamp)) return stamp;  // the first check (NaN), or the same state again
+  return std::min(stamp, std::max(previous, epoch + kEpochSlack));
 }
 
 double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch) {

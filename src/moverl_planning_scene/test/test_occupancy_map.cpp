@@ -877,6 +877,21 @@ TEST_F(PandaOctomap, UnknownOccupiedAroundTheRobot) {
   scene_->checker().setOccupancy(nullptr);
 }
 
+/// Lockstep's one-step lag (octomap/lockstep_lag): a check reads the clouds up to the previous check's state, except
+/// for the first check, another check of the same state, and the first after a reset, which read what the cameras saw
+/// since it.
+TEST(SensedMargin, LockstepMapCutoff) {
+  const double none = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(mps::lockstepMapCutoff(none, 5.0, 0.0), 5.0);   // the first check: every cloud
+  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 0.0), 4.95);  // a step later: the clouds up to the previous state
+  EXPECT_EQ(mps::lockstepMapCutoff(5.0, 5.0, 0.0), 5.0);    // the same state again: every cloud
+  EXPECT_EQ(mps::lockstepMapCutoff(5.0, 4.0, 0.0), 4.0);    // a clock that went back: every cloud up to the state
+  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 2.0), 4.95);  // a reset long before: as any step
+  // A reset after the previous check: the views at the reset are in (within the epoch's slack), later ones wait.
+  EXPECT_DOUBLE_EQ(mps::lockstepMapCutoff(4.95, 5.2, 5.0), 5.0 + mps::kEpochSlack);
+  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 5.0), 5.0);  // the reset's own state: every cloud
+}
+
 /// The margin's arithmetic (README, "A person seen only by cameras"): 1.6 m/s and 0.1 s of map age cost 16 cm.
 TEST(SensedMargin, AgeAndRule) {
   const double inf = std::numeric_limits<double>::infinity();

@@ -13,6 +13,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -59,6 +60,9 @@ class OctomapMonitor {
   ///        while that age exceeds octomap/max_age, for newer clouds: both within stale_wait (wall) s in all (in
   ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
   ///        exceeds the largest the checker has: nothing is known to be free (fail closed).
+  ///        With octomap/lockstep_lag, the map the checks read holds the clouds up to the previous check's state
+  ///        (lockstepMapCutoff), and it waits for those only; every cloud when the map would be older than max_age
+  ///        without the others.
   ///        Must not be called with the scene's mutex held (integration needs it).
   /// \param epoch when the world's motions last restarted (a simulator reset moves every moving object back to its
   ///        start): a camera's clouds from before it tell nothing about where moving things are now, and the camera
@@ -88,7 +92,13 @@ class OctomapMonitor {
   /// The integration thread: integrates the pending cloud of the camera whose last integrated cloud is oldest, so
   /// that no camera starves when integration falls behind (a shared queue dropped whichever cloud was oldest).
   void integrateLoop();
-  void awaitPending(std::chrono::steady_clock::time_point deadline);
+  /// Lockstep: wait until the clouds received stamped up to *cutoff (nullptr: all of them) are integrated into map_.
+  void awaitPending(const ros::Time* cutoff, std::chrono::steady_clock::time_point deadline);
+  /// octomap/lockstep_lag: apply the held updates to the checks' map, in their order, up to the first stamped after
+  /// *cutoff (nullptr: all); their cameras count as seen from then on.
+  void publishHeld(const ros::Time* cutoff);
+  /// The cloud stamped `stamp` from `frame` is in the map the checks read (its age counts it).
+  void markSeen(const std::string& frame, const ros::Time& stamp);
   void integrate(const sensor_msgs::PointCloud2::ConstPtr& msg);
   bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
   void drop(const std::string& why);
@@ -99,7 +109,21 @@ class OctomapMonitor {
   PlanningScene* scene_;
   std::mutex* scene_mutex_;
   bool filter_static_ = false;
-  std::unique_ptr<OccupancyMap> map_;
+  std::unique_ptr<OccupancyMap> map_;  // the clouds integrated; without octomap/lockstep_lag also the checks' map
+  // octomap/lockstep_lag (lockstep only): the map the checks read. It gets map_'s updates later, in the same order
+  // (an update is computed against map_ as it was: applied to the same state, it gives the same map).
+  bool lag_ = false;
+  std::unique_ptr<OccupancyMap> checked_map_;
+  struct Held {
+    ros::Time stamp;
+    std::string frame;
+    MapUpdate update;
+  };
+  std::deque<Held> held_;     // map_'s updates not yet in checked_map_ (guarded by pending_mutex_)
+  std::mutex publish_mutex_;  // serializes publishHeld (the updates go in in their order)
+  double previous_check_ = std::numeric_limits<double>::quiet_NaN();  // the latest check's stamp (pending_mutex_)
+  bool integrating_ = false;  // the integration thread holds a cloud stamped in_flight_ (pending_mutex_)
+  ros::Time in_flight_;
   std::mutex sensor_mutex_;  // serializes cloud integration with ~clear_octomap (never held by the queries)
   ros::CallbackQueue sensor_queue_, joint_queue_;
   std::unique_ptr<ros::AsyncSpinner> sensor_spinner_, joint_spinner_;

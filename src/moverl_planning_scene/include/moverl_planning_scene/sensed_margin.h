@@ -15,6 +15,10 @@
 
 namespace moverl_planning_scene {
 
+/// \brief s: a camera seen this little before the world's motions restarted still counts as seen after (the epoch is
+///        computed from doubles: a state's stamp minus its time since the restart).
+constexpr double kEpochSlack = 1e-3;
+
 /// \brief A camera as the map's age sees it: its frame and the stamp (s) of its last integrated cloud (-infinity: none
 ///        since start-up or the last clear).
 struct CameraSeen {
@@ -26,7 +30,7 @@ struct CameraSeen {
 ///        sees is as old as that camera's view). Infinite (blind) when there is no camera, when one has never been
 ///        heard from (every camera the world lists counts, also before its first cloud), or when one was last seen
 ///        before `epoch` (the world's motions restarted then: its view tells nothing about where moving things are
-///        now; 1 ms of slack, as the epoch is computed from doubles). A cloud newer than the state: 0.
+///        now; kEpochSlack). A cloud newer than the state: 0.
 /// \param deciding set to the camera that decides the age (the first blind one when blind; "" when there is none)
 double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double epoch,
                     std::string* deciding = nullptr);
@@ -54,6 +58,15 @@ struct SensedMarginRule {
   ///        is set from it; the sensed map reaches that far beyond the robot (sensedMapBounds).
   double largestMargin(double resolution) const;
 };
+
+/// \brief Lockstep with octomap/lockstep_lag: the newest cloud stamp (s) the map of a check stamped `stamp` holds. The
+///        clouds rendered since the previous check's state are integrated while the simulator moves on, and the next
+///        check reads them: a step does not wait for its own views, the map is one step older, and the margin counts
+///        that age. The previous check's stamp (`previous`; NaN: none yet) when it is older than `stamp`; the world's
+///        motions' restart (`epoch`, 0: none) when that came later, so that the views since the reset are in (without
+///        them every camera counts as unseen); `stamp` itself, every cloud, for the first check and for another check
+///        of the same state.
+double lockstepMapCutoff(double previous, double stamp, double epoch);
 
 /// \brief The box the sensed map covers, centred on the base link (m): everything the robot can reach with its padding
 ///        (reach_radius: FclCollisionChecker::reachRadius() + padding), widened by the largest margin a check may use

@@ -399,13 +399,14 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   }
   ++clouds_;
   if (lag_) {
-    bool checked = false;
+    bool at_once = false;
     {
       std::lock_guard<std::mutex> lock(pending_mutex_);
       held_.push_back({msg->header.stamp, msg->header.frame_id, update_});
-      checked = !std::isnan(previous_check_);
+      at_once = std::isnan(previous_check_) || publish_at_once_;
     }
-    if (!checked) publishHeld(nullptr);  // before the first check (start-up): at once, as the first check would
+    // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would.
+    if (at_once) publishHeld(nullptr);
   } else {
     markSeen(msg->header.frame_id, msg->header.stamp);
   }
@@ -504,8 +505,14 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   if (lag_) publishHeld(&cutoff);
   std::unique_lock<std::mutex> lock(stamps_mutex_);
   double map_age = age();
-  if (map_age > max_age_ && cutoff < stamp) {  // too old without the later clouds: all of them
+  bool at_once = false;
+  if (map_age > max_age_ && lag_) {
+    // Too old as of the previous check: every cloud, and those that come while this check waits (as in one map).
     lock.unlock();
+    {
+      std::lock_guard<std::mutex> pending(pending_mutex_);
+      publish_at_once_ = at_once = true;
+    }
     awaitPending(nullptr, deadline);
     publishHeld(nullptr);
     lock.lock();
@@ -517,6 +524,10 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   }
   const bool none = cameras_.empty() && frame_stamps_.empty();
   lock.unlock();
+  if (at_once) {
+    std::lock_guard<std::mutex> pending(pending_mutex_);
+    publish_at_once_ = false;
+  }
   if (marginRule().compute(map_age, duration, out, why)) return true;
   if (!std::isfinite(map_age)) {
     *why = none ? "no camera has been heard from: nothing is known to be free"

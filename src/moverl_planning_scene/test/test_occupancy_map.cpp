@@ -4,6 +4,8 @@
  *        FCL checks of the Panda against the octree.
  */
 #include <gtest/gtest.h>
+#include <array>
+#include <deque>
 
 #include <octomap/OcTree.h>
 
@@ -185,6 +187,52 @@ TEST(OccupancyMap, ForgetsAnObstacleThatMovedAway) {
   EXPECT_TRUE(map->occupied({0.4, 0.0, 0.0}));
   map->clear();
   EXPECT_EQ(map->occupiedLeafCount(), 0u);
+}
+
+/// octomap/lockstep_lag: the checks' map gets each update later, in the same order, and is then the integrated map as
+/// it was after that update (an update applied to the same state gives the same map), though the integrated map has
+/// moved on meanwhile.
+TEST(OccupancyMap, UpdatesAppliedLaterToASecondMapGiveTheSameMap) {
+  auto integrated = makeMap(), checked = makeMap();
+  const Eigen::Vector3d origin(0.4, 0.0, 1.0);
+  auto leaves = [](const mps::OccupancyMap& m) {
+    std::vector<Eigen::Vector3d> centers;
+    std::vector<double> sizes;
+    m.occupiedLeaves(&centers, &sizes);
+    std::vector<std::array<double, 3>> out;
+    for (const auto& c : centers) out.push_back({c.x(), c.y(), c.z()});
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  // A box top that moves along x over a floor, then leaves: cells turn occupied, free and occupied again.
+  std::vector<std::vector<Eigen::Vector3d>> clouds;
+  for (int k = 0; k < 8; ++k) {
+    auto pts = plane(0.2 + 0.03 * k, 0.4 + 0.03 * k, -0.1, 0.1, 0.4, 0.01);
+    const auto floor = plane(-0.2, 1.0, -0.3, 0.3, 0.0, 0.02);
+    pts.insert(pts.end(), floor.begin(), floor.end());
+    clouds.push_back(pts);
+  }
+  for (int k = 0; k < 6; ++k) clouds.push_back(plane(-0.2, 1.0, -0.3, 0.3, 0.0, 0.02));
+  std::deque<mps::MapUpdate> held;
+  std::vector<std::vector<std::array<double, 3>>> after;  // the integrated map after each update
+  std::vector<std::size_t> unobserved;
+  for (std::size_t k = 0; k < clouds.size(); ++k) {
+    mps::MapUpdate u;
+    integrated->computeUpdate(clouds[k], {}, origin, &u);
+    integrated->apply(u);
+    after.push_back(leaves(*integrated));
+    unobserved.push_back(integrated->unobservedCount());
+    held.push_back(u);
+    if (k == 0) continue;  // one step behind: the previous cloud's update goes in now
+    checked->apply(held.front());
+    held.pop_front();
+    EXPECT_EQ(leaves(*checked), after[k - 1]) << "after update " << k - 1;
+    EXPECT_EQ(checked->unobservedCount(), unobserved[k - 1]);
+  }
+  // The maps did change from update to update (the comparison above is not between empty maps).
+  EXPECT_GT(after[3].size(), 0u);
+  EXPECT_NE(after[3], after[7]);
+  EXPECT_NE(after[7], after.back());
 }
 
 TEST(OccupancyMap, ACellOnAPointsLineOfSightIsSeenFree) {

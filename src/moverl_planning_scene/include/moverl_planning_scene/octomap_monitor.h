@@ -122,7 +122,8 @@ class OctomapMonitor {
   std::deque<Held> held_;     // map_'s updates not yet in checked_map_ (guarded by pending_mutex_)
   std::mutex publish_mutex_;  // serializes publishHeld (the updates go in in their order)
   double previous_check_ = std::numeric_limits<double>::quiet_NaN();  // the latest check's stamp (pending_mutex_)
-  bool integrating_ = false;  // the integration thread holds a cloud stamped in_flight_ (pending_mutex_)
+  bool publish_at_once_ = false;  // a check waits for every cloud: they go into its map as they come (pending_mutex_)
+  bool integrating_ = false;      // the integration thread holds a cloud stamped in_flight_ (pending_mutex_)
   ros::Time in_flight_;
   std::mutex sensor_mutex_;  // serializes cloud integration with ~clear_octomap (never held by the queries)
   ros::CallbackQueue sensor_queue_, joint_queue_;

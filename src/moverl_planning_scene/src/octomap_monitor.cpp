@@ -22,6 +22,9 @@ namespace {
 const char* const kYaml = "load config/planning_scene.yaml";
 /// The cloud subscriber's transport queue: this many times octomap/queue_size (room for as many cameras' views).
 constexpr int kCloudTransportQueue = 16;
+/// octomap/lockstep_lag: the most updates held for the checks' map. A lockstep step holds a few (3 cameras at 30 Hz:
+/// about 5 a step); without checks they would pile up.
+constexpr std::size_t kMaxHeld = 64;
 }  // namespace
 
 // PointCloud2ConstIterator checks none of this.
@@ -403,9 +406,10 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     {
       std::lock_guard<std::mutex> lock(pending_mutex_);
       held_.push_back({msg->header.stamp, msg->header.frame_id, update_});
-      at_once = std::isnan(previous_check_) || publish_at_once_;
+      at_once = std::isnan(previous_check_) || publish_at_once_ || held_.size() > kMaxHeld;
     }
-    // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would.
+    // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would. And
+    // when no check comes for long (the shield off): the checks' map gets newer, never older, than the rule says.
     if (at_once) publishHeld(nullptr);
   } else {
     markSeen(msg->header.frame_id, msg->header.stamp);

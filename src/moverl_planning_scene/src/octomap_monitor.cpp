@@ -22,9 +22,6 @@ namespace {
 const char* const kYaml = "load config/planning_scene.yaml";
 /// The cloud subscriber's transport queue: this many times octomap/queue_size (room for as many cameras' views).
 constexpr int kCloudTransportQueue = 16;
-/// octomap/lockstep_lag: the most updates held for the checks' map. A lockstep step holds a few (3 cameras at 30 Hz:
-/// about 5 a step); without checks they would pile up.
-constexpr std::size_t kMaxHeld = 64;
 }  // namespace
 
 // PointCloud2ConstIterator checks none of this.
@@ -405,8 +402,8 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     bool at_once = false;
     {
       std::lock_guard<std::mutex> lock(pending_mutex_);
-      held_.push_back({msg->header.stamp, msg->header.frame_id, update_});
-      at_once = std::isnan(previous_check_) || publish_at_once_ || held_.size() > kMaxHeld;
+      held_.push(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->header.frame_id, update_);
+      at_once = std::isnan(previous_check_) || publish_at_once_ || held_.full();
     }
     // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would. And
     // when no check comes for long (the shield off): the checks' map gets newer, never older, than the rule says.
@@ -432,20 +429,17 @@ void OctomapMonitor::markSeen(const std::string& frame, const ros::Time& stamp) 
 
 void OctomapMonitor::publishHeld(const ros::Time* cutoff) {
   std::lock_guard<std::mutex> publishing(publish_mutex_);
-  std::vector<Held> out;
+  std::vector<HeldUpdates::Held> out;
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    while (!held_.empty() && (cutoff == nullptr || held_.front().stamp <= *cutoff)) {
-      out.push_back(std::move(held_.front()));
-      held_.pop_front();
-    }
+    out = cutoff == nullptr ? held_.takeAll() : held_.takeUpTo(static_cast<std::int64_t>(cutoff->toNSec()));
   }
   if (out.empty()) return;
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
-    for (const Held& h : out) checked_map_->apply(h.update);
+    for (const auto& h : out) checked_map_->apply(h.update);
   }
-  for (const Held& h : out) markSeen(h.frame, h.stamp);
+  for (const auto& h : out) markSeen(h.frame, ros::Time().fromNSec(static_cast<std::uint64_t>(h.stamp_ns)));
 }
 
 void OctomapMonitor::awaitPending(const ros::Time* cutoff, std::chrono::steady_clock::time_point deadline) {

@@ -5,7 +5,6 @@
  */
 #include <gtest/gtest.h>
 #include <array>
-#include <deque>
 
 #include <octomap/OcTree.h>
 
@@ -15,6 +14,7 @@
 #include <random>
 #include <unordered_map>
 
+#include "moverl_planning_scene/held_updates.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
 #include "moverl_planning_scene/sensed_margin.h"
@@ -213,7 +213,7 @@ TEST(OccupancyMap, UpdatesAppliedLaterToASecondMapGiveTheSameMap) {
     clouds.push_back(pts);
   }
   for (int k = 0; k < 6; ++k) clouds.push_back(plane(-0.2, 1.0, -0.3, 0.3, 0.0, 0.02));
-  std::deque<mps::MapUpdate> held;
+  mps::HeldUpdates held;
   std::vector<std::vector<std::array<double, 3>>> after;  // the integrated map after each update
   std::vector<std::size_t> unobserved;
   for (std::size_t k = 0; k < clouds.size(); ++k) {
@@ -222,10 +222,11 @@ TEST(OccupancyMap, UpdatesAppliedLaterToASecondMapGiveTheSameMap) {
     integrated->apply(u);
     after.push_back(leaves(*integrated));
     unobserved.push_back(integrated->unobservedCount());
-    held.push_back(u);
-    if (k == 0) continue;  // one step behind: the previous cloud's update goes in now
-    checked->apply(held.front());
-    held.pop_front();
+    const auto stamp = static_cast<std::int64_t>(k) * 50'000'000;  // a cloud every 0.05 s
+    held.push(stamp, "camera", u);
+    if (k == 0) continue;  // one step behind: the updates up to the previous cloud's go in now
+    for (const auto& h : held.takeUpTo(stamp - 50'000'000)) checked->apply(h.update);
+    EXPECT_EQ(held.size(), 1u);
     EXPECT_EQ(leaves(*checked), after[k - 1]) << "after update " << k - 1;
     EXPECT_EQ(checked->unobservedCount(), unobserved[k - 1]);
   }
@@ -233,6 +234,38 @@ TEST(OccupancyMap, UpdatesAppliedLaterToASecondMapGiveTheSameMap) {
   EXPECT_GT(after[3].size(), 0u);
   EXPECT_NE(after[3], after[7]);
   EXPECT_NE(after[7], after.back());
+}
+
+/// The held updates go out as a prefix, in their order: one stamped earlier behind a later one waits for it (it was
+/// computed on a map that held the later one), and beyond HeldUpdates::kMax the holder says it is full.
+TEST(HeldUpdates, APrefixInOrderUpToTheCutoff) {
+  mps::HeldUpdates held;
+  mps::MapUpdate u;
+  for (std::int64_t stamp : {10, 20, 40, 30, 50}) {
+    u.hits = {static_cast<std::uint64_t>(stamp)};
+    held.push(stamp, "camera", u);
+  }
+  auto stamps = [](const std::vector<mps::HeldUpdates::Held>& v) {
+    std::vector<std::int64_t> out;
+    for (const auto& h : v) {
+      EXPECT_EQ(h.update.hits, std::vector<std::uint64_t>{static_cast<std::uint64_t>(h.stamp_ns)});
+      out.push_back(h.stamp_ns);
+    }
+    return out;
+  };
+  EXPECT_EQ(stamps(held.takeUpTo(5)), std::vector<std::int64_t>{});
+  EXPECT_EQ(stamps(held.takeUpTo(20)), (std::vector<std::int64_t>{10, 20}));
+  EXPECT_EQ(stamps(held.takeUpTo(30)), std::vector<std::int64_t>{});  // 30 waits behind 40
+  EXPECT_EQ(stamps(held.takeUpTo(40)), (std::vector<std::int64_t>{40, 30}));
+  EXPECT_EQ(stamps(held.takeAll()), std::vector<std::int64_t>{50});
+  EXPECT_EQ(held.size(), 0u);
+  for (std::size_t k = 0; k <= mps::HeldUpdates::kMax; ++k) {
+    EXPECT_FALSE(held.full());
+    held.push(static_cast<std::int64_t>(k), "camera", u);
+  }
+  EXPECT_TRUE(held.full());
+  held.clear();
+  EXPECT_EQ(held.size(), 0u);
 }
 
 TEST(OccupancyMap, ACellOnAPointsLineOfSightIsSeenFree) {

@@ -31,6 +31,7 @@
 #include <tf2_ros/transform_listener.h>
 
 #include "moverl_planning_scene/cloud_integrator.h"
+#include "moverl_planning_scene/held_updates.h"
 #include "moverl_planning_scene/joint_state_history.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/planning_scene.h"
@@ -114,12 +115,7 @@ class OctomapMonitor {
   // (an update is computed against map_ as it was: applied to the same state, it gives the same map).
   bool lag_ = false;
   std::unique_ptr<OccupancyMap> checked_map_;
-  struct Held {
-    ros::Time stamp;
-    std::string frame;
-    MapUpdate update;
-  };
-  std::deque<Held> held_;     // map_'s updates not yet in checked_map_ (guarded by pending_mutex_)
+  HeldUpdates held_;          // map_'s updates not yet in checked_map_ (guarded by pending_mutex_)
   std::mutex publish_mutex_;  // serializes publishHeld (the updates go in in their order)
   double previous_check_ = std::numeric_limits<double>::quiet_NaN();  // the latest check's stamp (pending_mutex_)
   bool publish_at_once_ = false;  // a check waits for every cloud: they go into its map as they come (pending_mutex_)

@@ -33,8 +33,8 @@ class HeldUpdates {
   /// \brief Hold the update just applied to the integrated map.
   void push(std::int64_t stamp_ns, const std::string& frame, const MapUpdate& update);
   /// \brief The held updates in their order, up to the first stamped after cutoff_ns, removed from here: apply them to
-  ///        the checks' map in that order. A prefix: an earlier-stamped update behind a later one stays (it was computed
-  ///        on a map that held the later one).
+  ///        the checks' map in that order. A prefix: an earlier-stamped update behind a later one stays (it was
+  ///        computed on a map that held the later one).
   std::vector<Held> takeUpTo(std::int64_t cutoff_ns);
   /// \brief Every held update, in order, removed.
   std::vector<Held> takeAll();

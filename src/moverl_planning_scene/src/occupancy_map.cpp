@@ -1,6 +1,7 @@
 #include "moverl_planning_scene/occupancy_map.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -122,6 +123,11 @@ std::uint64_t mix(std::uint64_t x) {
 }
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
+/// A revision no map of this process has had (OccupancyMap::revision).
+std::uint64_t nextRevision() {
+  static std::atomic<std::uint64_t> counter{0};
+  return ++counter;
+}
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
 void clearBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] &= ~(std::uint64_t{1} << (k & 63)); }
 
@@ -1187,6 +1193,7 @@ void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdat
 
 void OccupancyMap::apply(const MapUpdate& update) {
   ++epoch_;  // cells it turns not clamped free are newer than every view so far
+  revision_ = nextRevision();
   for (const auto* cells : {&update.hits, &update.misses}) {
     const float u = cells == &update.hits ? log_hit_ : log_miss_;
     for (std::uint64_t key : *cells) {
@@ -1227,6 +1234,7 @@ void OccupancyMap::setUnknownOccupied(bool on) {
 
 void OccupancyMap::fillUnobserved(bool on) {
   ++epoch_;
+  revision_ = nextRevision();
   for (auto& view : views_) view->last = 0;  // every cell may change: no view is up to date
   const float unknown = std::numeric_limits<float>::quiet_NaN();
   std::fill(occupied_.begin(), occupied_.end(), 0);
@@ -1346,7 +1354,7 @@ bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest&
 }
 
 bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
-                                 CellClass which) const {
+                                 CellClass which, bool whole_blocks) const {
   std::int64_t lo[3], hi[3];
   for (int i = 0; i < 3; ++i) {
     lo[i] = std::max<std::int64_t>(0, indexOf(region.min()[i], i));
@@ -1424,7 +1432,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
               const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
               const Eigen::AlignedBox3d block_box = box(ba, bb);
               if (!near(block_box)) continue;
-              if (bc == bcells) {  // full
+              if (bc == bcells || whole_blocks) {  // full, or not to be looked into
                 if (visit(block_box)) return true;
                 continue;
               }

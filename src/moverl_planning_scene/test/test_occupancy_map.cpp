@@ -661,6 +661,109 @@ TEST_F(PandaOctomap, ARobotRestingWithinTheMarginBacksAway) {
 /// Unknown is occupied: the rule is octomap's update from a prior just above the threshold; one view clears what it
 /// sees, space no camera sees stays occupied, known-free cells (inside the robot) are turned free, and switching the
 /// rule off forgets only the prior.
+/// checkPath leaves out, for a whole segment, the shapes that no occupied cell comes within their motion over half of
+/// it at its midpoint (and so do state checks of a prepared segment's ends): the same answers as checking every shape
+/// at every state. Random segments short and long around a wall and a person-sized column, at several margins; the
+/// margin changes between the ends' checks (as validateMotion's start margin does: a culling made at one margin must
+/// not answer at another), the column moves between a segment's preparation and its checks, and space no camera has
+/// seen turns occupied (unknown_occupied) or free again between the ends' checks and the path's (a culling must not
+/// outlive the map it was made for). Each of those two rules left out fails this test, and so does a culling that
+/// leaves out the shapes' motion.
+TEST_F(PandaOctomap, CullingAgainstTheMapChangesNoAnswer) {
+  mps::OccupancyMapOptions mo = mps::panda::mapOptions();
+  mo.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-1.2, -1.2, -0.4), Eigen::Vector3d(1.2, 1.2, 1.4));  // the reach
+  std::string error;
+  auto map = mps::OccupancyMap::create(mo, &error);
+  ASSERT_NE(map, nullptr) << error;
+  mps::FclCheckerOptions options = scene_->checker().options();
+  options.cull_path_pairs = true;
+  auto culled = mps::FclCollisionChecker::create(scene_->model(), options, &error);
+  ASSERT_NE(culled, nullptr) << error;
+  options.cull_path_pairs = false;
+  auto every = mps::FclCollisionChecker::create(scene_->model(), options, &error);
+  ASSERT_NE(every, nullptr) << error;
+  const Eigen::Vector3d eye(1.6, 0.0, 1.2);
+  std::vector<Eigen::Vector3d> wall;
+  for (double y = -0.6; y <= 0.6; y += 0.01) {
+    for (double z = 0.0; z <= 0.9; z += 0.01) wall.emplace_back(-0.55, y, z);
+  }
+  integrate(map.get(), wall, eye);
+  // The column: a 0.2 m square of points from the floor to 1.1 m, at (x, y); moved between clouds.
+  auto column = [&](double x, double y) {
+    std::vector<Eigen::Vector3d> pts;
+    for (double z = 0.0; z <= 1.1; z += 0.01) {
+      for (double d = -0.1; d <= 0.1; d += 0.01) {
+        pts.emplace_back(x - 0.1, y + d, z);
+        pts.emplace_back(x + d, y - 0.1, z);
+      }
+    }
+    integrate(map.get(), pts, eye);
+  };
+  column(0.65, 0.3);
+  culled->setOccupancy(map.get());
+  every->setOccupancy(map.get());
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const auto& model = scene_->model();
+  const std::size_t dof = model.dof();
+  std::size_t counts[3] = {0, 0, 0}, states = 0, map_changes = 0, unseen_trials = 0;
+  for (int trial = 0; trial < 1000; ++trial) {
+    std::vector<double> q0(dof), q1(dof);
+    const double reach = std::array<double, 4>{0.02, 0.08, 0.2, 0.5}[trial % 4];  // rad per joint, at most
+    for (std::size_t i = 0; i < dof; ++i) {
+      const double lo = model.lowerLimits()[i], hi = model.upperLimits()[i];
+      q0[i] = std::min(std::max(kHome[i] + 0.6 * unit(rng), lo), hi);
+      q1[i] = std::min(std::max(q0[i] + reach * unit(rng), lo), hi);
+    }
+    const double end_margin = std::array<double, 3>{0.0, 0.03, 0.1}[trial % 3];
+    const double start_margin = trial % 5 == 0 ? 0.15 : end_margin;
+    mps::PathCheckRequest request;
+    request.find_first = trial % 2 == 0;
+    request.state.max_pairs = std::array<std::size_t, 3>{0, 1, 100}[trial % 3];
+    for (auto* c : {culled.get(), every.get()}) ASSERT_TRUE(c->setOctreeMargin(end_margin));
+    culled->prepareSegment(q0.data(), q1.data());
+    if (trial % 7 == 3) {  // the column moves after the segment was prepared
+      column(0.6 + 0.15 * unit(rng), 0.3 * unit(rng));
+      ++map_changes;
+    }
+    for (const std::vector<double>* q : {&q1, &q0}) {
+      const double margin = q == &q1 ? end_margin : start_margin;
+      for (auto* c : {culled.get(), every.get()}) ASSERT_TRUE(c->setOctreeMargin(margin));
+      mps::CollisionResult sa, sb;
+      culled->checkState(q->data(), request.state, &sa);
+      every->checkState(q->data(), request.state, &sb);
+      ASSERT_EQ(sa.status, sb.status) << "trial " << trial;
+      ASSERT_EQ(sa.pairs.size(), sb.pairs.size()) << "trial " << trial;
+    }
+    if (trial % 7 == 5) {  // after the ends were checked (the segment's culling made), unseen space turns occupied
+      map->setUnknownOccupied(!map->unknownOccupied());  // (or free again)
+      ++map_changes;
+    }
+    for (auto* c : {culled.get(), every.get()}) ASSERT_TRUE(c->setOctreeMargin(end_margin));
+    mps::PathCheckResult a, b;
+    culled->checkPath(q0.data(), q1.data(), request, &a);
+    every->checkPath(q0.data(), q1.data(), request, &b);
+    ASSERT_EQ(a.status, b.status) << "trial " << trial;
+    ASSERT_EQ(a.checked_states, b.checked_states) << "trial " << trial;
+    ASSERT_EQ(a.collision_fraction, b.collision_fraction) << "trial " << trial;
+    ASSERT_EQ(a.last_valid_fraction, b.last_valid_fraction) << "trial " << trial;
+    ASSERT_EQ(a.pairs.size(), b.pairs.size()) << "trial " << trial;
+    for (std::size_t k = 0; k < a.pairs.size(); ++k) {
+      EXPECT_EQ(a.pairs[k].a, b.pairs[k].a) << "trial " << trial;
+      EXPECT_EQ(a.pairs[k].b, b.pairs[k].b) << "trial " << trial;
+    }
+    ++counts[static_cast<int>(a.status)];
+    states += a.checked_states;
+    unseen_trials += map->unknownOccupied() ? 1 : 0;
+  }
+  // Paths free and paths that meet the map (self collisions as they come), long enough to cull on.
+  EXPECT_GT(counts[0], 120u) << "free";
+  EXPECT_GT(counts[2], 300u) << "world";
+  EXPECT_GT(states, 1000u * 6);
+  EXPECT_GT(map_changes, 250u);
+  EXPECT_GT(unseen_trials, 300u);
+}
+
 /// Retreat with unseen space around the robot (unknown_occupied): only cells a camera saw occupied make the robot
 /// back away (space no camera has seen, e.g. its own shadow, does not come closer); a retreat ends clearer of every
 /// occupied cell and never brings any link closer to any of them, seen or unseen, than the robot stands (nothing can

@@ -45,6 +45,7 @@ struct FclCheckerOptions {
   std::string acm_cache_dir;
   /// checkPath leaves out, for a whole segment, the shape pairs a plane at its midpoint separates by more than their
   /// motion over half the segment can close (they meet at none of its states): the same answers with fewer GJK calls.
+  /// Against the occupancy map likewise, the shapes that no occupied cell comes near enough at the midpoint.
   /// Not a tunable (the answers do not depend on it): false checks every pair at every state, for the tests that
   /// compare the two.
   bool cull_path_pairs = true;
@@ -227,9 +228,16 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<Obstacle> world_;
   const OccupancyMap* occupancy_ = nullptr;  // sensed obstacles (may be null)
   int octo_level_ = 0;                       // sensed margin: octoGeom's level (kMarginStep each)
-  /// True when the shape at tf meets an occupied cell (of class `which`) of the occupancy map.
+  /// True when the shape at tf meets an occupied cell (of class `which`) of the occupancy map; with `grow` > 0, a cell
+  /// grown by `grow` (m) on every side, or a block of cells grown so (true for any cell within `grow` of the shape,
+  /// and for some a little farther: checkPath's culling).
   bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf,
-                     CellClass which = CellClass::kAll) const;
+                     CellClass which = CellClass::kAll, double grow = 0.0) const;
+  /// checkPath's culling against the occupancy map, for the states of the segment cullPairs last culled: makes
+  /// occupancy_active_ hold, for this map (its revision) and margin, when it does not yet (at the segment's
+  /// midpoint: world shapes' transforms are left there) and returns true; false when it was made at another margin,
+  /// or the segment is too short to be worth it (every shape is then checked).
+  bool occupancyCulled();
   /// The shape of g checked against the occupancy map at the current margin.
   const std::shared_ptr<fcl::CollisionGeometry<double>>& octoGeom(Geom& g);
   std::vector<std::size_t> moving_;  // indices into world_ of moving obstacles
@@ -242,6 +250,13 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::vector<double>> geom_joint_radius_;
   std::vector<std::vector<double>> pair_joint_radius_;
   std::vector<std::uint8_t> self_active_, world_active_;
+  // Against the occupancy map, per world_geoms_ entry, 1 when the shape may meet an occupied cell on the segment: made
+  // for the map, its revision, the margin level and the culling (cull_serial_ counts cullPairs) recorded beside.
+  std::vector<std::uint8_t> occupancy_active_;
+  const OccupancyMap* occupancy_culled_map_ = nullptr;
+  std::uint64_t occupancy_culled_revision_ = 0, occupancy_culled_serial_ = 0, cull_serial_ = 0;
+  std::size_t cull_states_ = 0;  // the states of the segment cullPairs last culled, its ends included
+  int occupancy_culled_level_ = 0;
   std::vector<double> half_dq_, drift_;
   // The memory per shape pair (self: as self_active_; world: as world_active_, for the world of memory_world_stamp_),
   // and the midpoint its bounds hold at.

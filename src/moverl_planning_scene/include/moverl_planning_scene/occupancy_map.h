@@ -191,6 +191,9 @@ class OccupancyMap {
   void occupiedLeaves(std::vector<Eigen::Vector3d>* centers, std::vector<double>* sizes) const;
   /// \brief How many cells a camera saw occupied (kept up to date by apply).
   std::size_t occupiedLeafCount() const;
+  /// \brief Changes whenever the cells may have (apply, clear, setUnknownOccupied), to a value no map of this process
+  ///        has had: what a reader remembers of the cells holds while it stays the same (checkPath's culling).
+  std::uint64_t revision() const { return revision_; }
 
   /// \brief What anyOccupied asks of a box (map frame) that holds occupied cells: does the box meet the caller's shape?
   using BoxTest = std::function<bool(const Eigen::AlignedBox3d& box)>;
@@ -203,9 +206,11 @@ class OccupancyMap {
   /// \brief The traversal behind anyOccupied: within `region`, every box that holds occupied cells of class `which`
   ///        (a superblock, a block, a cell) is offered to `near`; one it refuses is skipped, one it accepts is looked
   ///        into, or, when all its cells are occupied cells of that class (a full superblock or block, a cell), handed
-  ///        to `visit`. True as soon as `visit` returns true (stop), false when the traversal ends.
+  ///        to `visit`. True as soon as `visit` returns true (stop), false when the traversal ends. `whole_blocks`: a
+  ///        block (4^3 cells) `near` accepts is handed to `visit` whole, full or not (a coarser traversal, for callers
+  ///        that may answer for a block as for any of its cells).
   bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
-                     CellClass which = CellClass::kAll) const;
+                     CellClass which = CellClass::kAll, bool whole_blocks = false) const;
   /// \brief The centre of the cell with id `key` (MapUpdate's ids), map frame.
   Eigen::Vector3d cellCentre(std::uint64_t key) const {
     std::int64_t at[3];
@@ -355,6 +360,7 @@ class OccupancyMap {
   // cameras' last views; per block and superblock, a sum of hashes of the cloud's end cells in it (and the ones
   // holding any).
   std::uint64_t epoch_ = 0;
+  std::uint64_t revision_ = 0;  ///< revision(): set from a counter shared by every map (nextRevision)
   std::vector<std::uint64_t> block_dirtied_, super_dirtied_;
   std::vector<std::unique_ptr<View>> views_;
   std::vector<std::uint64_t> end_hash_, super_end_hash_;

@@ -20,7 +20,7 @@ configuration whose steps discard more moves does less (no motion, no render) an
 --profile NAME (sim, shield, env, ...: a process of the graph, named as in the table) also samples that process
 while it is measured: py-spy (`pip install py-spy`, not part of the set-up) for a Python process, perf for a C++ one;
 the frames with the largest shares of the samples are printed (py-spy: of the samples that held the GIL, inclusive;
-perf: self time by library and symbol).
+perf: self time by thread, library and symbol).
 
 Random actions from a fixed seed, episodes reset as usual (resets included); 200 warm-up steps first. Each id runs in
 its own process (rospy allows one ROS master per process).
@@ -86,7 +86,7 @@ class Profiler:
         self.proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(1.0)  # attached
 
-    def stop(self, top: int = 25) -> list[str]:
+    def stop(self, top: int = 30) -> list[str]:
         self.proc.send_signal(signal.SIGINT)  # both write their output on SIGINT
         try:
             self.proc.wait(timeout=60)
@@ -96,7 +96,7 @@ class Profiler:
         if self.python:
             return _top_frames(self.out, top)
         r = subprocess.run(
-            ["perf", "report", "-i", self.out, "--no-children", "--sort", "dso,symbol", "--stdio", "-g", "none"],
+            ["perf", "report", "-i", self.out, "--no-children", "--sort", "comm,dso,symbol", "--stdio", "-g", "none"],
             capture_output=True,
             text=True,
             timeout=120,

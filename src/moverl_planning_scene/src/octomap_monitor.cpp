@@ -116,6 +116,7 @@ bool OctomapMonitor::init(std::string* error) {
     stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
     lockstep_ = requiredParam<bool>(pnh_, "octomap/lockstep", kYaml);
     lag_ = lockstep_ && requiredParam<bool>(pnh_, "octomap/lockstep_lag", kYaml);
+    lag_max_margin_ = requiredParam<double>(pnh_, "octomap/lockstep_lag_max_margin", kYaml);
     integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
     threads = requiredParam<int>(pnh_, "octomap/integration_threads", kYaml);
   } catch (const std::exception& e) {
@@ -127,7 +128,8 @@ bool OctomapMonitor::init(std::string* error) {
         std::make_pair("plan_horizon", plan_horizon_), std::make_pair("stale_wait", stale_wait_),
         std::make_pair("self_filter_padding", self_filter_padding_),
         std::make_pair("static_filter_padding", static_filter_padding_),
-        std::make_pair("future_tolerance", future_tolerance_), std::make_pair("camera_wait", camera_wait_)}) {
+        std::make_pair("future_tolerance", future_tolerance_), std::make_pair("camera_wait", camera_wait_),
+        std::make_pair("lockstep_lag_max_margin", lag_max_margin_)}) {
     if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
       *error = std::string("octomap/") + p.first + " must be finite and >= 0";
       return false;
@@ -496,7 +498,8 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   ros::Time cutoff = stamp;
   if (lag_) {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    cutoff = ros::Time(lockstepMapCutoff(previous_check_, stamp.toSec(), epoch.toSec()));
+    cutoff = ros::Time(
+        lockstepMapCutoff(previous_check_, stamp.toSec(), epoch.toSec(), speed_bound_.load(), lag_max_margin_));
     previous_check_ = std::isnan(previous_check_) ? stamp.toSec() : std::max(previous_check_, stamp.toSec());
   }
   awaitPending(lag_ ? &cutoff : nullptr, deadline);

@@ -25,9 +25,10 @@ double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double
   return std::max(0.0, stamp - oldest);
 }
 
-double lockstepMapCutoff(double previous, double stamp, double epoch) {
+double lockstepMapCutoff(double previous, double stamp, double epoch, double speed_bound, double max_margin) {
   if (!(previous < stamp)) return stamp;  // the first check (NaN), or the same state again
-  return std::min(stamp, std::max(previous, epoch + kEpochSlack));
+  const double cutoff = std::min(stamp, std::max(previous, epoch + kEpochSlack));
+  return std::max(0.0, speed_bound) * (stamp - cutoff) <= max_margin ? cutoff : stamp;
 }
 
 double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch) {

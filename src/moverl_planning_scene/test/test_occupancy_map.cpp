@@ -1063,17 +1063,30 @@ TEST_F(PandaOctomap, UnknownOccupiedAroundTheRobot) {
 
 /// Lockstep's one-step lag (octomap/lockstep_lag): a check reads the clouds up to the previous check's state, except
 /// for the first check, another check of the same state, and the first after a reset, which read what the cameras saw
-/// since it.
+/// since it; and except when the lag would cost more margin than octomap/lockstep_lag_max_margin allows.
 TEST(SensedMargin, LockstepMapCutoff) {
   const double none = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(mps::lockstepMapCutoff(none, 5.0, 0.0), 5.0);   // the first check: every cloud
-  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 0.0), 4.95);  // a step later: the clouds up to the previous state
-  EXPECT_EQ(mps::lockstepMapCutoff(5.0, 5.0, 0.0), 5.0);    // the same state again: every cloud
-  EXPECT_EQ(mps::lockstepMapCutoff(5.0, 4.0, 0.0), 4.0);    // a clock that went back: every cloud up to the state
-  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 2.0), 4.95);  // a reset long before: as any step
-  // A reset after the previous check: the views at the reset are in (within the epoch's slack), later ones wait.
-  EXPECT_DOUBLE_EQ(mps::lockstepMapCutoff(4.95, 5.2, 5.0), 5.0 + mps::kEpochSlack);
-  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 5.0), 5.0);  // the reset's own state: every cloud
+  auto cutoff = [](double previous, double stamp, double epoch) {
+    return mps::lockstepMapCutoff(previous, stamp, epoch, 0.16, 0.01);  // the human world: 8 mm a 0.05 s step
+  };
+  EXPECT_EQ(cutoff(none, 5.0, 0.0), 5.0);   // the first check: every cloud
+  EXPECT_EQ(cutoff(4.95, 5.0, 0.0), 4.95);  // a step later: the clouds up to the previous state
+  EXPECT_EQ(cutoff(5.0, 5.0, 0.0), 5.0);    // the same state again: every cloud
+  EXPECT_EQ(cutoff(5.0, 4.0, 0.0), 4.0);    // a clock that went back: every cloud up to the state
+  EXPECT_EQ(cutoff(4.95, 5.0, 2.0), 4.95);  // a reset long before: as any step
+  // A reset after the previous check: the views at the reset are in (within the epoch's slack), later ones wait (a
+  // slower world: the 0.2 s since the reset cost 8 mm); at 0.16 m/s that lag costs 3 cm: every cloud.
+  EXPECT_DOUBLE_EQ(mps::lockstepMapCutoff(4.95, 5.2, 5.0, 0.04, 0.01), 5.0 + mps::kEpochSlack);
+  EXPECT_EQ(cutoff(4.95, 5.2, 5.0), 5.2);
+  EXPECT_EQ(cutoff(4.95, 5.0, 5.0), 5.0);  // the reset's own state: every cloud
+  // A lag that would cost more margin than allowed: every cloud. 0.16 m/s over a long step (1 s: 16 cm); ISO's
+  // 1.6 m/s over one 0.05 s step (8 cm); within the budget, exactly at it (0.2 m/s x 0.05 s) and without a bound.
+  EXPECT_EQ(cutoff(4.0, 5.0, 0.0), 5.0);
+  EXPECT_EQ(mps::lockstepMapCutoff(4.95, 5.0, 0.0, 1.6, 0.01), 5.0);
+  EXPECT_EQ(mps::lockstepMapCutoff(4.9375, 5.0, 0.0, 0.16, 0.01), 4.9375);  // 1 cm: 0.0625 s at 0.16 m/s
+  EXPECT_EQ(mps::lockstepMapCutoff(4.9, 5.0, 0.0, 1.6, 0.0), 5.0);
+  EXPECT_EQ(mps::lockstepMapCutoff(4.0, 5.0, 0.0, 0.0, 0.0), 4.0);   // nothing moves: the lag costs nothing
+  EXPECT_EQ(mps::lockstepMapCutoff(4.0, 5.0, 0.0, -1.0, 0.0), 4.0);  // (no bound given: none)
 }
 
 /// The margin's arithmetic (README, "A person seen only by cameras"): 1.6 m/s and 0.1 s of map age cost 16 cm.

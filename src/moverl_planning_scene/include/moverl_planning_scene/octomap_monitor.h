@@ -114,6 +114,7 @@ class OctomapMonitor {
   // octomap/lockstep_lag (lockstep only): the map the checks read. It gets map_'s updates later, in the same order
   // (an update is computed against map_ as it was: applied to the same state, it gives the same map).
   bool lag_ = false;
+  double lag_max_margin_ = 0.0;  // octomap/lockstep_lag_max_margin (m)
   std::unique_ptr<OccupancyMap> checked_map_;
   HeldUpdates held_;          // map_'s updates not yet in checked_map_ (guarded by pending_mutex_)
   std::mutex publish_mutex_;  // serializes publishHeld (the updates go in in their order)

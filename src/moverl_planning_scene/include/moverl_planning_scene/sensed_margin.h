@@ -65,8 +65,9 @@ struct SensedMarginRule {
 ///        that age. The previous check's stamp (`previous`; NaN: none yet) when it is older than `stamp`; the world's
 ///        motions' restart (`epoch`, 0: none) when that came later, so that the views since the reset are in (without
 ///        them every camera counts as unseen); `stamp` itself, every cloud, for the first check and for another check
-///        of the same state.
-double lockstepMapCutoff(double previous, double stamp, double epoch);
+///        of the same state, and when the lag would cost more than `max_margin` (m): an obstacle moving at
+///        `speed_bound` (m/s; <= 0: none) may come nearer by its speed times the lag, which the margin then covers.
+double lockstepMapCutoff(double previous, double stamp, double epoch, double speed_bound, double max_margin);
 
 /// \brief The box the sensed map covers, centred on the base link (m): everything the robot can reach with its padding
 ///        (reach_radius: FclCollisionChecker::reachRadius() + padding), widened by the largest margin a check may use

@@ -313,8 +313,7 @@ void FclCollisionChecker::cullPairs(const double* q0, const double* q1) {
 
 bool FclCollisionChecker::occupancyCulled() {
   if (cull_states_ < kCullOccupancyFromStates) return false;
-  if (occupancy_culled_serial_ == cull_serial_ && occupancy_culled_map_ == occupancy_ &&
-      occupancy_culled_revision_ == occupancy_->revision()) {
+  if (occupancy_culled_serial_ == cull_serial_ && occupancy_culled_revision_ == occupancy_->revision()) {
     return occupancy_culled_level_ == octo_level_;
   }
   // On the segment every point of a shape stays within its motion over half the segment of where it is at the
@@ -334,7 +333,6 @@ bool FclCollisionChecker::occupancyCulled() {
     occupancy_active_[w] = meetsOccupied(shape, g.world_tf, CellClass::kAll, motion) ? 1 : 0;
   }
   occupancy_culled_serial_ = cull_serial_;
-  occupancy_culled_map_ = occupancy_;
   occupancy_culled_revision_ = occupancy_->revision();
   occupancy_culled_level_ = octo_level_;
   return true;

@@ -123,13 +123,13 @@ std::uint64_t mix(std::uint64_t x) {
 }
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
+void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
+void clearBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] &= ~(std::uint64_t{1} << (k & 63)); }
 /// A revision no map of this process has had (OccupancyMap::revision).
 std::uint64_t nextRevision() {
   static std::atomic<std::uint64_t> counter{0};
   return ++counter;
 }
-void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
-void clearBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] &= ~(std::uint64_t{1} << (k & 63)); }
 
 }  // namespace
 

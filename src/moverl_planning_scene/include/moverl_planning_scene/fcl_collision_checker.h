@@ -251,9 +251,9 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::vector<double>> pair_joint_radius_;
   std::vector<std::uint8_t> self_active_, world_active_;
   // Against the occupancy map, per world_geoms_ entry, 1 when the shape may meet an occupied cell on the segment: made
-  // for the map, its revision, the margin level and the culling (cull_serial_ counts cullPairs) recorded beside.
+  // for the map's revision (unique to the map too), the margin level and the culling (cull_serial_ counts cullPairs)
+  // recorded beside.
   std::vector<std::uint8_t> occupancy_active_;
-  const OccupancyMap* occupancy_culled_map_ = nullptr;
   std::uint64_t occupancy_culled_revision_ = 0, occupancy_culled_serial_ = 0, cull_serial_ = 0;
   std::size_t cull_states_ = 0;  // the states of the segment cullPairs last culled, its ends included
   int occupancy_culled_level_ = 0;

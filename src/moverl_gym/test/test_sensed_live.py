@@ -20,13 +20,17 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
       sim time; over 20 env steps of dt = 0.05 s and one 0.6 s hold each camera's clouds are stamped exactly
       1/camera_rate of sim time apart (also in the middle of a move, with a joint state stamped alike for the self
       filter), and a
-      cloud stamped within a step has arrived when the step's call returns (give or take ARRIVAL_SLACK).
+      cloud stamped within a step has arrived when the step's call returns (give or take ARRIVAL_SLACK). The lockstep
+      lag (octomap/lockstep_lag): each step's check read exactly the clouds up to the previous check's state, none of
+      the latest step's (info["map_age"] / ShieldStep.map_age, predicted from the render times), and its margin
+      covered that age and the move (sensed_margin >= the world's speed_bound x (map_age + the move's duration)).
   (f) unknown is occupied (a world's `sensing: unknown_occupied: true`, switched on here by publishing the world with
       it): with the same map, every configuration that collides with unknown cells free also collides with them
       occupied, some free ones now collide with the cells no camera has seen, home stays free (the cells inside the
       robot are known free), and switching it off gives back the first verdicts.
 """
 
+import os
 import struct
 import threading
 import time
@@ -42,6 +46,7 @@ from sensor_msgs.msg import JointState
 import moverl_gym  # noqa: F401
 from moverl_msgs.msg import OctomapStatus, World
 from moverl_msgs.srv import CheckPath, CheckStateResponse, GetWorld, ShieldStepResponse
+from moverl_sim.world import load_world
 
 SAFE, REPLANNED, DISCARDED_POSE, UNCHECKED = (
     ShieldStepResponse.SAFE,
@@ -60,6 +65,7 @@ CAMERAS = ("right_optical_frame", "left_optical_frame")
 # s of sim time: 1 / camera_rate of sensed_obstacle.test (5), which overrides the world file's rate (4.0): the stamps
 # show that the launch argument reached the cameras.
 CAMERA_PERIOD = 0.2
+WORLD_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "worlds", "sensed_box.yaml")
 ARRIVAL_SLACK = 0.01  # s (wall) a cloud may be handled after the call that rendered it returned (see its use)
 
 
@@ -125,9 +131,11 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             # (first, last stamp rendered during the call, monotonic time it returned).
             t0 = self.place(HOME).state.header.stamp.to_sec()
             calls, prev, q = [(t0, t0, time.monotonic())], t0, list(HOME)
+            ages = []  # (the check's state, map_age, sensed_margin, the move's duration)
             for k, duration in enumerate([DT] * 20 + [0.6]):  # the hold spans two due times in mid-move
                 q[0] = HOME[0] + (0.05 if k % 2 == 0 else 0.0)
                 res = self.step(target=q, duration=duration)
+                ages.append((prev, res.map_age, res.sensed_margin, duration))
                 now = res.state.header.stamp.to_sec()
                 calls.append((prev + 1e-3, now, time.monotonic()))  # (stamps are whole substeps: 1/240 s)
                 self.assertEqual(res.verdict, SAFE, res.message)
@@ -135,6 +143,16 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
                 prev = now
             self.assertAlmostEqual(prev - t0, 20 * DT + 0.6, places=6)
             expected = [t0 + CAMERA_PERIOD * j for j in range(int((prev - t0) / CAMERA_PERIOD + 1e-6) + 1)]
+            # The lag: the check at a state reads the clouds rendered up to the previous check's state, so its map is
+            # as old as the state less the newest render at or before that one (the first check after the reset,
+            # whose previous check came before it, left out). Without the lag every fourth check would read its own
+            # state's render (age 0); with a cloud missing, an age would exceed a camera period plus a step.
+            speed = load_world(WORLD_FILE).sensed_speed_bound
+            for (before, _, _, _), (state, age, margin, duration) in zip(ages, ages[1:]):
+                newest = max(t for t in expected if t <= before + 1e-6)
+                self.assertAlmostEqual(age, state - newest, places=6, msg="the check at %.3f s" % (state - t0))
+                self.assertGreaterEqual(margin, speed * (age + duration) - 1e-9, "the check at %.3f s" % (state - t0))
+            self.assertEqual(sorted({round(a, 3) for _, a, _, _ in ages[1:]}), [0.05, 0.1, 0.15, 0.2], ages)
             deadline = time.monotonic() + 2.0  # (the last clouds may still be on their way: see below)
             while any(len(stamps(f, t0)) < len(expected) for f in CAMERAS) and time.monotonic() < deadline:
                 time.sleep(0.01)
@@ -221,6 +239,9 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             starts.append(env.unwrapped.q[:7].tolist())
             for _ in range(ENV_STEPS):
                 _, _, term, trunc, info = env.step(env.action_space.sample())
+                # every step was checked against the sensed map, and says how old it was (test_camera_schedule:
+                # exactly) and what margin covered it
+                self.assertTrue(0.0 <= info["map_age"] < 1.0 and info["sensed_margin"] > 0.0, info)
                 if term or trunc:
                     before = env.unwrapped._stamp
                     env.reset()

@@ -97,6 +97,8 @@ void Shield::step(const StepRequest& req, StepResult* res, bool record_executed)
   res->unsafe_cause = 0;
   res->truncated_fraction = -1.0;
   res->driver_error_code = 0;
+  res->map_age = -1.0;
+  res->sensed_margin = 0.0;
   res->executed = TimedTrajectory();
   res->verdict = run(req, res, record_executed);
   if (res->contacts.stamp == 0) {
@@ -170,6 +172,8 @@ Verdict Shield::run(const StepRequest& req, StepResult* res, bool record_execute
     return Verdict::kSceneUnavailable;
   }
   res->pairs.swap(a.pairs);
+  res->map_age = a.map_age;
+  res->sensed_margin = a.sensed_margin;
   res->state_check_time = a.state_check_time;
   res->path_check_time = a.path_check_time;
   res->planning_time = a.planning_time;

@@ -200,6 +200,8 @@ class ShieldNode {
     res.unsafe_cause = r.unsafe_cause;
     res.truncated_fraction = r.truncated_fraction;
     res.driver_error_code = r.driver_error_code;
+    res.map_age = r.map_age;
+    res.sensed_margin = r.sensed_margin;
     toMsg(r.contacts, &res.contacts);
     if (shield_->lastState(&last_)) fillState(last_, res.state, res.ee_pose);
     if (r.verdict == Verdict::kSceneUnavailable || r.verdict == Verdict::kInvalidRequest) {

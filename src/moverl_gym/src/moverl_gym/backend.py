@@ -55,6 +55,8 @@ class StepResult:
     strategy: str = ""
     planning_time: float = 0.0
     driver_error_code: int = 0  # control_msgs/FollowJointTrajectoryResult code, 0 when none
+    map_age: float = -1.0  # ShieldStep.map_age: s, the sensed map's age at the check; -1 without one
+    sensed_margin: float = 0.0  # ShieldStep.sensed_margin: m, the predictive margin it was checked with
     timing: dict = field(default_factory=dict)  # state_check, path_check, planning, execution (s)
 
 

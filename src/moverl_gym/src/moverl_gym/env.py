@@ -528,6 +528,10 @@ class MoveRLReachEnv(gym.Env):
             "is_success": success,
             "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,
             "message": res.message,  # the shield's words on the step (why an action was discarded, ...)
+            # Sensed obstacles: how old the map the step was checked against was, and the margin that covered it
+            # (-1 and 0 without a sensed map).
+            "map_age": float(res.map_age),
+            "sensed_margin": float(res.sensed_margin),
             "graph_restarts": self.graph_restarts,
             "graph_failures": self.graph_failures,
             **tracks,

@@ -374,6 +374,8 @@ class RosBackend(Backend):
             strategy=res.strategy,
             planning_time=res.planning_time,
             driver_error_code=res.driver_error_code,
+            map_age=res.map_age,
+            sensed_margin=res.sensed_margin,
             timing={
                 "state_check": res.state_check_time,
                 "path_check": res.path_check_time,

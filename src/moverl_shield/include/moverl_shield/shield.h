@@ -165,6 +165,8 @@ struct StepResult {
   std::uint8_t unsafe_cause = 0;       ///< MotionOutcome code of what made the action unsafe; 0: none
   double truncated_fraction = -1.0;    ///< TRUNCATED: fraction of the straight path executed; else -1
   std::int32_t driver_error_code = 0;  ///< control_msgs/FollowJointTrajectoryResult code, 0: none
+  double map_age = -1.0;               ///< s: the sensed map's age at the check (-1: no check against a sensed map)
+  double sensed_margin = 0.0;          ///< m: the predictive margin of the target and the straight path (0: none)
   TimedTrajectory executed;            ///< what was sent to the driver (filled only when StepRequest asks: see step())
 };
 

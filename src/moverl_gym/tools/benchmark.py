@@ -115,6 +115,9 @@ def worker_graph(
             "contacts_resting": int(sum(max(i["contacts_resting"], 0) for i, _ in infos)),
             "round_trip": _percentiles([t["round_trip"] for _, t in infos]),
         }
+        ages = [i["map_age"] for i, _ in infos if i["map_age"] >= 0.0]  # the sensed map's age at each step's check
+        if ages:
+            out["map_age_ms"] = 1e3 * float(np.mean(ages))
         if shield:
             out["state_check"] = _percentiles([t["state_check"] for _, t in infos])
             out["path_check"] = _percentiles([t["path_check"] for i, t in infos if t["path_check"] > 0])
@@ -222,7 +225,10 @@ def sensed_rows(args) -> int:
         print(f"measuring {name} ...", flush=True)
         rows[rate] = run_worker(name, args)
     print(f"\n== the human world, shield ON, lockstep, 160x120 cameras, {os.cpu_count()} cores ==")
-    print(f"{'configuration':44s} {'steps':>6s} {'steps/s':>9s} {'CPU ms/step':>12s} {'ratio':>7s}  target  contacts")
+    print(
+        f"{'configuration':44s} {'steps':>6s} {'steps/s':>9s} {'CPU ms/step':>12s} {'ratio':>7s}  target  contacts  "
+        "map age ms (mean)"
+    )
     print(
         f"{'world file (the person from the script)':44s} {base['steps']:6d} {base['steps_per_s']:9.1f} "
         f"{base['cpu_ms_per_step']:12.2f} {1.0:7.3f}"
@@ -233,7 +239,7 @@ def sensed_rows(args) -> int:
         ratio = r["steps_per_s"] / base["steps_per_s"]
         print(
             f"{label:44s} {r['steps']:6d} {r['steps_per_s']:9.1f} {r['cpu_ms_per_step']:12.2f} {ratio:7.3f}  "
-            f"{'>= %.3f' % target if target else '      '}  {r['contacts']}"
+            f"{'>= %.3f' % target if target else '      '}  {r['contacts']:8d}  {r.get('map_age_ms', float('nan')):.1f}"
         )
     if args.json:
         with open(args.json, "w") as f:

@@ -6,11 +6,16 @@ see), and by PyBullet's batched ray test over the same pixel rays (collision sha
 this process (no ROS).
 
     python src/moverl_gym/tools/render_cost.py --world human --renders 10
+    python src/moverl_gym/tools/render_cost.py --world human --renders 300 --by-body
 
 The robot stands at its home configuration. Prints, per camera, CPU ms (this process, all threads) and wall ms per
 image, how far the other methods' depths are from TinyRenderer's with the visual meshes, and how far each image reads
 behind the world file's own shapes (ray-cast exactly, moverl_sim.depth_scene.world_depth) (z-depth, metres; pixels
 without a return count as the far plane in both). A baseline for a faster depth camera (issue 25).
+
+--by-body: where the default camera (the rasterizer, the robot simplified) spends an image instead: CPU ms per image
+with every body drawn, with none (what a render costs besides triangles: the poses, every vertex into the camera's
+frame, the image's buffers), and with each body alone, every camera rendered in turn, twice.
 """
 
 from __future__ import annotations
@@ -76,11 +81,44 @@ def print_shares(other: np.ndarray, depth: np.ndarray) -> None:
     )
 
 
+def by_body(rc, world, renders: int) -> int:
+    """Print the default camera's CPU ms per image with every body drawn, none, and each body alone (--by-body)."""
+    from moverl_sim.camera import Camera
+    from moverl_sim.settings import simulator_for
+
+    sim = simulator_for(rc, world, robot_visuals="simplified", camera_renderer="raster")
+    try:
+        sim.reset_robot(rc["home"])
+        scene = sim.depth_scene  # what the simulator's cameras draw
+        if scene is None:
+            raise SystemExit(f"render_cost.py: the rasterizer cannot draw this scene: {sim.camera_renderer_fallback}")
+        cams = [Camera(spec) for spec in world.cameras]
+        uids = sorted({uid for uid, _ in scene.parts})
+        names = {uid: f"{rc['name']} (the robot)" for uid in uids}
+        for oid, (uid, _) in sim.object_bodies.items():
+            names[uid] = oid if names.get(uid, "").endswith("(the robot)") else f"{names[uid]}, {oid}"
+        drawn = [("every body", scene), ("none (no triangle)", scene.drawing_only([]))]
+        drawn += [(f"only {names[uid]}", scene.drawing_only([uid])) for uid in uids]
+
+        def per_image(s) -> float:
+            cpu, _, _ = timed(lambda: [s.render(cam) for cam in cams], renders)
+            return cpu / len(cams)
+
+        print(f"{world.source}, robot {rc['name']} at home (simplified), the rasterizer, {len(cams)} cameras in turn")
+        print(f"{'CPU ms per image, two runs':>26s} {'triangles':>9s}  drawn")
+        for label, s in drawn:
+            print(f"{per_image(s):13.3f} {per_image(s):12.3f} {s.triangle_count:9d}  {label}")
+    finally:
+        sim.close()
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
     p.add_argument("--renders", type=int, default=10, help="images per camera and method")
+    p.add_argument("--by-body", action="store_true", help="the default camera's CPU per image by body drawn")
     args = p.parse_args(argv)
     if args.renders < 1:
         p.error("--renders must be at least 1")
@@ -96,6 +134,8 @@ def main(argv=None) -> int:
     if not world.cameras:
         raise SystemExit(f"render_cost.py: {world.source} has no cameras")
     rc = load_robot_config(robot_config_file(args.robot))
+    if args.by_body:
+        return by_body(rc, world, args.renders)
     # camera_renderer raster: each sim's render_depth is the rasterizer's image; cam.render_depth(client) TinyRenderer's
     sims = {
         looks: simulator_for(rc, world, robot_visuals=looks, camera_renderer="raster")

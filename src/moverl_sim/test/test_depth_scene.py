@@ -110,6 +110,31 @@ def test_the_world_files_shapes_are_drawn_where_they_are_never_behind_or_beside(
         assert sees_world.sum() <= 1.02 * hits.sum() + 50
 
 
+def test_a_scene_drawing_only_some_bodies_draws_them_as_the_whole_scene_does(human_sim):
+    """DepthScene.drawing_only (render_cost.py --by-body): every body drawn is the scene's image; no body, the far plane
+    everywhere; one body alone is seen where the whole scene sees it, at the same depth, and nowhere nearer than the
+    whole scene; the world objects' bodies (Simulator.object_bodies) and the robot are every body there is."""
+    sim, world = human_sim
+    sim.place_obstacles(1.5)
+    scene = sim.depth_scene
+    uids = {uid for uid, _ in scene.parts}
+    assert uids == {sim.robot} | {uid for uid, _ in sim.object_bodies.values()}
+    assert set(sim.object_bodies) == {o.id for o in world.objects}
+    for spec in world.cameras:
+        cam = Camera(spec)
+        full, seen = scene.render(cam, parts=True)
+        assert np.array_equal(scene.drawing_only(uids).render(cam), full)
+        assert np.all(scene.drawing_only([]).render(cam) == np.float32(cam.far))
+        body_of_part = np.asarray([uid for uid, _ in scene.parts] + [-1])  # part -1: nothing seen
+        for uid in uids:
+            alone = scene.drawing_only([uid]).render(cam)
+            mine = body_of_part[seen] == uid
+            assert mine.sum() > 0, (cam.id, uid)
+            assert np.array_equal(alone[mine], full[mine]), (cam.id, uid)
+            assert np.all(alone >= full), (cam.id, uid)
+            assert np.all(alone[~mine & (alone < cam.far)] > full[~mine & (alone < cam.far)]), (cam.id, uid)
+
+
 def test_the_robots_meshes_are_drawn_as_tinyrenderer_draws_them(human_sim):
     """The same triangles (the simplified visual meshes) in both renderers: the pixels that see the robot, which link,
     and at what depth agree but for the rims (each renderer's coverage rule)."""

@@ -609,6 +609,18 @@ class Simulator:
         """PyBullet physicsClientId of this simulator's world (e.g. for moverl_sim.camera rendering)."""
         return self._cid
 
+    @property
+    def object_bodies(self):
+        """World object id -> (PyBullet body unique id, link index: -1 the body's base) of the world's objects (the
+        objects that move together are one body's base and links)."""
+        return dict(self._object_links)
+
+    @property
+    def depth_scene(self):
+        """The moverl_sim.depth_scene.DepthScene the cameras are drawn from (None when PyBullet's TinyRenderer draws
+        them: camera_renderer tinyrenderer, or its fallback)."""
+        return self._depth_scene
+
     def render_depth(self, camera):
         """The z-depth image (height x width, metres; far = no return) a moverl_sim.camera.Camera sees of the world
         now, drawn by this simulator's camera_renderer."""

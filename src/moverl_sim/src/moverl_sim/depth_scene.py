@@ -240,6 +240,23 @@ class DepthScene:
     def triangle_count(self):
         return len(self._triangles)
 
+    def drawing_only(self, bodies):
+        """This scene with only the triangles of `bodies` (PyBullet unique ids) drawn; every part is still placed.
+        For measuring what each body's triangles cost a render (render_cost.py --by-body)."""
+        body_of_part = np.asarray([uid for uid, _ in self.parts], dtype=np.int64)
+        drawn = self._triangles
+        if len(drawn):
+            drawn = drawn[np.isin(body_of_part[self._vertex_part[drawn[:, 0]]], list(bodies))]
+        return DepthScene(
+            self.client_id,
+            self.parts,
+            self._closed,
+            self._vertices,
+            self._vertex_part,
+            drawn.reshape(-1, 3),
+            self._bodies,
+        )
+
     @classmethod
     def from_client(cls, client_id):
         """Reads every body's visual shapes (call once the world is built: bodies added later are not drawn)."""

@@ -247,7 +247,7 @@ class DepthScene:
         drawn = self._triangles
         if len(drawn):
             drawn = drawn[np.isin(body_of_part[self._vertex_part[drawn[:, 0]]], list(bodies))]
-        return DepthScene(
+        scene = DepthScene(
             self.client_id,
             self.parts,
             self._closed,
@@ -256,6 +256,8 @@ class DepthScene:
             drawn.reshape(-1, 3),
             self._bodies,
         )
+        scene._body_count = self._body_count  # built for this scene's world: a body added since is refused as here
+        return scene
 
     @classmethod
     def from_client(cls, client_id):

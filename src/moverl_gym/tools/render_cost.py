@@ -94,9 +94,10 @@ def by_body(rc, world, renders: int) -> int:
             raise SystemExit(f"render_cost.py: the rasterizer cannot draw this scene: {sim.camera_renderer_fallback}")
         cams = [Camera(spec) for spec in world.cameras]
         uids = sorted({uid for uid, _ in scene.parts})
-        names = {uid: f"{rc['name']} (the robot)" for uid in uids}
+        objects = {}  # body -> the world objects it is made of
         for oid, (uid, _) in sim.object_bodies.items():
-            names[uid] = oid if names.get(uid, "").endswith("(the robot)") else f"{names[uid]}, {oid}"
+            objects.setdefault(uid, []).append(oid)
+        names = {uid: ", ".join(objects[uid]) if uid in objects else f"{rc['name']} (the robot)" for uid in uids}
         drawn = [("every body", scene), ("none (no triangle)", scene.drawing_only([]))]
         drawn += [(f"only {names[uid]}", scene.drawing_only([uid])) for uid in uids]
 

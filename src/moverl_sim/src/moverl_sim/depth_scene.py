@@ -224,7 +224,7 @@ def world_depth(objects, t, camera: Camera):
 class DepthScene:
     """Every body's visual shapes in a PyBullet client, as triangles in their links' frames; rendered by a Camera."""
 
-    def __init__(self, client_id, parts, closed, vertices, vertex_part, triangles, bodies):
+    def __init__(self, client_id, parts, closed, vertices, vertex_part, triangles, bodies, body_count=None):
         self.client_id = client_id
         self.parts = parts  # part index -> (body unique id, link index: -1 the base)
         self._closed = np.ascontiguousarray(closed, dtype=np.uint8)  # only primitives: back faces culled
@@ -232,7 +232,8 @@ class DepthScene:
         self._vertex_part = np.ascontiguousarray(vertex_part, dtype=np.int32)
         self._triangles = np.ascontiguousarray(triangles, dtype=np.int32)
         self._bodies = bodies
-        self._body_count = pybullet.getNumBodies(physicsClientId=client_id)  # a body added later is not drawn
+        # the bodies of the world it was built for (default: the client's now): a body added later is not drawn
+        self._body_count = pybullet.getNumBodies(physicsClientId=client_id) if body_count is None else body_count
         self._positions = np.zeros((len(parts), 3))
         self._quaternions = np.zeros((len(parts), 4))
 
@@ -247,7 +248,7 @@ class DepthScene:
         drawn = self._triangles
         if len(drawn):
             drawn = drawn[np.isin(body_of_part[self._vertex_part[drawn[:, 0]]], list(bodies))]
-        scene = DepthScene(
+        return DepthScene(
             self.client_id,
             self.parts,
             self._closed,
@@ -255,9 +256,8 @@ class DepthScene:
             self._vertex_part,
             drawn.reshape(-1, 3),
             self._bodies,
+            body_count=self._body_count,  # this scene's world: a body added since is refused as here
         )
-        scene._body_count = self._body_count  # built for this scene's world: a body added since is refused as here
-        return scene
 
     @classmethod
     def from_client(cls, client_id):

@@ -20,7 +20,7 @@ float logodds(double p) { return static_cast<float>(std::log(p / (1.0 - p))); }
 constexpr std::int64_t kMaxCells = 64 * 1024 * 1024;
 static_assert(kMaxCells < (std::int64_t{1} << 31), "collectEndCells' table keys cells by int32");
 /// Cells per block (4^3) and superblock (16^3) edge, as shifts.
-constexpr int kBlockShift = 2, kSuperShift = 4;
+constexpr int kBlockShift = OccupancyMap::kBlockBits, kSuperShift = OccupancyMap::kSuperBits;
 /// A superblock's blocks along each axis, and in all (kSubShift: their shift).
 constexpr int kSubShift = kSuperShift - kBlockShift, kSuperBlocks = 1 << (3 * kSubShift);
 
@@ -205,6 +205,17 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   m->super_dirtied_.assign(static_cast<std::size_t>(supers), 0);
   m->end_hash_.assign(static_cast<std::size_t>(blocks), 0);
   m->super_end_hash_.assign(static_cast<std::size_t>(supers), 0);
+  if (o.hidden_space) {
+    if (!std::isfinite(o.watch_time) || o.watch_time <= 0.0) return bad("watch_time must be > 0 (hidden_space)");
+    if (!std::isfinite(o.speed_bound)) return bad("speed_bound must be finite (hidden_space)");
+    m->batch_seen_.assign(static_cast<std::size_t>(blocks), 0);
+    m->block_watched_.assign(static_cast<std::size_t>(blocks), 0);
+    m->super_watched_.assign(static_cast<std::size_t>(supers), 0);
+    m->grown_mark_.assign(static_cast<std::size_t>(blocks), 0);
+    m->stale_.assign(words, 0);
+    m->fixed_.assign(words, 0);
+    m->free_until_.assign(static_cast<std::size_t>(cells), std::numeric_limits<float>::quiet_NaN());
+  }
   m->log_hit_ = logodds(o.prob_hit);
   m->log_miss_ = logodds(o.prob_miss);
   m->clamp_min_ = logodds(o.clamp_min);
@@ -218,6 +229,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   }
   m->options_.unknown_occupied = o.unknown_occupied;
   m->fillUnobserved(o.unknown_occupied);
+  if (o.hidden_space) m->setSpeedBound(o.speed_bound);
   return m;
 }
 
@@ -269,12 +281,6 @@ struct alignas(64) OccupancyMap::Scratch {
 
 OccupancyMap::~OccupancyMap() = default;
 
-inline std::int64_t OccupancyMap::blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
-  constexpr std::int64_t sub = (1 << kSubShift) - 1;
-  const std::int64_t super = superIndex(x >> kSubShift, y >> kSubShift, z >> kSubShift);
-  return (super << (3 * kSubShift)) | (((x & sub) << (2 * kSubShift)) | ((y & sub) << kSubShift) | (z & sub));
-}
-
 void OccupancyMap::boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super, std::uint64_t* bit) const {
   std::int64_t at[3];
   unravel(c, size_, at);
@@ -309,6 +315,11 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
                                    MapUpdate* out, bool beams, WorkerPool* pool) {
   out->hits.clear();
   out->misses.clear();
+  out->fixed.clear();
+  out->stale.clear();
+  out->close = out->forget = false;
+  out->late = options_.hidden_space && !recording_;  // hidden_space: a view beginView did not place in the open batch
+  out->stamp = recording_ ? batch_stamp_ : std::numeric_limits<double>::quiet_NaN();
   out->stats = MapUpdateStats();
   out->stats.points = points.size();
   const bool masked = robot_mask.size() == points.size();
@@ -517,7 +528,7 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
       const bool at_last = at[0] == last[0] && at[1] == last[1] && at[2] == last[2];
       if (at_last && !through_end) break;
       const std::int64_t block = blockIndex(at[0] >> kBlockShift, at[1] >> kBlockShift, at[2] >> kBlockShift);
-      if (block_clamped_[block] == kAllCells && !at_last) {
+      if ((block_clamped_[block] & ~watchedBits(block)) == kAllCells && !at_last) {
         // Every cell of this block is clamped at clamp_min (the free space the cameras keep seeing): a miss changes
         // none of them. Jump to where the beam leaves the block, unless it ends in it.
         bool ends_here = true;
@@ -566,6 +577,11 @@ void OccupancyMap::computeUpdate(const std::vector<Eigen::Vector3d>& points,
           // A free cell already clamped at clamp_min does not change: nothing to apply (a bit, not the value: the
           // values are 4 bytes a cell, too many for the cache).
           if ((clamped_[k >> 6] & bit) == 0) out->misses.push_back(static_cast<std::uint64_t>(k));
+          if (recording_) {
+            constexpr std::int64_t m = (1 << kBlockShift) - 1;
+            batch_seen_[block] |= std::uint64_t{1}
+                                  << ((((at[0] & m) << kBlockShift | (at[1] & m)) << kBlockShift) | (at[2] & m));
+          }
         }
         if (at_last) break;  // a fixture's end cell, done
       }
@@ -649,7 +665,15 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   };
   // A cell where only fixture points end was seen down to the fixture's surface: seen free (computeUpdate's rule).
   for (std::size_t n = 0; n < order_.size(); ++n) {
-    if (onlyFixtureEnds(order_flags_[n]) && !testBit(seen_, order_[n])) see(order_[n]);
+    if (onlyFixtureEnds(order_flags_[n]) && !testBit(seen_, order_[n])) {
+      see(order_[n]);
+      if (recording_) {
+        std::int64_t b, sb;
+        std::uint64_t bit;
+        boxesOf(order_[n], &b, &sb, &bit);
+        batch_seen_[b] |= bit;
+      }
+    }
   }
   // 3. Free space by projection. Each pixel's depth as far as it sees free: its z-depth, cut where its ray reaches
   //    max_range (a beam is integrated up to max_range, and a no-return at the far plane clears up to it); 0 for a
@@ -888,7 +912,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
   // order, whatever the number of workers.
   tasks_.clear();
   for (std::int64_t si = 0; si < static_cast<std::int64_t>(super_dirty_.size()); ++si) {
-    if (super_dirty_[si] != 0) tasks_.push_back(si);
+    if (super_dirty_[si] != 0 || (!super_watched_.empty() && super_watched_[si] != 0)) tasks_.push_back(si);
   }
   const int workers = pool == nullptr ? 1 : pool->threads();
   if (static_cast<int>(scratch_.size()) < workers) scratch_.resize(static_cast<std::size_t>(workers));
@@ -905,7 +929,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     auto see = [&](std::int64_t k) {
       __atomic_fetch_or(&seen_[static_cast<std::size_t>(k >> 6)], std::uint64_t{1} << (k & 63), __ATOMIC_RELAXED);
       ++sc.free_cells;
-      sc.misses.push_back(static_cast<std::uint64_t>(k));  // (never a cell clamped free: block_clamped_ leaves those)
+      sc.misses.push_back(static_cast<std::uint64_t>(k));  // (never a cell clamped free: the callers leave those)
     };
     std::int64_t s[3], sa[3], sb[3], bl[3], ba[3], bb[3];
     unravel(si, supers_, s);
@@ -920,11 +944,13 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
     // unevaluated (a cell that leaves clamp_min has it evaluated again).
     auto repeat = [&](std::uint64_t bits, std::int64_t bi) {
       ++sc.reused;
-      const std::uint64_t still = bits & ~block_clamped_[bi];
+      const std::uint64_t still =
+          bits & ~(block_clamped_[bi] & ~watchedBits(bi));  // watched: looked at, clamped or not
       const std::int64_t k0 = cellId(ba[0], ba[1], ba[2]);
-      for (std::uint64_t todo = still & ~block_ended_[bi]; todo != 0; todo &= todo - 1) {
+      for (std::uint64_t todo = still & ~block_ended_[bi] & ~block_clamped_[bi]; todo != 0; todo &= todo - 1) {
         see(k0 + cell_offset_[__builtin_ctzll(todo)]);
       }
+      if (recording_) batch_seen_[bi] |= still & ~block_ended_[bi];
       return still;
     };
     SuperRecord& sr = view->supers[static_cast<std::size_t>(si)];
@@ -948,7 +974,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
         for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
           for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
             const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
-            if (block_clamped_[bi] == kAllCells) continue;
+            if ((block_clamped_[bi] & ~watchedBits(bi)) == kAllCells) continue;
             if (!sr.seen) {  // no record holds a cell: counted only
               ++sc.reused;
               continue;
@@ -972,7 +998,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
       for (bl[1] = sa[1] >> kBlockShift; bl[1] <= sb[1] >> kBlockShift; ++bl[1]) {
         for (bl[2] = sa[2] >> kBlockShift; bl[2] <= sb[2] >> kBlockShift; ++bl[2]) {
           const std::int64_t bi = blockIndex(bl[0], bl[1], bl[2]);
-          if (block_clamped_[bi] == kAllCells) continue;
+          if ((block_clamped_[bi] & ~watchedBits(bi)) == kAllCells) continue;
           for (int i = 0; i < 3; ++i) {
             ba[i] = bl[i] << kBlockShift;
             bb[i] = std::min(size_[i] - 1, ((bl[i] + 1) << kBlockShift) - 1);
@@ -1012,7 +1038,13 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
           // The cells neither clamped free nor hit nor seen free already (a block's words: no test per cell), each
           // at its offset from the block's first cell (its id, its centre in the optical frame, its projection).
           const std::int64_t k0 = cellId(ba[0], ba[1], ba[2]);
-          for (std::uint64_t todo = ~(block_clamped_[bi] | block_ended_[bi]); todo != 0; todo &= todo - 1) {
+          // Watched cells clamped free are looked at too (hidden_space), but a miss would not change them.
+          const std::uint64_t clamped = block_clamped_[bi];
+          auto seen_cell = [&](std::int64_t k, int n) {
+            if (((clamped >> n) & 1u) == 0) see(k);
+            seen_bits |= std::uint64_t{1} << n;
+          };
+          for (std::uint64_t todo = ~((clamped & ~watchedBits(bi)) | block_ended_[bi]); todo != 0; todo &= todo - 1) {
             const int n = __builtin_ctzll(todo);
             const std::int64_t k = k0 + cell_offset_[n];
             const Eigen::Vector3d c = c0 + cell_step[n];
@@ -1045,8 +1077,7 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               crossed = free_depth[p] >= zmax;
             }
             if (crossed && in_front) {
-              see(k);
-              seen_bits |= std::uint64_t{1} << n;
+              seen_cell(k, n);
               continue;
             }
             if (q->u0 == CellProjection::kNotYet16) {
@@ -1093,11 +1124,11 @@ void OccupancyMap::computeUpdateProjective(const std::vector<Eigen::Vector3d>& p
               }
               if (!crossed) continue;
             }
-            see(k);
-            seen_bits |= std::uint64_t{1} << n;
+            seen_cell(k, n);
           }
           br.seen = seen_bits;
           br.at = epoch_;
+          if (recording_) batch_seen_[bi] |= seen_bits;
           any = any || seen_bits != 0;
         }
       }
@@ -1168,7 +1199,10 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   if (now == testBit(occupied_, c)) return;
   if (now) {
     setBit(&occupied_, c);
-    ++block_count_[b];
+    if (block_count_[b]++ == 0 && !grown_mark_.empty() && grown_mark_[b] == 0) {
+      grown_mark_[b] = 1;  // hidden_space: the blocks watched around it grow at the batch's close
+      grown_blocks_.push_back(b);
+    }
     ++super_count_[s];
   } else {
     clearBit(&occupied_, c);
@@ -1177,13 +1211,19 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   }
 }
 
-void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out) {
+void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, bool fixed, MapUpdate* out) {
   for (std::uint64_t key : keys) {
     const auto c = static_cast<std::int64_t>(key);
-    if (c < 0 || c >= static_cast<std::int64_t>(value_.size()) || testBit(observed_, c) || testBit(hit_, c) ||
-        testBit(seen_, c)) {
-      continue;
+    if (c < 0 || c >= static_cast<std::int64_t>(value_.size()) || testBit(hit_, c)) continue;
+    if (recording_) {  // vouched for as free by this view
+      std::int64_t b, s;
+      std::uint64_t bit;
+      boxesOf(c, &b, &s, &bit);
+      batch_seen_[b] |= bit;
     }
+    if (fixed && !fixed_.empty()) out->fixed.push_back(key);
+    const bool possibly_occupied = !testBit(observed_, c) || (!stale_.empty() && testBit(stale_, c));
+    if (!possibly_occupied || testBit(seen_, c)) continue;
     setBit(&seen_, c);
     out->misses.push_back(key);  // prior + one miss: free
     ++out->stats.known_free;
@@ -1191,30 +1231,114 @@ void OccupancyMap::addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdat
   }
 }
 
+void OccupancyMap::knownFreeCells(const Eigen::AlignedBox3d& box, bool fixed, std::vector<Eigen::Vector3d>* centers,
+                                  std::vector<std::uint64_t>* keys) const {
+  if (!hiddenSpaceActive()) {
+    unobservedCells(box, centers, keys);
+    return;
+  }
+  centers->clear();
+  keys->clear();
+  if (box.isEmpty()) return;
+  const double r = options_.resolution;
+  std::int64_t lo[3], hi[3];
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(box.min()[i] / r - 0.5)) - offset_[i]);
+    hi[i] = std::min<std::int64_t>(size_[i] - 1,
+                                   static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) - offset_[i]);
+    if (lo[i] > hi[i]) return;
+  }
+  for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
+      for (std::int64_t k = lo[2]; k <= hi[2]; ++k) {
+        const std::int64_t c = cellId(i, j, k);
+        const bool observed = testBit(observed_, c), occupied = testBit(occupied_, c);
+        bool take;
+        if (!observed || testBit(stale_, c)) {
+          take = true;  // never seen, or possibly occupied since last seen free
+        } else if (occupied) {
+          take = false;  // seen occupied: stays
+        } else if (fixed) {
+          take = !testBit(fixed_, c);  // free, to be free for good
+        } else {
+          std::int64_t b, s;
+          boxesOf(c, &b, &s);
+          take = block_watched_[b] != 0;  // free where the views look for what comes
+        }
+        if (!take) continue;
+        centers->push_back(centre(i, j, k));
+        keys->push_back(static_cast<std::uint64_t>(c));
+      }
+    }
+  }
+}
+
+bool OccupancyMap::stale(const Eigen::Vector3d& p) const {
+  const std::int64_t c = cellOf(p);
+  return c >= 0 && !stale_.empty() && testBit(stale_, c);
+}
+
 void OccupancyMap::apply(const MapUpdate& update) {
   ++epoch_;  // cells it turns not clamped free are newer than every view so far
   revision_ = nextRevision();
+  if (update.close) {
+    applyClose(update);
+    return;
+  }
+  const bool hold = options_.hidden_space;
+  for (std::uint64_t key : update.fixed) {
+    const auto c = static_cast<std::int64_t>(key);
+    if (c >= 0 && c < static_cast<std::int64_t>(value_.size()) && !fixed_.empty()) setBit(&fixed_, c);
+  }
   for (const auto* cells : {&update.hits, &update.misses}) {
-    const float u = cells == &update.hits ? log_hit_ : log_miss_;
+    const bool hits = cells == &update.hits;
     for (std::uint64_t key : *cells) {
       const auto c = static_cast<std::int64_t>(key);
       if (c < 0 || c >= static_cast<std::int64_t>(value_.size())) continue;
-      const bool observed = testBit(observed_, c);
-      const bool was = observed && value_[c] >= threshold_;
-      setValue(c, updated(value_[c], u));
-      if (!observed) {
-        setBit(&observed_, c);
-        ++observed_cells_;
+      if (!hits && hold && testBit(occupied_, c)) {
+        // hidden_space: a possibly-occupied cell seen free goes free at the batch's close (another view of the
+        // instant may show what came), and never from a late view (it may have been entered since).
+        if (!update.late) held_misses_.push_back(key);
+        continue;
       }
-      const bool now = value_[c] >= threshold_;
-      if (now != was) countSeen(c, now ? 1 : -1);
+      applyOne(c, hits);
     }
+  }
+}
+
+void OccupancyMap::applyOne(std::int64_t c, bool hit) {
+  const bool observed = testBit(observed_, c);
+  const bool was = observed && value_[c] >= threshold_;
+  setValue(c, updated(value_[c], hit ? log_hit_ : log_miss_));
+  if (!observed) {
+    setBit(&observed_, c);
+    ++observed_cells_;
+  }
+  const bool now = value_[c] >= threshold_;
+  if (now != was) countSeen(c, now ? 1 : -1);
+  if (!stale_.empty()) {
+    if (testBit(stale_, c)) {  // seen again: what the view says
+      clearBit(&stale_, c);
+      --stale_cells_;
+    }
+    free_until_[c] = std::numeric_limits<float>::quiet_NaN();
   }
 }
 
 void OccupancyMap::clear() {
   std::fill(observed_.begin(), observed_.end(), 0);
   observed_cells_ = 0;
+  if (options_.hidden_space) {
+    std::fill(stale_.begin(), stale_.end(), 0);
+    std::fill(fixed_.begin(), fixed_.end(), 0);
+    std::fill(batch_seen_.begin(), batch_seen_.end(), 0);
+    std::fill(free_until_.begin(), free_until_.end(), std::numeric_limits<float>::quiet_NaN());
+    stale_cells_ = 0;
+    held_misses_.clear();
+    batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
+    map_time_ = -std::numeric_limits<double>::infinity();
+    recording_ = false;
+  }
   fillUnobserved(options_.unknown_occupied);
 }
 
@@ -1278,6 +1402,7 @@ void OccupancyMap::fillUnobserved(bool on) {
     setValue(c, v);
     if (testBit(observed_, c) && v >= threshold_) countSeen(c, 1);
   }
+  if (options_.hidden_space) updateWatched(true);
 }
 
 void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,

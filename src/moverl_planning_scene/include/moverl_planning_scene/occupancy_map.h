@@ -35,6 +35,21 @@
  * keeps occupied, so the update rule is unchanged. Space no camera can see but that holds no obstacle (inside the
  * robot's links, inside static world objects) is turned free by the caller with addKnownFree.
  *
+ * Hidden space (hidden_space, under unknown_occupied with a speed bound > 0): a cell seen free stays free only while
+ * nothing that moves at up to speed_bound could have reached it since a camera last saw it free. The views of one
+ * instant (clouds stamped alike: beginView) form a batch; when the batch closes (closeBatch), every free cell that no
+ * view of the batch saw free, and that something possibly occupied when the batch before closed could have reached by
+ * now, turns possibly occupied again (the unknown_occupied prior: one miss of a later view frees it, one hit keeps it).
+ * Each such cell keeps a lower bound on the time something could first be in it: the previous batch's stamp plus its
+ * distance (a lower bound: Chebyshev cells less one, times the resolution) to the nearest possibly-occupied cell over
+ * the speed bound, kept as the largest of those bounds while it stays hidden, so that something in a hidden region
+ * advances at the speed bound, not a cell per batch. That is the exact reachable set of anything moving at the bound
+ * and never seen where the views looked, at the grid's resolution: see docs/sensing.md, "Space no camera sees". A
+ * batch's misses of possibly-occupied cells wait for its close (a cell that one view saw free may be what another view
+ * of the same instant shows something moving into). Only the free cells near possibly-occupied ones can turn (within
+ * speed_bound x watch_time, by blocks: the watched blocks), and the update looks at those cells in every view even
+ * when clamped free, as it looks at cells not yet clamped (the skipped unchanged blocks included).
+ *
  * Representation: a dense grid over `bounds` holds each cell's log-odds (octomap's sensor model and its keys: the cell
  * of coordinate x is floor(x / resolution)), a bit per cell for "occupied" (log-odds at or above the threshold, the
  * unknown_occupied prior included) and, for the collision checks, how many cells are occupied in every block of 4^3
@@ -55,6 +70,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -94,6 +110,17 @@ struct OccupancyMapOptions {
   /// Not a tunable (the updates do not depend on it): false evaluates every block and projects every cell afresh, for
   /// the tests that compare the two.
   bool skip_unchanged_blocks = true;
+  /// Free space no camera sees in a batch turns possibly occupied once something moving at speed_bound may have come
+  /// there (see the file comment; setSpeedBound). Set by the scenario (the scene node: under unknown_occupied); needs
+  /// beginView before every view and closeBatch after a batch's last. Off: every cell seen free stays free until a
+  /// camera sees something there (a static scene).
+  bool hidden_space = false;
+  /// m/s: how fast anything the cameras may miss moves (hidden_space; the world's sensing: speed_bound).
+  double speed_bound = 0.0;
+  /// s: the longest a batch may come after the one before (octomap/watch_time): free cells farther than speed_bound x
+  /// watch_time from every possibly-occupied cell are not watched; a batch later than that finds every free cell
+  /// possibly occupied (the views stopped: nothing is known to be free).
+  double watch_time = kUnset;
 };
 
 /// \brief What a point of a cloud is, as computeUpdate's mask says.
@@ -129,7 +156,29 @@ struct MapUpdateStats {
 struct MapUpdate {
   std::vector<std::uint64_t> hits;    ///< cell ids of the hit cells the update changes
   std::vector<std::uint64_t> misses;  ///< cell ids of the free cells it changes (hits removed)
+  /// Cells free for good (inside the static objects: addKnownFree's fixed ones), among misses: never possibly
+  /// occupied again (hidden_space).
+  std::vector<std::uint64_t> fixed;
+  /// hidden_space, a batch's close (closeBatch): the free cells that turn possibly occupied, then the misses of the
+  /// batch's possibly-occupied cells (held until now) go in. The map's time (mapTime) is then `stamp`.
+  bool close = false;
+  /// close: every free cell not fixed turns possibly occupied (the batch came more than watch_time after the one
+  /// before: the views stopped).
+  bool forget = false;
+  /// A late view (hidden_space: stamped before the open batch or the last closed one): it may add hits, but its misses
+  /// of possibly-occupied cells are dropped (what it saw free may have been entered since).
+  bool late = false;
+  double stamp = std::numeric_limits<double>::quiet_NaN();  ///< s: the batch's (close) or the view's
+  std::vector<std::uint64_t> stale;                         ///< close: free cells that turn possibly occupied
   MapUpdateStats stats;
+};
+
+/// \brief What a batch's close found (closeBatch, hidden_space).
+struct BatchStats {
+  std::size_t watched_blocks = 0;  ///< blocks whose free cells the views looked at
+  std::size_t hidden = 0;          ///< watched free cells no view of the batch saw
+  std::size_t stale = 0;           ///< of those, the ones that turned possibly occupied
+  bool forget = false;             ///< every free cell turned possibly occupied (the batch came too late)
 };
 
 /// \brief Occupancy grid in the robot base frame.
@@ -140,6 +189,8 @@ struct MapUpdate {
 ///        camera's last view between calls; apply, clear and setUnknownOccupied write the counters it reads them with).
 class OccupancyMap {
  public:
+  /// \brief A block is 2^kBlockBits cells along each axis (4^3 cells), a superblock 2^kSuperBits (16^3).
+  static constexpr int kBlockBits = 2, kSuperBits = 4;
   /// \brief nullptr with *error for bad options (resolution <= 0, probabilities outside (0, 1), ...).
   static std::unique_ptr<OccupancyMap> create(const OccupancyMapOptions& options, std::string* error);
   ~OccupancyMap();
@@ -164,7 +215,16 @@ class OccupancyMap {
   /// \brief Unobserved cells (never hit nor seen free) known to hold no obstacle, given as cell ids from
   ///        unobservedCells: added to `out` as seen free, unless this cloud hits them. Call after computeUpdate with
   ///        the same update, before apply (it uses computeUpdate's marks of this cloud).
-  void addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out);
+  void addKnownFree(const std::vector<std::uint64_t>& keys, MapUpdate* out) { addKnownFree(keys, false, out); }
+  /// \brief As addKnownFree, for keys from knownFreeCells. fixed: free for good (inside the static objects), never
+  ///        possibly occupied again. hidden_space: every key counts as seen free by this view's batch (the robot's
+  ///        padding band at the cloud's configuration, the static objects' insides: nobody stands there).
+  void addKnownFree(const std::vector<std::uint64_t>& keys, bool fixed, MapUpdate* out);
+  /// \brief The cells whose centre lies in `box` that a region known to hold no obstacle frees or vouches for: as
+  ///        unobservedCells, and, with hidden_space, also the cells possibly occupied since last seen free, and the
+  ///        free cells of watched blocks (not fixed: those of the box) or every cell not seen occupied (fixed).
+  void knownFreeCells(const Eigen::AlignedBox3d& box, bool fixed, std::vector<Eigen::Vector3d>* centers,
+                      std::vector<std::uint64_t>* keys) const;
   /// \brief Apply an update to the map (hits, then misses).
   void apply(const MapUpdate& update);
   /// \brief Forget everything (all cells unknown: occupied under unknown_occupied).
@@ -194,6 +254,28 @@ class OccupancyMap {
   /// \brief Changes whenever the cells may have (apply, clear, setUnknownOccupied), to a value no map of this process
   ///        has had: what a reader remembers of the cells holds while it stays the same (checkPath's culling).
   std::uint64_t revision() const { return revision_; }
+
+  /// \brief hidden_space: the next view (computeUpdate*) is stamped `stamp` (s). When a batch of views stamped
+  ///        before it is open, that batch is closed first into *close (apply it, to every map, before this view's
+  ///        update) and true is returned. A view stamped before the open batch, or at or before the last closed one, is
+  ///        late (its update says so: MapUpdate::late). Off (not hidden_space): false, nothing to do.
+  bool beginView(double stamp, MapUpdate* close);
+  /// \brief hidden_space: close the open batch into *close (apply it to every map): the free cells no view of the
+  ///        batch saw that something possibly occupied may have reached by the batch's stamp turn possibly occupied,
+  ///        then the batch's held misses go in. False (nothing to close) when no batch is open or hidden_space is off.
+  ///        Reads the map like computeUpdate (not concurrently with apply).
+  bool closeBatch(MapUpdate* close, BatchStats* stats = nullptr);
+  /// \brief The stamp of the open batch (NaN: none).
+  double batchStamp() const { return batch_stamp_; }
+  /// \brief hidden_space: the stamp of the last closed batch applied (-infinity before the first): what the map knows
+  ///        is possibly occupied is as of then (a check's age counts from it).
+  double mapTime() const { return map_time_; }
+  /// \brief hidden_space: the world's speed bound (m/s; <= 0: nothing moves, hidden space stays free).
+  void setSpeedBound(double speed_bound);
+  /// \brief Cells possibly occupied because something may have come there since a camera last saw them free.
+  std::size_t staleCount() const { return stale_cells_; }
+  /// \brief True when the cell containing p is such a cell.
+  bool stale(const Eigen::Vector3d& p) const;
 
   /// \brief What anyOccupied asks of a box (map frame) that holds occupied cells: does the box meet the caller's shape?
   using BoxTest = std::function<bool(const Eigen::AlignedBox3d& box)>;
@@ -291,15 +373,46 @@ class OccupancyMap {
   /// The index of block (x, y, z) (block grid coordinates) in the per-block arrays: superblock-major (a superblock's
   /// blocks side by side, in x, y, z order), so that the blocks the projective update visits together share cache
   /// lines.
-  std::int64_t blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const;
+  std::int64_t blockIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    constexpr int sub_shift = kSuperBits - kBlockBits;
+    constexpr std::int64_t sub = (1 << sub_shift) - 1;
+    const std::int64_t super = superIndex(x >> sub_shift, y >> sub_shift, z >> sub_shift);
+    return (super << (3 * sub_shift)) | (((x & sub) << (2 * sub_shift)) | ((y & sub) << sub_shift) | (z & sub));
+  }
   /// The block and the superblock that hold cell c, and (bit: optional) c's bit in the block's words (block_clamped_).
   void boxesOf(std::int64_t c, std::int64_t* block, std::int64_t* super, std::uint64_t* bit = nullptr) const;
   /// Set cell c's value, keeping the occupied bit and the block counts.
   void setValue(std::int64_t c, float v);
+  /// One hit (or miss) into cell c, as apply does it (observed, the seen counts, hidden space's marks).
+  void applyOne(std::int64_t c, bool hit);
   /// Every unobserved cell at the prior (on) or unknown (off).
   void fillUnobserved(bool on);
   /// Count cell c in (delta 1) or out of (-1) the seen-occupied block counts.
   void countSeen(std::int64_t c, int delta);
+
+  // Hidden space (hidden_space.cpp).
+  /// Block (x, y, z) grid coordinates of block index b (blockIndex's inverse).
+  void blockCoords(std::int64_t b, std::int64_t* at) const;
+  /// The cell ids of a block's cells (bit n: cell_offset_[n] from its first cell), first cell id and which bits lie
+  /// inside the grid.
+  std::int64_t blockFirstCell(const std::int64_t* block_at) const;
+  /// Cells within Chebyshev index distance `up_to` of cell (i, j, k) that count as possibly occupied (occupied_, or
+  /// outside the grid): the smallest such distance L in [1, up_to], or a lower bound on it above up_to.
+  int chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const;
+  /// Blocks watched: within watch_blocks_ (Chebyshev, in blocks) of a block holding a possibly-occupied cell, or of
+  /// the grid's edge. full: recompute all (else only around the blocks that gained such cells since: grown_blocks_).
+  void updateWatched(bool full);
+  void setWatched(std::int64_t b, bool on);
+  /// A block's watched cells (every one, or none), as its bits.
+  std::uint64_t watchedBits(std::int64_t b) const { return block_watched_.empty() ? 0 : block_watched_[b]; }
+  /// A cell turned possibly occupied because something may have come there since it was seen free.
+  void makeStale(std::int64_t c);
+  /// The apply() part of a batch's close.
+  void applyClose(const MapUpdate& update);
+  /// hidden_space with a bound: the rule applies (unknown_occupied, speed bound > 0).
+  bool hiddenSpaceActive() const {
+    return options_.hidden_space && options_.unknown_occupied && options_.speed_bound > 0.0;
+  }
 
   OccupancyMapOptions options_;
   double inv_resolution_ = 0.0;
@@ -364,6 +477,24 @@ class OccupancyMap {
   std::vector<std::uint64_t> block_dirtied_, super_dirtied_;
   std::vector<std::unique_ptr<View>> views_;
   std::vector<std::uint64_t> end_hash_, super_end_hash_;
+  // Hidden space. Per block (blockIndex): the cells the open batch's views saw free or knew free (a bit each, the
+  // block's x, y, z order), and whether its cells are watched (every cell looked at by every view); per superblock how
+  // many of its blocks are watched. Per cell: stale (possibly occupied since last seen free), fixed (free for good),
+  // and for a watched cell hidden from the views, a lower bound on when something could first be in it (NaN: seen by
+  // the last batch, or not watched). The misses of possibly-occupied cells held until the batch's close.
+  std::vector<std::uint64_t> batch_seen_, block_watched_;
+  std::vector<std::uint16_t> super_watched_;
+  std::vector<std::uint64_t> stale_, fixed_;
+  std::vector<float> free_until_;
+  std::vector<std::uint64_t> held_misses_;
+  std::vector<std::int64_t> grown_blocks_;  ///< blocks that gained a possibly-occupied cell since the watch was updated
+  std::vector<std::uint8_t> grown_mark_;    ///< per block: listed in grown_blocks_
+  int watch_blocks_ = 0;                    ///< blocks (Chebyshev) around a possibly-occupied one that are watched
+  int closes_since_full_watch_ = 0;
+  double batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
+  double map_time_ = -std::numeric_limits<double>::infinity();
+  bool recording_ = false;  ///< this view records what it sees free for the open batch (not late)
+  std::size_t stale_cells_ = 0;
   std::vector<std::int64_t> end_blocks_, end_supers_;
   /// per pixel: 1 where the depths differ from the camera's last view (level 0), and its max pyramid
   std::vector<std::vector<float>> changed_max_;

@@ -40,7 +40,22 @@ CloudIntegrator::CloudIntegrator(OccupancyMap* map, const FclCollisionChecker* c
       checker_(checker),
       world_mutex_(world_mutex),
       options_(options),
-      pool_(std::make_unique<WorkerPool>(options.threads)) {}
+      pool_(std::make_unique<WorkerPool>(options.threads)) {
+  // The robot's padding band in the open batch's configurations, as addKnownFree's (a cell reaching into the padding).
+  batch_known_free_ = [this](const std::vector<Eigen::Vector3d>& centres, std::vector<std::uint8_t>* known) {
+    known->assign(centres.size(), 0);
+    const double robot_pad = checker_->options().padding + map_->cellHalfDiagonal();
+    for (std::size_t k = 0; k < batch_configurations_.size(); ++k) {
+      const auto& q = batch_configurations_[k];
+      if (std::find(batch_configurations_.begin(), batch_configurations_.begin() + k, q) !=
+          batch_configurations_.begin() + k) {
+        continue;  // the same configuration again (every cloud of an instant brings its own)
+      }
+      checker_->robotPointMask(q.data(), centres, robot_pad, &band_mask_, nullptr, pool_.get());
+      for (std::size_t i = 0; i < centres.size(); ++i) (*known)[i] |= band_mask_[i];
+    }
+  };
+}
 
 Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isometry3d& sensor_pose,
                                      const std::vector<std::vector<double>>& configurations, MapUpdate* update,
@@ -177,19 +192,32 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   if (used == Integration::kRayCasting) map_->computeUpdate(points_, mask_, sensor_pose.translation(), update);
   t.update = since(&at);
   if (map_->unknownOccupied()) addKnownFree(configurations, update);
+  batch_configurations_.insert(batch_configurations_.end(), configurations.begin(), configurations.end());
   t.known_free = since(&at);
   if (timing != nullptr) *timing = t;
   return used;
 }
 
+bool CloudIntegrator::beginView(double stamp, MapUpdate* close) {
+  const bool closed = map_->beginView(stamp, close, &batch_known_free_);
+  if (closed) batch_configurations_.clear();
+  return closed;
+}
+
+bool CloudIntegrator::closeBatch(MapUpdate* close, BatchStats* stats) {
+  const bool closed = map_->closeBatch(close, stats, &batch_known_free_);
+  batch_configurations_.clear();
+  return closed;
+}
+
 void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update) {
   // The cells (centres) inside the boxes that are unobserved and that `mask` puts inside the shapes: free. One mask
   // for the cells of all the boxes (a mask places every shape first; boxes that overlap may list a cell twice).
-  auto turn_free = [&](const auto& mask) {
+  auto turn_free = [&](const auto& mask, bool fixed) {
     cell_centers_.clear();
     cell_keys_.clear();
     for (const Eigen::AlignedBox3d& box : boxes_) {
-      map_->unobservedCells(box, &box_centers_, &box_keys_);
+      map_->knownFreeCells(box, fixed, &box_centers_, &box_keys_);
       cell_centers_.insert(cell_centers_.end(), box_centers_.begin(), box_centers_.end());
       cell_keys_.insert(cell_keys_.end(), box_keys_.begin(), box_keys_.end());
     }
@@ -198,7 +226,7 @@ void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& confi
     for (std::size_t k = 0; k < cell_keys_.size(); ++k) {
       if (mask_more_[k] != 0) free_keys_.push_back(cell_keys_[k]);
     }
-    map_->addKnownFree(free_keys_, update);
+    map_->addKnownFree(free_keys_, fixed, update);
   };
   // A cell's centre within half its diagonal of a shape: the cell reaches into the shape. The robot: every cell that
   // reaches into its padding (the start check inflates it by padding against the cells: an unseen cell there would
@@ -208,18 +236,20 @@ void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& confi
   const double static_pad = options_.static_filter_padding + half_diagonal;
   for (const auto& q : configurations) {
     checker_->robotBoundingBoxes(q.data(), robot_pad, &boxes_);
-    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      checker_->robotPointMask(q.data(), pts, robot_pad, m, nullptr, pool_.get());
-    });
+    turn_free(
+        [&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
+          checker_->robotPointMask(q.data(), pts, robot_pad, m, nullptr, pool_.get());
+        },
+        false);
   }
   if (options_.filter_static && static_known_free_) {
     static_known_free_ = false;
     std::unique_lock<std::mutex> lock;
     if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);  // the world
     checker_->staticObjectBoxes(static_pad, &boxes_);
-    turn_free([&](const std::vector<Eigen::Vector3d>& pts, std::vector<std::uint8_t>* m) {
-      checker_->staticObjectPointMask(pts, static_pad, m, pool_.get());
-    });
+    turn_free([&](const std::vector<Eigen::Vector3d>& pts,
+                  std::vector<std::uint8_t>* m) { checker_->staticObjectPointMask(pts, static_pad, m, pool_.get()); },
+              true);
   }
 }
 

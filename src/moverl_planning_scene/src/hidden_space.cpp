@@ -187,6 +187,14 @@ int OccupancyMap::chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64
   }
 }
 
+void OccupancyMap::refreshFree(std::int64_t c) {
+  std::int64_t b, s;
+  std::uint64_t bit;
+  boxesOf(c, &b, &s, &bit);
+  const bool free = testBit(observed_, c) && !testBit(occupied_, c);
+  block_free_[b] = free ? block_free_[b] | bit : block_free_[b] & ~bit;
+}
+
 void OccupancyMap::makeStale(std::int64_t c) {
   const bool was_seen_occupied = testBit(observed_, c) && value_[c] >= threshold_;
   setValue(c, prior_);
@@ -200,18 +208,19 @@ void OccupancyMap::makeStale(std::int64_t c) {
     ++stale_cells_;
   }
   free_until_[c] = std::numeric_limits<float>::quiet_NaN();
+  refreshFree(c);
 }
 
-bool OccupancyMap::beginView(double stamp, MapUpdate* close) {
+bool OccupancyMap::beginView(double stamp, MapUpdate* close, const KnownFree* known_free) {
   if (!options_.hidden_space) return false;
   bool closed = false;
-  if (!std::isnan(batch_stamp_) && stamp > batch_stamp_) closed = closeBatch(close);
+  if (!std::isnan(batch_stamp_) && stamp > batch_stamp_) closed = closeBatch(close, nullptr, known_free);
   if (std::isnan(batch_stamp_) && stamp > map_time_) batch_stamp_ = stamp;
   recording_ = stamp == batch_stamp_;  // else late: it sees nothing free that another view may contradict
   return closed;
 }
 
-bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats) {
+bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree* known_free) {
   if (!options_.hidden_space || std::isnan(batch_stamp_)) return false;
   out->hits.clear();
   out->misses.clear();
@@ -223,10 +232,9 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats) {
   out->forget = false;
   out->stamp = batch_stamp_;
   BatchStats bs;
-  const float kNaN = std::numeric_limits<float>::quiet_NaN();
   if (hiddenSpaceActive() && std::isfinite(map_time_)) {
     const double v = options_.speed_bound, res = options_.resolution, now = batch_stamp_, before = map_time_;
-    if (now - before > options_.watch_time) {
+    if (now - before > options_.watch_time || forget_next_) {
       out->forget = bs.forget = true;  // the views stopped for longer than the watch covers: nothing is known free
     } else {
       // The Chebyshev distance that keeps a cell unreachable until now: (L - 1) res / v >= now - before.
@@ -236,49 +244,46 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats) {
       for (std::int64_t b = 0; b < nb; ++b) {
         if (block_watched_[b] == 0) continue;
         ++bs.watched_blocks;
+        if ((block_free_[b] & ~batch_seen_[b]) == 0) continue;
         blockCoords(b, at);
-        if (at[0] >= blocks_[0] || at[1] >= blocks_[1] || at[2] >= blocks_[2]) continue;
         const std::int64_t k0 = blockFirstCell(at);
-        for (std::uint64_t bits = ~batch_seen_[b]; bits != 0; bits &= bits - 1) {
+        for (std::uint64_t bits = block_free_[b] & ~batch_seen_[b]; bits != 0; bits &= bits - 1) {
           const int n = __builtin_ctzll(bits);
           const std::int64_t ci = (at[0] << kBlockShift) + (n >> (2 * kBlockShift));
           const std::int64_t cj = (at[1] << kBlockShift) + ((n >> kBlockShift) & ((1 << kBlockShift) - 1));
           const std::int64_t ck = (at[2] << kBlockShift) + (n & ((1 << kBlockShift) - 1));
-          if (ci >= size_[0] || cj >= size_[1] || ck >= size_[2]) continue;
           const std::int64_t c = k0 + cell_offset_[n];
-          if (testBit(occupied_, c) || !testBit(observed_, c) || testBit(fixed_, c)) continue;  // not free
+          if (testBit(fixed_, c)) continue;  // free for good
           ++bs.hidden;
           const int L = chebyshevToOccupied(ci, cj, ck, needed);
           const double reach = before + std::max(0, L - 1) * res / v;  // nothing there before this
           const double kept = std::isnan(free_until_[c]) ? reach : std::max<double>(free_until_[c], reach);
           if (kept < now) {
             out->stale.push_back(static_cast<std::uint64_t>(c));
+            if (known_free != nullptr) vouch_centres_.push_back(centre(ci, cj, ck));
           } else {
             free_until_[c] = static_cast<float>(std::min(kept, static_cast<double>(std::numeric_limits<float>::max())));
           }
         }
       }
+      if (known_free != nullptr && !out->stale.empty()) {
+        // The would-be stale cells the caller knows hold nothing (the robot's padding band) stay free.
+        (*known_free)(vouch_centres_, &vouch_known_);
+        std::size_t kept = 0;
+        for (std::size_t k = 0; k < out->stale.size(); ++k) {
+          if (k < vouch_known_.size() && vouch_known_[k] != 0) continue;
+          out->stale[kept++] = out->stale[k];
+        }
+        out->stale.resize(kept);
+      }
+      vouch_centres_.clear();
       bs.stale = out->stale.size();
     }
   }
-  // What the batch saw free is known until the next close from there: forget the bounds of the cells it saw.
-  const std::int64_t nb = static_cast<std::int64_t>(batch_seen_.size());
-  for (std::int64_t b = 0; b < nb; ++b) {
-    if (batch_seen_[b] == 0) continue;
-    if (block_watched_[b] != 0) {
-      std::int64_t at[3];
-      blockCoords(b, at);
-      if (at[0] < blocks_[0] && at[1] < blocks_[1] && at[2] < blocks_[2]) {
-        const std::int64_t k0 = blockFirstCell(at);
-        for (std::uint64_t bits = batch_seen_[b]; bits != 0; bits &= bits - 1) {
-          const int n = __builtin_ctzll(bits);
-          const std::int64_t c = k0 + cell_offset_[n];
-          if (c < static_cast<std::int64_t>(free_until_.size())) free_until_[c] = kNaN;
-        }
-      }
-    }
-    batch_seen_[b] = 0;
-  }
+  // (The bounds of the cells the batch saw stay: a lower bound on when something could first be in a cell stays one
+  // as views come; each is below the map's time once it is older than a batch, and then a new close's bound counts.)
+  std::fill(batch_seen_.begin(), batch_seen_.end(), 0);
+  forget_next_ = false;
   batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
   recording_ = false;
   if (stats != nullptr) *stats = bs;

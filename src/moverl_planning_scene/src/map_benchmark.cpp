@@ -9,7 +9,8 @@
  * cameras of a world file render by ray casting the table top of worlds/table.yaml, the floor, and a standing person
  * as a vertical cylinder of radius 0.165 m from z 0.14 to 0.72 at x 0.8, walking along y as worlds/human.yaml's torso
  * does, the robot at home (its points are not drawn). Cells and bounds as the scene node sets them for the Panda
- * (the bounds with the largest margin the world's speed bound asks for).
+ * (the bounds with the largest margin the world's speed bound asks for), with its hidden space: the clouds of one
+ * instant are one batch, closed after the last of them (the stage "hidden space (batch close)").
  *
  * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--resolution M] [--check]
  *                      [--identity]
@@ -21,7 +22,8 @@
  *   a coarser or finer map costs on the same clouds.
  *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated, on one
  *   thread) into
- *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets).
+ *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets,
+ *   and the cells a batch's close turns possibly occupied: the hidden space's).
  */
 #include <yaml-cpp/yaml.h>
 
@@ -61,6 +63,7 @@ struct Cloud {
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  ///< optical frame in the base frame
   std::vector<double> joints;
   double person_y = std::numeric_limits<double>::quiet_NaN();  ///< synthetic scene: where the person stood
+  double stamp = 0.0;  ///< s: when it was taken (the clouds of one instant are one batch of the map's hidden space)
 };
 
 /// Synthetic scene: is p inside the person (the walking cylinder) standing at person_y?
@@ -180,6 +183,7 @@ std::vector<Cloud> loadRecording(const std::string& dir, std::vector<mps::WorldO
     cloud.height = c["height"].as<int>();
     cloud.pose = pose(c["xyz"], c["quat"]);
     cloud.joints = c["joints"].as<std::vector<double>>();
+    cloud.stamp = c["t"].as<double>();
     const std::string file = dir + "/" + c["file"].as<std::string>();
     std::ifstream in(file, std::ios::binary);
     cloud.xyz.resize(3 * static_cast<std::size_t>(cloud.width) * cloud.height);
@@ -290,6 +294,7 @@ int main(int argc, char** argv) {
         const Camera& c = cams[static_cast<std::size_t>(k) % cams.size()];
         if (k % cams.size() == 0 && k > 0) sim_time += c.period;
         clouds.push_back(render(c, 0.15 * std::sin(2 * M_PI * sim_time / 6.0), home));
+        clouds.back().stamp = sim_time;
       }
       mps::WorldObject table;  // the synthetic scene's table top, as worlds/human.yaml's
       table.id = "table";
@@ -325,6 +330,7 @@ int main(int argc, char** argv) {
     rule.latency = tunables->require<double>("octomap/latency");
     rule.plan_horizon = tunables->require<double>("octomap/plan_horizon");
     rule.max_age = tunables->require<double>("octomap/max_age");
+    mo.hidden_space = true;  // as the scene node: the clouds of one instant are one batch
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
     return 1;
@@ -336,6 +342,7 @@ int main(int argc, char** argv) {
     const YAML::Node sensing = YAML::LoadFile(world)["sensing"];
     mo.unknown_occupied = !(sensing && sensing["unknown_occupied"]) || sensing["unknown_occupied"].as<bool>();
     if (sensing && sensing["speed_bound"]) rule.speed_bound = sensing["speed_bound"].as<double>();
+    mo.speed_bound = rule.speed_bound;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s: %s\n", world.c_str(), e.what());
     return 1;
@@ -347,7 +354,8 @@ int main(int argc, char** argv) {
     mps::Integration integration;
     std::unique_ptr<mps::OccupancyMap> map;
     std::unique_ptr<mps::CloudIntegrator> integrator;
-    std::vector<double> t_points, t_self, t_static, t_update, t_known_free, t_apply, t_total;
+    std::vector<double> t_points, t_self, t_static, t_update, t_known_free, t_apply, t_close, t_total;
+    std::size_t hidden = 0, stale = 0, batches = 0;
     std::vector<double> t_steady;  ///< total, the clouds after each camera's fill views
     std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0, reused = 0;
   };
@@ -389,9 +397,27 @@ int main(int argc, char** argv) {
   const int fill_views = runs[1].map->missesToClampFree();
   std::size_t ray_only_person = 0, ray_only_max = 0, ray_only_clouds = 0, proj_only_sum = 0, proj_only_max = 0,
               compared = 0;
-  mps::MapUpdate u;
+  mps::MapUpdate u, close;
   std::vector<Eigen::Vector3d> centers;
-  for (const Cloud& c : clouds) {
+  // The hidden space's batches: a cloud stamped later than the one before closes the open batch first (as the scene
+  // node's integration does), the last cloud closes its own. The close's cost counts against the cloud that closes.
+  auto close_batch = [&](mps::CloudIntegrator* integrator, mps::OccupancyMap* map, bool begin_at, double stamp,
+                         Run* r) {
+    const auto t0 = Clock::now();
+    mps::BatchStats bs;
+    const bool closed = begin_at ? integrator->beginView(stamp, &close) : integrator->closeBatch(&close, &bs);
+    if (closed) map->apply(close);
+    const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (r != nullptr && closed && !begin_at) {
+      r->hidden += bs.hidden;
+      r->stale += bs.stale;
+      ++r->batches;
+    }
+    return closed ? s : 0.0;
+  };
+  for (std::size_t ci = 0; ci < clouds.size(); ++ci) {
+    const Cloud& c = clouds[ci];
+    const bool batch_ends = ci + 1 == clouds.size() || clouds[ci + 1].stamp != c.stamp;
     const auto camera =
         static_cast<std::size_t>(std::find(first_seen.begin(), first_seen.end(), c.camera) - first_seen.begin());
     if (camera == first_seen.size()) {
@@ -410,6 +436,7 @@ int main(int argc, char** argv) {
       view.width = c.width;
       view.height = c.height;
       view.row_step = 12 * static_cast<std::size_t>(c.width);
+      double closing = close_batch(r.integrator.get(), r.map.get(), true, c.stamp, nullptr);
       const auto used = r.integrator->compute(view, c.pose, {c.joints}, &u, &t, &why);
       if (used != r.integration) {
         ++r.fallbacks;
@@ -420,6 +447,7 @@ int main(int argc, char** argv) {
         // The same cloud with every block evaluated: the same hits and misses (as sets), or --identity fails.
         mps::MapUpdate full;
         mps::CloudTiming tr;
+        close_batch(reference.get(), reference_map.get(), true, c.stamp, nullptr);
         reference->compute(view, c.pose, {c.joints}, &full, &tr, nullptr);
         const auto a0 = Clock::now();
         reference_map->apply(full);
@@ -432,7 +460,14 @@ int main(int argc, char** argv) {
           std::sort(b.begin(), b.end());
           return a == b;
         };
-        if (!same(u.hits, full.hits) || !same(u.misses, full.misses)) {
+        mps::MapUpdate mine_close, full_close;
+        if (batch_ends) {
+          // The two maps' closes, compared below (their stale cells), applied after.
+          r.map->apply(u);
+          if (r.integrator->closeBatch(&mine_close)) r.map->apply(mine_close);
+          if (reference->closeBatch(&full_close)) reference_map->apply(full_close);
+        }
+        if (!same(u.hits, full.hits) || !same(u.misses, full.misses) || !same(mine_close.stale, full_close.stale)) {
           ++identity_failures;
           std::fprintf(
               stderr, "identity: cloud %zu of %s: %zu hits, %zu misses with skip_unchanged_blocks, %zu, %zu without\n",
@@ -444,8 +479,10 @@ int main(int argc, char** argv) {
         for (std::uint64_t key : u.misses) r.freed_inside += insidePerson(r.map->cellCentre(key), c.person_y) ? 1 : 0;
       }
       const auto t0 = Clock::now();
-      r.map->apply(u);
+      const bool compared_closes = reference && r.integration == mps::Integration::kProjective && batch_ends;
+      if (!compared_closes) r.map->apply(u);  // (else applied above, with the close)
       const double apply = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (batch_ends && !compared_closes) closing += close_batch(r.integrator.get(), r.map.get(), false, c.stamp, &r);
       if (first) continue;  // the first view of each camera fills the map from unknown: left out
       r.t_points.push_back(t.points);
       r.t_self.push_back(t.self_filter);
@@ -453,8 +490,9 @@ int main(int argc, char** argv) {
       r.t_update.push_back(t.update);
       if (mo.unknown_occupied) r.t_known_free.push_back(t.known_free);
       r.t_apply.push_back(apply);
-      r.t_total.push_back(t.total() + apply);
-      if (view_index >= fill_views) r.t_steady.push_back(t.total() + apply);
+      r.t_close.push_back(closing);
+      r.t_total.push_back(t.total() + apply + closing);
+      if (view_index >= fill_views) r.t_steady.push_back(t.total() + apply + closing);
       r.free_cells += u.stats.free_cells;
       r.changed += u.stats.changed_cells;
       r.reused += u.stats.reused_blocks;
@@ -493,6 +531,7 @@ int main(int argc, char** argv) {
     report(projective ? "update (projective)" : "update (ray casting)", r.t_update);
     report("known free (unknown_occupied)", r.t_known_free);
     report("apply", r.t_apply);
+    report("hidden space (batch close)", r.t_close);
     report("total", r.t_total);
     if (r.integration == mps::Integration::kProjective) {
       report("total after the map's fill", r.t_steady);
@@ -511,6 +550,13 @@ int main(int argc, char** argv) {
             ? (", " + std::to_string(r.reused / n) + " blocks not evaluated (the camera's last view repeated)").c_str()
             : "",
         r.map->occupiedLeafCount(), mean_total[k] > 0 ? points / mean_total[k] / 1e6 : 0.0, r.fallbacks);
+    if (r.batches > 0) {
+      std::printf(
+          "  hidden space: %zu batches; per batch %.0f watched free cells no view saw, %.1f of them turned stale; "
+          "%zu stale cells at the end\n",
+          r.batches, static_cast<double>(r.hidden) / r.batches, static_cast<double>(r.stale) / r.batches,
+          r.map->staleCount());
+    }
     if (recording.empty()) {
       std::printf("  cells seen free with their centre inside the person (all clouds): %zu\n", r.freed_inside);
     }

@@ -210,6 +210,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
     if (!std::isfinite(o.speed_bound)) return bad("speed_bound must be finite (hidden_space)");
     m->batch_seen_.assign(static_cast<std::size_t>(blocks), 0);
     m->block_watched_.assign(static_cast<std::size_t>(blocks), 0);
+    m->block_free_.assign(static_cast<std::size_t>(blocks), 0);
     m->super_watched_.assign(static_cast<std::size_t>(supers), 0);
     m->grown_mark_.assign(static_cast<std::size_t>(blocks), 0);
     m->stale_.assign(words, 0);
@@ -1258,12 +1259,8 @@ void OccupancyMap::knownFreeCells(const Eigen::AlignedBox3d& box, bool fixed, st
           take = true;  // never seen, or possibly occupied since last seen free
         } else if (occupied) {
           take = false;  // seen occupied: stays
-        } else if (fixed) {
-          take = !testBit(fixed_, c);  // free, to be free for good
         } else {
-          std::int64_t b, s;
-          boxesOf(c, &b, &s);
-          take = block_watched_[b] != 0;  // free where the views look for what comes
+          take = fixed && !testBit(fixed_, c);  // free, to be free for good
         }
         if (!take) continue;
         centers->push_back(centre(i, j, k));
@@ -1309,7 +1306,10 @@ void OccupancyMap::apply(const MapUpdate& update) {
 void OccupancyMap::applyOne(std::int64_t c, bool hit) {
   const bool observed = testBit(observed_, c);
   const bool was = observed && value_[c] >= threshold_;
-  setValue(c, updated(value_[c], hit ? log_hit_ : log_miss_));
+  // A stale cell seen free again is free as it was before it went stale (seen free then, often enough to be clamped):
+  // staleness is what may have come, not what a camera saw.
+  const bool restore = !hit && !stale_.empty() && testBit(stale_, c);
+  setValue(c, restore ? clamp_min_ : updated(value_[c], hit ? log_hit_ : log_miss_));
   if (!observed) {
     setBit(&observed_, c);
     ++observed_cells_;
@@ -1317,6 +1317,7 @@ void OccupancyMap::applyOne(std::int64_t c, bool hit) {
   const bool now = value_[c] >= threshold_;
   if (now != was) countSeen(c, now ? 1 : -1);
   if (!stale_.empty()) {
+    refreshFree(c);
     if (testBit(stale_, c)) {  // seen again: what the view says
       clearBit(&stale_, c);
       --stale_cells_;
@@ -1395,6 +1396,15 @@ void OccupancyMap::fillUnobserved(bool on) {
     }
   }
   const auto cells = static_cast<std::int64_t>(value_.size());
+  if (!on && !stale_.empty()) {
+    // Unknown space counts as free: what may have come into hidden space since it was seen free too (hidden space).
+    for (std::int64_t c = 0; c < cells; ++c) {
+      if (!testBit(stale_, c)) continue;
+      value_[c] = clamp_min_;
+      clearBit(&stale_, c);
+    }
+    stale_cells_ = 0;
+  }
   for (std::int64_t c = 0; c < cells; ++c) {
     if (!testBit(observed_, c)) value_[c] = on ? prior_ : unknown;
     const float v = value_[c];
@@ -1402,7 +1412,10 @@ void OccupancyMap::fillUnobserved(bool on) {
     setValue(c, v);
     if (testBit(observed_, c) && v >= threshold_) countSeen(c, 1);
   }
-  if (options_.hidden_space) updateWatched(true);
+  if (options_.hidden_space) {
+    for (std::int64_t c = 0; c < cells; ++c) refreshFree(c);
+    updateWatched(true);
+  }
 }
 
 void OccupancyMap::unobservedCells(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,

@@ -65,13 +65,17 @@ void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied,
     cameras_ = camera_frames;
   }
   static_known_free_ = true;  // the static objects may have changed
-  if (unknown_occupied_.exchange(unknown_occupied) == unknown_occupied || !map_) return;
+  const bool switched = unknown_occupied_.exchange(unknown_occupied) != unknown_occupied;
+  if (!map_) return;
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
   if (lag_) publishHeld(nullptr);  // the updates computed before the change, first (as map_ had them)
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
-    map_->setUnknownOccupied(unknown_occupied);
-    if (checked_map_) checked_map_->setUnknownOccupied(unknown_occupied);
+    for (OccupancyMap* m : {map_.get(), checked_map_.get()}) {
+      if (m == nullptr) continue;
+      if (switched) m->setUnknownOccupied(unknown_occupied);
+      m->setSpeedBound(speed_bound_);  // how fast what the cameras miss may come (hidden space)
+    }
   }
   publishStatus(last_cloud_stamp_, last_cloud_frame_);  // the unobserved count changed
 }
@@ -92,7 +96,7 @@ OctomapMonitor::~OctomapMonitor() {
 bool OctomapMonitor::init(std::string* error) {
   OccupancyMapOptions mo;
   std::string cloud_topic, joint_topic;
-  int queue = 0, startup_clouds = 0, threads = 0;
+  int queue = 0, threads = 0;
   std::string integration;
   double startup_timeout = 0.0;
   try {
@@ -107,7 +111,6 @@ bool OctomapMonitor::init(std::string* error) {
     joint_topic = requiredParam<std::string>(pnh_, "octomap/joint_states_topic", kYaml);
     queue = requiredParam<int>(pnh_, "octomap/queue_size", kYaml);
     queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
-    startup_clouds = requiredParam<int>(pnh_, "octomap/startup_clouds", kYaml);
     startup_timeout = requiredParam<double>(pnh_, "octomap/startup_timeout", kYaml);
     yaml_speed_bound_ = requiredParam<double>(pnh_, "octomap/speed_bound", kYaml);
     latency_ = requiredParam<double>(pnh_, "octomap/latency", kYaml);
@@ -152,6 +155,10 @@ bool OctomapMonitor::init(std::string* error) {
   mo.bounds = sensedMapBounds(scene_->checker().reachRadius() + scene_->checker().options().padding, max_margin_);
   const double reach = mo.bounds.max().x();
   mo.unknown_occupied = unknown_occupied_;
+  // Free space no camera sees turns possibly occupied once something at the speed bound may have come there (under
+  // unknown_occupied; the clouds of one instant are one batch: intoMaps).
+  mo.hidden_space = true;
+  mo.speed_bound = speed_bound_;
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
   if (lag_) {
@@ -209,36 +216,60 @@ bool OctomapMonitor::init(std::string* error) {
       world_speed_bound_ ? "the world file's sensing: speed_bound"
                          : "octomap/speed_bound of config/planning_scene.yaml: the world file gives none",
       max_age_, mo.unknown_occupied ? "occupied" : "free");
-  // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free).
+  // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free). A cloud
+  // of every camera the world lists (as many as it lists: one in a cell with one camera), or one cloud when it lists
+  // none; once one is in, the others get camera_wait more.
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(startup_timeout);
-  while (clouds_ < static_cast<uint32_t>(std::max(0, startup_clouds))) {
+  std::vector<std::string> unheard = unheardCameras();
+  bool listed = false;
+  {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    listed = !cameras_.empty();
+  }
+  ros::WallTime camera_deadline;
+  while (clouds_ == 0 || (!unheard.empty() && ros::WallTime::now() < camera_deadline)) {
     if (!ros::ok()) {
       *error = "shut down while waiting for the first point clouds";
       return false;
     }
-    if (ros::WallTime::now() > deadline) {
-      *error = "only " + std::to_string(clouds_.load()) + " of " + std::to_string(startup_clouds) +
-               " point clouds integrated from " + cloud_sub_.getTopic() + " after " + std::to_string(startup_timeout) +
-               " s (dropped " + std::to_string(dropped_.load()) +
+    if (clouds_ == 0 && ros::WallTime::now() > deadline) {
+      std::string why;
+      {
+        std::lock_guard<std::mutex> lock(stamps_mutex_);
+        for (const auto& d : last_drop_) why += "; " + d.first + ": " + d.second;
+      }
+      *error = "no point cloud integrated from " + cloud_sub_.getTopic() + " after " + std::to_string(startup_timeout) +
+               " s (" +
+               (listed ? "the world's cameras " +
+                             [&] {
+                               std::string s;
+                               for (const auto& u : unheard) s += (s.empty() ? "" : ", ") + u;
+                               return s;
+                             }() +
+                             " sent none"
+                       : "the world lists no camera") +
+               ", dropped " + std::to_string(dropped_.load()) + why +
                "): is a depth camera publishing there, with TF for its frame and joint states on " +
                joint_sub_.getTopic() + "?";
       return false;
     }
-    ros::WallDuration(0.01).sleep();
-  }
-  // Then every camera the world lists, for up to camera_wait more: one still unheard leaves the map blind (every check
-  // fails closed, naming it) until it is heard.
-  const ros::WallTime camera_deadline = ros::WallTime::now() + ros::WallDuration(camera_wait_);
-  std::vector<std::string> unheard = unheardCameras();
-  while (!unheard.empty() && ros::ok() && ros::WallTime::now() < camera_deadline) {
+    if (clouds_ > 0 && camera_deadline.isZero())
+      camera_deadline = ros::WallTime::now() + ros::WallDuration(camera_wait_);
     ros::WallDuration(0.01).sleep();
     unheard = unheardCameras();
   }
-  for (const auto& c : unheard) {
+  // One still unheard leaves the map blind (every check fails closed, naming it) until it is heard.
+  for (const auto& cam : unheard) {
+    std::string why;
+    {
+      std::lock_guard<std::mutex> lock(stamps_mutex_);
+      const auto it = last_drop_.find(cam);
+      if (it != last_drop_.end()) why = " (its clouds were dropped: " + it->second + ")";
+    }
     ROS_WARN(
-        "planning_scene: camera %s (in the world's cameras:) sent no cloud at start-up: the sensed map is blind "
-        "(every check fails closed) until it does",
-        c.c_str());
+        "planning_scene: camera %s (in the world's cameras:) sent no cloud within %.1f s of the first%s: the sensed "
+        "map is blind (every check fails closed) until it does",
+        cam.c_str(), camera_wait_, why.c_str());
   }
   ROS_INFO("planning_scene: %u clouds integrated at start-up, %zu occupied cells", clouds_.load(),
            map_->occupiedLeafCount());
@@ -342,25 +373,28 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   try {
     tf = tf_buffer_->lookupTransform(base, msg->header.frame_id, msg->header.stamp, ros::Duration(transform_timeout_));
   } catch (const tf2::TransformException& e) {
-    drop("cloud from '" + msg->header.frame_id + "' dropped: " + e.what());
+    drop("cloud from '" + msg->header.frame_id + "' dropped: " + e.what(), msg->header.frame_id);
     return;
   }
   const std::string bad = cloudLayoutError(*msg);  // before waiting for a joint state: a malformed cloud goes at once
   if (!bad.empty()) {
-    drop("malformed cloud from '" + msg->header.frame_id + "' dropped: " + bad);
+    drop("malformed cloud from '" + msg->header.frame_id + "' dropped: " + bad, msg->header.frame_id);
     return;
   }
   // A cloud stamped in the future (a camera's clock ahead of this one) would make the map look younger than it is.
   const double ahead = msg->header.stamp.toSec() - ros::Time::now().toSec();
   if (ahead > future_tolerance_) {
     drop("cloud from '" + msg->header.frame_id + "' dropped: stamped " + std::to_string(ahead) +
-         " s ahead of this node's clock (octomap/future_tolerance " + std::to_string(future_tolerance_) +
-         " s): synchronise the camera's clock with the robot's");
+             " s ahead of this node's clock (octomap/future_tolerance " + std::to_string(future_tolerance_) +
+             " s): synchronise the camera's clock with the robot's",
+         msg->header.frame_id);
     return;
   }
   if (!history_.around(static_cast<std::int64_t>(msg->header.stamp.toNSec()), joint_state_wait_, &configurations_)) {
-    drop("cloud dropped: no joint state stamped at or after it within " + std::to_string(joint_state_wait_) +
-         " s (cannot filter the robot's points)");
+    drop("cloud from '" + msg->header.frame_id + "' dropped: no joint state stamped at or after it within " +
+             std::to_string(joint_state_wait_) + " s on " + joint_sub_.getTopic() +
+             " (cannot filter the robot's points)",
+         msg->header.frame_id);
     return;
   }
   const auto& t = tf.transform;
@@ -380,6 +414,13 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   }
   std::string why;
   if (static_known_free_.exchange(false)) cloud_integrator_->staticObjectsChanged();
+  // The world's motions restarted (a reset teleported what moves): nothing hidden is known to be free any more.
+  if (forget_pending_.exchange(false)) map_->forgetAtNextClose();
+  // The clouds of one instant are one batch of the map's hidden space: a cloud stamped later closes the open one.
+  if (cloud_integrator_->beginView(msg->header.stamp.toSec(), &close_update_)) {
+    batch_stats_ = BatchStats();
+    intoMaps(close_update_, ros::Time(close_update_.stamp), "");
+  }
   const Integration used = cloud_integrator_->compute(view, pose, configurations_, &update_, nullptr, &why);
   // Say when a camera's clouds fall back to ray casting (and why), and when they are projected again.
   const bool fell_back = used != integration_;
@@ -395,23 +436,13 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     }
     fell_back_[msg->header.frame_id] = fell_back;
   }
-  {
-    std::lock_guard<std::mutex> lock(*scene_mutex_);
-    map_->apply(update_);
-  }
+  integrated_[msg->header.frame_id] = std::max(integrated_[msg->header.frame_id], msg->header.stamp);
+  intoMaps(update_, msg->header.stamp, msg->header.frame_id);
   ++clouds_;
-  if (lag_) {
-    bool at_once = false;
-    {
-      std::lock_guard<std::mutex> lock(pending_mutex_);
-      held_.push(static_cast<std::int64_t>(msg->header.stamp.toNSec()), msg->header.frame_id, update_);
-      at_once = std::isnan(previous_check_) || publish_at_once_ || held_.full();
-    }
-    // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would. And
-    // when no check comes for long (the shield off): the checks' map gets newer, never older, than the rule says.
-    if (at_once) publishHeld(nullptr);
-  } else {
-    markSeen(msg->header.frame_id, msg->header.stamp);
+  // The batch's last camera: close it (what no view of it saw may turn possibly occupied).
+  if (!update_.late && batchComplete(msg->header.stamp) &&
+      cloud_integrator_->closeBatch(&close_update_, &batch_stats_)) {
+    intoMaps(close_update_, msg->header.stamp, "");
   }
   last_integration_ = (ros::WallTime::now() - t0).toSec();
   last_cloud_stamp_ = msg->header.stamp;
@@ -420,7 +451,37 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   publishMarkers();
 }
 
+void OctomapMonitor::intoMaps(const MapUpdate& update, const ros::Time& stamp, const std::string& frame) {
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    map_->apply(update);
+  }
+  if (lag_) {
+    bool at_once = false;
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      held_.push(static_cast<std::int64_t>(stamp.toNSec()), frame, update);
+      at_once = std::isnan(previous_check_) || publish_at_once_ || held_.full();
+    }
+    // Before the first check (start-up), or while a check waits for every cloud: at once, as that check would. And
+    // when no check comes for long (the shield off): the checks' map gets newer, never older, than the rule says.
+    if (at_once) publishHeld(nullptr);
+  } else if (!frame.empty()) {
+    markSeen(frame, stamp);
+  }
+}
+
+bool OctomapMonitor::batchComplete(const ros::Time& stamp) {
+  std::lock_guard<std::mutex> lock(stamps_mutex_);
+  for (const auto& c : cameras_) {
+    const auto it = integrated_.find(c);
+    if (it == integrated_.end() || it->second < stamp) return false;
+  }
+  return true;
+}
+
 void OctomapMonitor::markSeen(const std::string& frame, const ros::Time& stamp) {
+  if (frame.empty()) return;  // a batch's close
   {
     std::lock_guard<std::mutex> lock(stamps_mutex_);
     ros::Time& last = frame_stamps_[frame];
@@ -490,6 +551,10 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     }
     return sensedMapAge(cameras, stamp.toSec(), epoch.toSec(), &deciding);
   };
+  if (epoch.toSec() > motion_epoch_.load()) {
+    motion_epoch_ = epoch.toSec();
+    forget_pending_ = true;
+  }
   const double wait = max_wait >= 0.0 ? std::min(stale_wait_, max_wait) : stale_wait_;
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
@@ -529,7 +594,18 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     std::lock_guard<std::mutex> pending(pending_mutex_);
     publish_at_once_ = false;
   }
-  if (marginRule().compute(map_age, duration, out, why)) return true;
+  // Under unknown_occupied, what the cameras missed since the checks' map's last batch is in it as possibly occupied
+  // (hidden space): the margin counts from that batch. The oldest camera still fails the check closed when too old.
+  double margin_age = map_age;
+  if (std::isfinite(map_age) && map_age <= max_age_ && unknown_occupied_ && speed_bound_ > 0.0) {
+    double map_time = 0.0;
+    {
+      std::lock_guard<std::mutex> scene_lock(*scene_mutex_);
+      map_time = (checked_map_ ? checked_map_ : map_)->mapTime();
+    }
+    margin_age = std::max(0.0, stamp.toSec() - map_time);
+  }
+  if (marginRule().compute(margin_age, duration, out, why)) return true;
   if (!std::isfinite(map_age)) {
     *why = none ? "no camera has been heard from: nothing is known to be free"
                 : "camera " + deciding +
@@ -575,6 +651,8 @@ bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&
     std::lock_guard<std::mutex> lock(stamps_mutex_);
     frame_stamps_.clear();  // nothing seen: blind until the cameras' next clouds
   }
+  integrated_.clear();
+  batch_stats_ = BatchStats();
   clouds_ = 0;
   update_.stats = MapUpdateStats();
   publishStatus(ros::Time(0), "");
@@ -583,8 +661,12 @@ bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&
 }
 
 /// A cloud that cannot be integrated: counted, logged (throttled) and reported in ~octomap_status.
-void OctomapMonitor::drop(const std::string& why) {
+void OctomapMonitor::drop(const std::string& why, const std::string& frame) {
   ++dropped_;
+  if (!frame.empty()) {
+    std::lock_guard<std::mutex> lock(stamps_mutex_);
+    last_drop_[frame] = why;
+  }
   ROS_WARN_THROTTLE(5.0, "planning_scene: %s", why.c_str());
   publishStatus(last_cloud_stamp_, last_cloud_frame_);
 }
@@ -598,7 +680,12 @@ void OctomapMonitor::publishStatus(const ros::Time& stamp, const std::string& se
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
     s.occupied_leaves = static_cast<uint32_t>(map_->occupiedLeafCount());
+    s.stale_cells = static_cast<uint32_t>(map_->staleCount());
+    const double t = (checked_map_ ? checked_map_ : map_)->mapTime();
+    s.map_time = std::isfinite(t) ? t : 0.0;
   }
+  s.hidden_cells = static_cast<uint32_t>(batch_stats_.hidden);
+  s.turned_stale = static_cast<uint32_t>(batch_stats_.stale);
   s.sensor_frame = sensor_frame;
   const MapUpdateStats& u = update_.stats;
   s.points = static_cast<uint32_t>(u.points);

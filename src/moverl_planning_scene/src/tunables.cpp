@@ -145,6 +145,7 @@ void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
   o->clamp_min = t.require<double>("octomap/clamp_min");
   o->clamp_max = t.require<double>("octomap/clamp_max");
   o->occupancy_threshold = t.require<double>("octomap/occupancy_threshold");
+  o->watch_time = t.require<double>("octomap/watch_time");
 }
 
 }  // namespace moverl_planning_scene

@@ -82,6 +82,12 @@ class CloudIntegrator {
   /// \brief The static objects changed (a new world, a cleared map): the next cloud turns their unobserved cells
   ///        free again (unknown_occupied). Call from the thread that calls compute.
   void staticObjectsChanged() { static_known_free_ = true; }
+  /// \brief The map's hidden space (OccupancyMapOptions::hidden_space): the next cloud is stamped `stamp` (s);
+  ///        OccupancyMap::beginView, the batch it closes vouched for as closeBatch below. True with *close to apply.
+  bool beginView(double stamp, MapUpdate* close);
+  /// \brief OccupancyMap::closeBatch, the robot's padding band in the configurations of the batch's clouds known free
+  ///        (as compute's addKnownFree: nobody stands there).
+  bool closeBatch(MapUpdate* close, BatchStats* stats = nullptr);
   /// \brief The threads that integrate a cloud (options.threads).
   int threads() const { return pool_->threads(); }
   /// \brief The intrinsics the last projective update used.
@@ -107,7 +113,10 @@ class CloudIntegrator {
   /// stands) and, once per world, into a static object's filter zone. docs/sensing.md states the blind zone this
   /// leaves.
   void addKnownFree(const std::vector<std::vector<double>>& configurations, MapUpdate* update);
-  bool static_known_free_ = true;           ///< the static objects' cells are to be turned free (next cloud)
+  bool static_known_free_ = true;  ///< the static objects' cells are to be turned free (next cloud)
+  std::vector<std::vector<double>> batch_configurations_;  ///< the configurations of the open batch's clouds
+  OccupancyMap::KnownFree batch_known_free_;               ///< the robot's band in them (closeBatch's known_free)
+  std::vector<std::uint8_t> band_mask_;
   std::vector<Eigen::AlignedBox3d> boxes_;  ///< addKnownFree's scratch
   std::vector<Eigen::Vector3d> cell_centers_, box_centers_;
   std::vector<std::uint64_t> cell_keys_, box_keys_, free_keys_;

@@ -222,7 +222,8 @@ class OccupancyMap {
   void addKnownFree(const std::vector<std::uint64_t>& keys, bool fixed, MapUpdate* out);
   /// \brief The cells whose centre lies in `box` that a region known to hold no obstacle frees or vouches for: as
   ///        unobservedCells, and, with hidden_space, also the cells possibly occupied since last seen free, and the
-  ///        free cells of watched blocks (not fixed: those of the box) or every cell not seen occupied (fixed).
+  ///        cells not seen occupied that are not yet fixed (fixed). A free cell of the robot's band is vouched for at
+  ///        the batch's close instead (closeBatch's known_free), where it would turn possibly occupied.
   void knownFreeCells(const Eigen::AlignedBox3d& box, bool fixed, std::vector<Eigen::Vector3d>* centers,
                       std::vector<std::uint64_t>* keys) const;
   /// \brief Apply an update to the map (hits, then misses).
@@ -255,16 +256,24 @@ class OccupancyMap {
   ///        has had: what a reader remembers of the cells holds while it stays the same (checkPath's culling).
   std::uint64_t revision() const { return revision_; }
 
+  /// \brief Which of the cells (centres, map frame) a caller knows hold nothing at the batch's instant (the robot's
+  ///        padding band in its configurations then): *known gets one value per centre, non-zero for those.
+  using KnownFree = std::function<void(const std::vector<Eigen::Vector3d>& centres, std::vector<std::uint8_t>* known)>;
   /// \brief hidden_space: the next view (computeUpdate*) is stamped `stamp` (s). When a batch of views stamped
-  ///        before it is open, that batch is closed first into *close (apply it, to every map, before this view's
-  ///        update) and true is returned. A view stamped before the open batch, or at or before the last closed one, is
-  ///        late (its update says so: MapUpdate::late). Off (not hidden_space): false, nothing to do.
-  bool beginView(double stamp, MapUpdate* close);
+  ///        before it is open, that batch is closed first into *close (closeBatch, with known_free) and true is
+  ///        returned: apply it, to every map, before this view's update. A view stamped before the open batch, or at
+  ///        or before the last closed one, is late (its update says so: MapUpdate::late). Off (not hidden_space):
+  ///        false, nothing to do.
+  bool beginView(double stamp, MapUpdate* close, const KnownFree* known_free = nullptr);
   /// \brief hidden_space: close the open batch into *close (apply it to every map): the free cells no view of the
-  ///        batch saw that something possibly occupied may have reached by the batch's stamp turn possibly occupied,
-  ///        then the batch's held misses go in. False (nothing to close) when no batch is open or hidden_space is off.
-  ///        Reads the map like computeUpdate (not concurrently with apply).
-  bool closeBatch(MapUpdate* close, BatchStats* stats = nullptr);
+  ///        batch saw, that known_free (optional) does not vouch for, and that something possibly occupied may have
+  ///        reached by the batch's stamp turn possibly occupied, then the batch's held misses go in. False (nothing to
+  ///        close) when no batch is open or hidden_space is off. Reads the map like computeUpdate (not concurrently
+  ///        with apply).
+  bool closeBatch(MapUpdate* close, BatchStats* stats = nullptr, const KnownFree* known_free = nullptr);
+  /// \brief hidden_space: the next batch's close finds every free cell possibly occupied (MapUpdate::forget), as after
+  ///        a gap longer than watch_time: the world's motions restarted (things moved faster than any bound).
+  void forgetAtNextClose() { forget_next_ = true; }
   /// \brief The stamp of the open batch (NaN: none).
   double batchStamp() const { return batch_stamp_; }
   /// \brief hidden_space: the stamp of the last closed batch applied (-infinity before the first): what the map knows
@@ -407,6 +416,8 @@ class OccupancyMap {
   std::uint64_t watchedBits(std::int64_t b) const { return block_watched_.empty() ? 0 : block_watched_[b]; }
   /// A cell turned possibly occupied because something may have come there since it was seen free.
   void makeStale(std::int64_t c);
+  /// block_free_'s bit of cell c, from its observed and occupied bits (hidden_space).
+  void refreshFree(std::int64_t c);
   /// The apply() part of a batch's close.
   void applyClose(const MapUpdate& update);
   /// hidden_space with a bound: the rule applies (unknown_occupied, speed bound > 0).
@@ -483,17 +494,22 @@ class OccupancyMap {
   // and for a watched cell hidden from the views, a lower bound on when something could first be in it (NaN: seen by
   // the last batch, or not watched). The misses of possibly-occupied cells held until the batch's close.
   std::vector<std::uint64_t> batch_seen_, block_watched_;
+  std::vector<std::uint64_t>
+      block_free_;  ///< per block, its free cells (observed, not occupied): the close's candidates
   std::vector<std::uint16_t> super_watched_;
   std::vector<std::uint64_t> stale_, fixed_;
   std::vector<float> free_until_;
   std::vector<std::uint64_t> held_misses_;
+  std::vector<Eigen::Vector3d> vouch_centres_;  ///< closeBatch's scratch: the would-be stale cells for known_free
+  std::vector<std::uint8_t> vouch_known_;
   std::vector<std::int64_t> grown_blocks_;  ///< blocks that gained a possibly-occupied cell since the watch was updated
   std::vector<std::uint8_t> grown_mark_;    ///< per block: listed in grown_blocks_
   int watch_blocks_ = 0;                    ///< blocks (Chebyshev) around a possibly-occupied one that are watched
   int closes_since_full_watch_ = 0;
   double batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
   double map_time_ = -std::numeric_limits<double>::infinity();
-  bool recording_ = false;  ///< this view records what it sees free for the open batch (not late)
+  bool recording_ = false;    ///< this view records what it sees free for the open batch (not late)
+  bool forget_next_ = false;  ///< forgetAtNextClose
   std::size_t stale_cells_ = 0;
   std::vector<std::int64_t> end_blocks_, end_supers_;
   /// per pixel: 1 where the depths differ from the camera's last view (level 0), and its max pyramid

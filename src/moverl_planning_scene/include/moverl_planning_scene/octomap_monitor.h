@@ -56,7 +56,10 @@ class OctomapMonitor {
   bool init(std::string* error);
 
   /// \brief The predictive margins (m) of one check whose move starts at `stamp` and lasts `duration` s (infinite:
-  ///        unknown), from the map's age at `stamp`: stamp minus the oldest of the cameras' last integrated clouds.
+  ///        unknown), from the map's age at `stamp`: under unknown_occupied, stamp minus the checks' map's time (its
+  ///        last batch of views: OccupancyMap::mapTime; what the cameras missed since is in it as possibly occupied),
+  ///        else stamp minus the oldest of the cameras' last integrated clouds. Either way the map is too old (fail
+  ///        closed) when the oldest camera's last cloud is older than octomap/max_age.
   ///        In lockstep (octomap/lockstep) it first waits for the clouds received to be integrated; then,
   ///        while that age exceeds octomap/max_age, for newer clouds: both within stale_wait (wall) s in all (in
   ///        lockstep simulated time stands still meanwhile). False with *why when the map stays too old or a margin
@@ -101,8 +104,13 @@ class OctomapMonitor {
   /// The cloud stamped `stamp` from `frame` is in the map the checks read (its age counts it).
   void markSeen(const std::string& frame, const ros::Time& stamp);
   void integrate(const sensor_msgs::PointCloud2::ConstPtr& msg);
+  /// An update of map_ (a cloud's, or a batch's close: frame ""): into map_ now, and into the checks' map now or, with
+  /// octomap/lockstep_lag, held for it. The integration thread only.
+  void intoMaps(const MapUpdate& update, const ros::Time& stamp, const std::string& frame);
+  /// Every camera the world lists has a cloud stamped `stamp` or later in map_ (none listed: true).
+  bool batchComplete(const ros::Time& stamp);
   bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
-  void drop(const std::string& why);
+  void drop(const std::string& why, const std::string& frame = "");
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
   void publishMarkers();
 
@@ -136,7 +144,12 @@ class OctomapMonitor {
   Integration integration_ = Integration::kRayCasting;  // octomap/integration (init reads it)
   std::map<std::string, bool> fell_back_;               // per camera frame: its last cloud fell back to ray casting
   std::vector<std::vector<double>> configurations_;
-  MapUpdate update_;
+  MapUpdate update_, close_update_;
+  BatchStats batch_stats_;                        // the last batch's close (integration thread)
+  std::atomic<double> motion_epoch_{0.0};         // the newest motion epoch a check named (margins)
+  std::atomic<bool> forget_pending_{false};       // it is newer than the map: the next batch forgets what it knew free
+  std::map<std::string, ros::Time> integrated_;   // per camera frame: its last cloud in map_ (sensor_mutex_)
+  std::map<std::string, std::string> last_drop_;  // per camera frame: why its last dropped cloud was (stamps_)
   double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;
   double static_filter_padding_ = 0.0, future_tolerance_ = 0.0, camera_wait_ = 0.0;
   std::atomic<bool> world_speed_bound_{false};  // the world file gave the speed bound (else octomap/speed_bound)

@@ -59,7 +59,7 @@ class YamlTunables : public Tunables {
 void readSceneTunables(const Tunables& t, PlanningSceneOptions* o);
 
 /// \brief Fill the occupancy map's tunables (octomap/resolution, max_range, prob_hit, prob_miss, clamp_min, clamp_max,
-///        occupancy_threshold). Throws std::runtime_error naming a missing key.
+///        occupancy_threshold, watch_time). Throws std::runtime_error naming a missing key.
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
 
 /// \brief The robot's options from a robot config (config/robots/<robot>.yaml: robot/joints, base_link, ee_link,

@@ -11,9 +11,11 @@ does not teleport the robot where a moving obstacle will walk into it within res
   all with the robot at rest;
 * strategy retreat: the shield backs the hand away while the visitor comes (verdict RETREATED) and no contact
   happens at all;
-* strategy retreat with the walk played three times faster than the world's bound says (motion_time_scale 3): the
-  margin no longer covers where the visitor may be between two views, and the robot is hit. The bound is the cell's
-  promise; a person faster than it is not covered.
+* strategy retreat with the walk played five times faster than the world's bound says (motion_time_scale 5, up to
+  1.57 m/s against 0.32): the margin no longer covers where the visitor may be between two views, and the robot is
+  hit. The bound is the cell's promise; a person faster than it is not covered. (Three times faster, 0.94 m/s, the
+  robot now escapes: the space the box hides from the cameras counts as possibly occupied, so it backs away sooner.
+  That is luck, not a guarantee.)
 """
 
 import numpy as np
@@ -37,7 +39,7 @@ VISITOR = {
     "observed": True,
 }
 STEPS = 120  # one period of the walk at the env's dt (0.05 s)
-GOAL = [0.3, 0.45, 0.5]  # away from the parked hand and the visitor: no episode ends on success
+GOAL = [-1.0, -1.0, 1.0]  # beyond the arm's reach (1.56 m from its shoulder): no episode ends on success
 
 
 def _world(tmp_path):
@@ -107,10 +109,10 @@ def test_a_parked_robot_backs_away_from_a_sensed_person(tmp_path, parked):
 
 
 def test_a_visitor_faster_than_the_declared_bound_is_not_covered(tmp_path, parked):
-    # The same walk played 3 times faster (up to 0.94 m/s) than the world's bound of 0.32 m/s says, as a real person
+    # The same walk played 5 times faster (up to 1.57 m/s) than the world's bound of 0.32 m/s says, as a real person
     # the world file does not describe: the margin no longer covers where the visitor may be between two views, and
     # backing away starts too late. The speed bound is the cell's promise, not something the shield can check
     # (declared as played, such a world is refused before anything starts: test_launch_args.py).
-    verdicts, moving, resting, moved = _park(tmp_path, parked, "retreat", motion_time_scale=3.0)
-    print(f"retreat, 3x faster: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f}")
+    verdicts, moving, resting, moved = _park(tmp_path, parked, "retreat", motion_time_scale=5.0)
+    print(f"retreat, 5x faster: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f}")
     assert moving + resting > 0, f"the visitor faster than the bound never reached the robot: {verdicts}"

@@ -290,11 +290,18 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             switch(True)
             self.wait_for_clouds(2)  # the cells inside the robot are turned free with each cloud
             self.assertGreater(self.status.unobserved_cells, 1000, "the map has no unseen cells")
+            # Both cameras stand in front of the robot: the pocket behind its base, seen free earlier, is hidden from
+            # both and touches space neither has seen. Under unknown_occupied something may come from there, so the
+            # pocket turns possibly occupied (stale) and may block home; the robot's own insides never do (they are
+            # turned free with every cloud, and what blocks home goes with the pocket when unknown space is free).
+            home = self.check_state(positions=HOME)
+            if home.outcome != VALID:
+                self.assertGreater(self.status.stale_cells, 0, "home blocked, not by hidden space: %s" % home.message)
+            switch(False)
             home = self.check_state(positions=HOME)
             self.assertEqual(
                 home.outcome, VALID, "home is blocked by its own cells: %s %s" % (home.message, home.pairs)
             )
-            switch(False)
             free = verdicts()  # the map as of now, with unknown cells free ...
             switch(True)
             occupied = verdicts()  # ... and with them occupied (lockstep: no cloud came in between)

@@ -311,4 +311,41 @@ void OccupancyMap::applyClose(const MapUpdate& update) {
   updateWatched(++closes_since_full_watch_ >= kFullWatchEvery);
 }
 
+void OccupancyMap::census(const Eigen::Vector3d& at, double radius, MapCensus* out) const {
+  *out = MapCensus();
+  const double r2 = radius * radius;
+  std::int64_t lo[3], hi[3];
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = std::max<std::int64_t>(0, indexOf(at[i] - radius, i));
+    hi[i] = std::min<std::int64_t>(size_[i] - 1, indexOf(at[i] + radius, i));
+    if (lo[i] > hi[i]) return;
+  }
+  for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
+      for (std::int64_t k = lo[2]; k <= hi[2]; ++k) {
+        const Eigen::Vector3d p = centre(i, j, k);
+        const Eigen::Vector3d d = p - at;
+        if (d.squaredNorm() > r2) continue;
+        ++out->cells;
+        const int octant = (d.x() >= 0 ? 1 : 0) + (d.y() >= 0 ? 2 : 0) + (d.z() >= 0 ? 4 : 0);
+        ++out->cells_by_octant[octant];
+        const std::int64_t c = cellId(i, j, k);
+        bool hidden = false;
+        if (!testBit(observed_, c)) {
+          ++out->unseen;
+          hidden = true;
+        } else if (!stale_.empty() && testBit(stale_, c)) {
+          ++out->stale;
+          hidden = true;
+        } else if (testBit(occupied_, c)) {
+          ++out->seen_occupied;
+        } else {
+          ++out->free;
+        }
+        if (hidden) ++out->hidden_by_octant[octant];
+      }
+    }
+  }
+}
+
 }  // namespace moverl_planning_scene

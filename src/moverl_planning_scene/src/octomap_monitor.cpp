@@ -185,6 +185,7 @@ bool OctomapMonitor::init(std::string* error) {
   status_pub_ = pnh_.advertise<moverl_msgs::OctomapStatus>("octomap_status", 64, /*latch=*/true);
   marker_pub_ = pnh_.advertise<visualization_msgs::Marker>("octomap_markers", 1, /*latch=*/true);
   clear_srv_ = pnh_.advertiseService("clear_octomap", &OctomapMonitor::clear, this);
+  census_srv_ = pnh_.advertiseService("sensed_census", &OctomapMonitor::census, this);
   ros::SubscribeOptions js = ros::SubscribeOptions::create<sensor_msgs::JointState>(
       joint_topic, 50, [this](const sensor_msgs::JointState::ConstPtr& m) { onJointState(m); }, ros::VoidPtr(),
       &joint_queue_);
@@ -657,6 +658,28 @@ bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&
   update_.stats = MapUpdateStats();
   publishStatus(ros::Time(0), "");
   publishMarkers();
+  return true;
+}
+
+bool OctomapMonitor::census(moverl_msgs::SensedCensus::Request& req, moverl_msgs::SensedCensus::Response& res) {
+  const double reach = scene_->checker().reachRadius() + scene_->checker().options().padding;
+  res.radius = req.radius > 0.0 && std::isfinite(req.radius) ? req.radius : reach;
+  MapCensus m;
+  {
+    std::lock_guard<std::mutex> lock(*scene_mutex_);
+    (checked_map_ ? checked_map_ : map_)->census(Eigen::Vector3d::Zero(), res.radius, &m);
+  }
+  res.success = true;
+  res.cells = static_cast<uint32_t>(m.cells);
+  res.free_cells = static_cast<uint32_t>(m.free);
+  res.seen_occupied = static_cast<uint32_t>(m.seen_occupied);
+  res.stale_cells = static_cast<uint32_t>(m.stale);
+  res.unseen_cells = static_cast<uint32_t>(m.unseen);
+  res.unknown_occupied = unknown_occupied_;
+  for (int k = 0; k < 8; ++k) {
+    res.cells_by_octant[k] = static_cast<uint32_t>(m.cells_by_octant[k]);
+    res.hidden_by_octant[k] = static_cast<uint32_t>(m.hidden_by_octant[k]);
+  }
   return true;
 }
 

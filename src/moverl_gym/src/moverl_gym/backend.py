@@ -113,6 +113,11 @@ class Backend(ABC):
     def ee_pose(self, q: np.ndarray) -> np.ndarray:
         """End-effector pose (x, y, z, qx, qy, qz, qw) at q."""
 
+    def sensed_census(self):
+        """What the sensed map holds within the robot's reach (moverl_gym.sensed.SensedCensus), or None when there is
+        no sensed map. Not for the hot path: a call to the planning scene."""
+        return None
+
     @abstractmethod
     def restart(self) -> None:
         """Tear a failed backend down and start it again; only called when `restartable`."""

@@ -430,7 +430,7 @@ class MoveRLReachEnv(gym.Env):
                 return self._backend.ee_pose(q)[:3]
         raise MoveRLError(
             f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
-            f"random samples of world '{self.world_name}'"
+            f"random samples of world '{self.world_name}'{self._unseen_reason()}"
         )
 
     def _sample_start(self, near_home: bool = True) -> np.ndarray:
@@ -451,7 +451,16 @@ class MoveRLReachEnv(gym.Env):
         raise MoveRLError(
             f"no collision-free start configuration found in {self.config.start_sampling_attempts} random samples "
             f"{'near home nor as many ' if len(ranges) > 1 else ''}over the joint range of world '{self.world_name}'"
+            f"{self._unseen_reason()}"
         )
+
+    def _unseen_reason(self) -> str:
+        """': <how much of the reach no camera sees, where, and the tool that shows it>' when the sensed map's
+        unseen space may be why nothing is free ('' otherwise)."""
+        from .sensed import describe_unseen
+
+        text = describe_unseen(self._backend.sensed_census(), self.world_name)
+        return f": {text}" if text else ""
 
     def step(self, action):
         if self.q is None or self._failure is not None:

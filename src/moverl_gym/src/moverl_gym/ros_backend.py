@@ -36,6 +36,7 @@ SCENE_CHECK = "/planning_scene/check_state"
 #: s a state check waits for a sensed map fresh enough to answer (check_state's MAP_STALE) before the env raises.
 STALE_MAP_WAIT = 10.0
 SCENE_FK = "/planning_scene/fk"
+SCENE_CENSUS = "/planning_scene/sensed_census"  # only when the scene senses obstacles
 SCENE_WORLD = "/planning_scene/get_world"  # the world as its source (simulator or world server) describes it
 REQUIRED_SERVICES = (SHIELD_STEP, SHIELD_RESET, SCENE_CHECK, SCENE_FK, SCENE_WORLD)
 
@@ -443,6 +444,39 @@ class RosBackend(Backend):
                     f"the planning scene's sensed map stayed too old for {STALE_MAP_WAIT} s: {res.message}"
                 )
             time.sleep(0.05)
+
+    def sensed_census(self):
+        import rosservice
+
+        from moverl_msgs.srv import SensedCensus
+
+        from .sensed import SensedCensus as Census
+
+        try:
+            if SCENE_CENSUS not in rosservice.get_service_list():
+                return None  # the scene senses no obstacles
+        except rosservice.ROSServiceIOException:
+            return None
+        proxy = _Proxy(SCENE_CENSUS, SensedCensus, self._watchdog, self._check.timeout)
+        try:
+            r = proxy(SensedCensus._request_class(radius=0.0))
+        except MoveRLError:
+            return None
+        finally:
+            proxy.close()
+        if not r.success:
+            return None
+        return Census(
+            radius=r.radius,
+            cells=r.cells,
+            free=r.free_cells,
+            seen_occupied=r.seen_occupied,
+            stale=r.stale_cells,
+            unseen=r.unseen_cells,
+            unknown_occupied=r.unknown_occupied,
+            cells_by_octant=tuple(r.cells_by_octant),
+            hidden_by_octant=tuple(r.hidden_by_octant),
+        )
 
     def ee_pose(self, q: np.ndarray) -> np.ndarray:
         fk = self._fk(self._srv["fk"](positions=[float(x) for x in q], links=[]))

@@ -173,6 +173,19 @@ struct MapUpdate {
   MapUpdateStats stats;
 };
 
+/// \brief What the map holds within a ball (OccupancyMap::census).
+struct MapCensus {
+  std::size_t cells = 0;          ///< cells whose centre lies in the ball
+  std::size_t free = 0;           ///< seen free (or known free)
+  std::size_t seen_occupied = 0;  ///< seen occupied
+  std::size_t stale = 0;          ///< seen free once, possibly occupied since (hidden_space)
+  std::size_t unseen = 0;         ///< never observed
+  /// Per octant around the ball's centre (index (x >= cx) + 2 (y >= cy) + 4 (z >= cz)): its cells, and of those the
+  /// unseen and stale ones.
+  std::size_t cells_by_octant[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  std::size_t hidden_by_octant[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+};
+
 /// \brief What a batch's close found (closeBatch, hidden_space).
 struct BatchStats {
   std::size_t watched_blocks = 0;  ///< blocks whose free cells the views looked at
@@ -285,6 +298,9 @@ class OccupancyMap {
   std::size_t staleCount() const { return stale_cells_; }
   /// \brief True when the cell containing p is such a cell.
   bool stale(const Eigen::Vector3d& p) const;
+  /// \brief What the cells whose centre lies within `radius` of `at` (map frame) hold: free, seen occupied,
+  ///        stale, never observed, and where the latter two lie. Reads the map like the checks.
+  void census(const Eigen::Vector3d& at, double radius, MapCensus* out) const;
 
   /// \brief What anyOccupied asks of a box (map frame) that holds occupied cells: does the box meet the caller's shape?
   using BoxTest = std::function<bool(const Eigen::AlignedBox3d& box)>;

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include <moverl_msgs/OctomapStatus.h>
+#include <moverl_msgs/SensedCensus.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <sensor_msgs/JointState.h>
@@ -110,6 +111,8 @@ class OctomapMonitor {
   /// Every camera the world lists has a cloud stamped `stamp` or later in map_ (none listed: true).
   bool batchComplete(const ros::Time& stamp);
   bool clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&);
+  /// ~sensed_census: what the checks' map holds within the robot's reach (SensedCensus.srv).
+  bool census(moverl_msgs::SensedCensus::Request& req, moverl_msgs::SensedCensus::Response& res);
   void drop(const std::string& why, const std::string& frame = "");
   void publishStatus(const ros::Time& stamp, const std::string& sensor_frame);
   void publishMarkers();
@@ -137,7 +140,7 @@ class OctomapMonitor {
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   ros::Subscriber joint_sub_, cloud_sub_;
   ros::Publisher status_pub_, marker_pub_;
-  ros::ServiceServer clear_srv_;
+  ros::ServiceServer clear_srv_, census_srv_;
   std::vector<std::string> joints_;
   JointStateHistory history_{400};
   std::unique_ptr<CloudIntegrator> cloud_integrator_;

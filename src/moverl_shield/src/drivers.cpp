@@ -162,8 +162,8 @@ MoveResult SimServiceDriver::execute(const TimedTrajectory& trajectory, double) 
   return out;
 }
 
-bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after, std::string* error,
-                                bool* unreachable) {
+bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after, Nanos* motion_epoch,
+                                std::string* error, bool* unreachable) {
   moverl_msgs::ResetRobot srv;
   srv.request.positions = q;
   srv.request.not_after = wallSeconds() + options_.result_margin;
@@ -181,6 +181,7 @@ bool SimServiceDriver::teleport(const std::vector<double>& q, RobotState* after,
   std::lock_guard<std::mutex> lock(mutex_);
   if (!adopt(srv.response.state, error)) return false;
   *after = state_;
+  *motion_epoch = static_cast<Nanos>(srv.response.motion_epoch.toNSec());  // the simulator's: restarted or not
   return true;
 }
 

@@ -60,7 +60,8 @@ class SimServiceDriver : public RosDriver {
   bool sensesContacts() const override { return true; }
   bool currentState(RobotState* state, std::string* error) override;
   MoveResult execute(const TimedTrajectory& trajectory, double start) override;
-  bool teleport(const std::vector<double>& q, RobotState* after, std::string* error, bool* unreachable) override;
+  bool teleport(const std::vector<double>& q, RobotState* after, Nanos* motion_epoch, std::string* error,
+                bool* unreachable) override;
 
  private:
   bool adopt(const sensor_msgs::JointState& msg, std::string* error);
@@ -93,7 +94,7 @@ class FollowJointTrajectoryDriver : public RosDriver {
   bool sensesContacts() const override { return false; }
   bool currentState(RobotState* state, std::string* error) override;
   MoveResult execute(const TimedTrajectory& trajectory, double start) override;
-  bool teleport(const std::vector<double>&, RobotState*, std::string* error, bool*) override {
+  bool teleport(const std::vector<double>&, RobotState*, Nanos*, std::string* error, bool*) override {
     *error = "a FollowJointTrajectory driver cannot teleport";
     return false;
   }

@@ -320,11 +320,12 @@ void Shield::reset(const ResetRequest& req, ResetResult* res) {
   }
   if (driver_->canTeleport()) {
     RobotState after;
-    if (!driver_->teleport(req.positions, &after, &error, &res->unreachable)) {
+    Nanos epoch = 0;
+    if (!driver_->teleport(req.positions, &after, &epoch, &error, &res->unreachable)) {
       res->message = error;
       return;
     }
-    motion_epoch_ = after.stamp;  // the simulator restarted the obstacles' motions at this stamp
+    motion_epoch_ = epoch;  // the simulator's: the teleport's stamp where it restarted the obstacles' motions
     epoch_known_ = true;
     adopt(after);
     res->success = true;

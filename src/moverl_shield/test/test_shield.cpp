@@ -90,7 +90,8 @@ class FakeDriver : public Driver {
     if (r.contacts.available) r.contacts.stamp = state.stamp;
     return r;
   }
-  bool teleport(const std::vector<double>& q, RobotState* after, std::string* error, bool* unreachable) override {
+  bool teleport(const std::vector<double>& q, RobotState* after, Nanos* motion_epoch, std::string* error,
+                bool* unreachable) override {
     teleports.push_back(q);
     if (!teleport_error.empty()) {
       *error = teleport_error;
@@ -101,11 +102,15 @@ class FakeDriver : public Driver {
     sim_time_ += 1000;
     state.stamp = sim_time_;
     *after = state;
+    if (restarts_motions) epoch_ = state.stamp;
+    *motion_epoch = epoch_;
     return true;
   }
   void setPathTolerance(const std::vector<double>& t) override { tolerance = t; }
 
   bool real_time = false, can_teleport = true, senses_contacts = true;
+  bool restarts_motions = true;  // a teleport restarts the obstacles' motions (not with sensed obstacles)
+  Nanos epoch_ = 0;              // when their motion time was 0
   RobotState state{kStart, {}, 5'000'000'000};
   std::vector<double> measured;          // reported as RobotState::measured when set
   std::deque<std::string> state_errors;  // "" = a good read, else that error
@@ -626,6 +631,18 @@ TEST_F(ShieldTest, MeasuredStateBeyondALimitIsChecked) {
 }
 
 // ------------------------------------------------------------------------------------------------------- reset
+
+TEST_F(ShieldTest, ATeleportThatDoesNotRestartTheMotionsKeepsTheirEpoch) {
+  // With sensed obstacles the simulator teleports the robot but leaves the walk where it is (a person does not jump
+  // back under the cameras' eyes): the motions' epoch is the simulator's, not the teleport's stamp.
+  make();
+  driver.restarts_motions = false;
+  driver.epoch_ = 1'000'000'000;
+  ResetResult r = reset({0.1, 0.2, 0.3});
+  EXPECT_TRUE(r.success) << r.message;
+  EXPECT_EQ(r.motion_epoch, 1'000'000'000);
+  EXPECT_NE(r.motion_epoch, driver.state.stamp);
+}
 
 TEST_F(ShieldTest, ResetTeleportsWhenTheDriverCan) {
   make();

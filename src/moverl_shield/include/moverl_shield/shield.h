@@ -92,10 +92,13 @@ class Driver {
   /// \brief Execute a timed trajectory whose first point is the current state, starting at `start` (driver clock, s;
   ///        ignored by lockstep drivers). Blocks until it ended, failed or passed its deadline (then it is cancelled).
   virtual MoveResult execute(const TimedTrajectory& trajectory, double start) = 0;
-  /// \brief Teleport (canTeleport() only): *after is the state there, whose stamp is when the obstacles' motions
-  ///        restarted. False with *error when the driver is unreachable or refused; *unreachable = true when it
-  ///        refused the target itself (it touches an obstacle where the motions restart: try another).
-  virtual bool teleport(const std::vector<double>& q, RobotState* after, std::string* error, bool* unreachable) = 0;
+  /// \brief Teleport (canTeleport() only): *after is the state there; *motion_epoch when the obstacles' motion time is
+  ///        0 from now on (the teleport's stamp when it restarted their motions; unchanged when it did not: with
+  ///        sensed obstacles a person does not jump back to the start of its walk). False with *error when the driver
+  ///        is unreachable or refused; *unreachable = true when it refused the target itself (it touches an obstacle
+  ///        where the motions restart: try another).
+  virtual bool teleport(const std::vector<double>& q, RobotState* after, Nanos* motion_epoch, std::string* error,
+                        bool* unreachable) = 0;
   /// \brief Path (and goal position) tolerance per controlled joint sent with every move from now on.
   virtual void setPathTolerance(const std::vector<double>& tolerance) = 0;
 };

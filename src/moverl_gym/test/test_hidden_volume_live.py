@@ -67,6 +67,8 @@ class Script:
         from moverl_msgs.srv import GetWorld
 
         self.env, self.inner = env, env.unwrapped
+        # The motions' epoch from the simulator: in the sensed modes a reset does not restart them, and the env's own
+        # epoch (the last reset's stamp, which the shield reports) is not theirs.
         self.epoch = rospy.ServiceProxy("/sim/get_world", GetWorld)().world.motion_epoch.to_sec()
         self.verdicts = {}  # phase -> {verdict: count}
         self.moving = self.resting = 0  # contact pairs while the robot moved / rested, summed over the steps

@@ -9,7 +9,7 @@ policy does (full-speed steps towards each pose, every one checked by the shield
 1. REVEAL (the episode starts there): the left camera sees the pocket beside the robot's base whole: it is seen free;
 2. HIDE: joint 1 turns the arm to the robot's left; the wrist now hides the pocket from the left camera, the upper arm
    from the right one. The robot holds there while the hand (at most 0.126 m/s) comes in from behind, seen on its
-   way, and stops in the pocket, hidden from both cameras (from motion time 4.1 s; ENTERED);
+   way, and stops in the pocket, hidden from both cameras from motion time 4.1 s (the robot holds until ENTERED);
 3. INTO: joint 2 forward and the elbow folded bring the wrist and the hand down through the pocket;
 4. if the robot did not get there (the move refused, or the robot backed away): back to REVEAL, where the cameras see
    the pocket again, and INTO once more.

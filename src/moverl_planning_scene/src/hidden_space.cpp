@@ -207,7 +207,6 @@ void OccupancyMap::makeStale(std::int64_t c) {
     setBit(&stale_, c);
     ++stale_cells_;
   }
-  free_until_[c] = std::numeric_limits<float>::quiet_NaN();
   refreshFree(c);
 }
 

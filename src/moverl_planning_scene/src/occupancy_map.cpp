@@ -1306,6 +1306,7 @@ void OccupancyMap::apply(const MapUpdate& update) {
 void OccupancyMap::applyOne(std::int64_t c, bool hit) {
   const bool observed = testBit(observed_, c);
   const bool was = observed && value_[c] >= threshold_;
+  const bool was_occupied = testBit(occupied_, c);
   // A stale cell seen free again is free as it was before it went stale (seen free then, often enough to be clamped):
   // staleness is what may have come, not what a camera saw.
   const bool restore = !hit && !stale_.empty() && testBit(stale_, c);
@@ -1317,12 +1318,11 @@ void OccupancyMap::applyOne(std::int64_t c, bool hit) {
   const bool now = value_[c] >= threshold_;
   if (now != was) countSeen(c, now ? 1 : -1);
   if (!stale_.empty()) {
-    refreshFree(c);
+    if (!observed || was_occupied != testBit(occupied_, c)) refreshFree(c);
     if (testBit(stale_, c)) {  // seen again: what the view says
       clearBit(&stale_, c);
       --stale_cells_;
     }
-    free_until_[c] = std::numeric_limits<float>::quiet_NaN();
   }
 }
 

@@ -35,22 +35,78 @@ constexpr std::uint64_t kAllCells = ~std::uint64_t{0};
 constexpr int kFullWatchEvery = 32;
 /// The cell-by-cell search for the nearest possibly-occupied cell goes this far (Chebyshev, cells); beyond, blocks.
 constexpr int kCellSearch = 4;
+/// watchMask's widest watch (cells): its window of rows is 4 + 2 L cells along each axis, up to 64.
+constexpr int kMaskCells = 30;
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
 
 }  // namespace
 
+int OccupancyMap::blocksWithin(double seconds) const {
+  // Blocks b apart (Chebyshev) hold cells (b - 1) x 4 cells apart at least: a possibly-occupied cell can reach a cell
+  // of a block b away within `seconds` only when (b - 1) x the block's edge < speed_bound x seconds.
+  const double block = options_.resolution * (1 << kBlockShift);
+  const double most = static_cast<double>(std::max(blocks_[0], std::max(blocks_[1], blocks_[2])));
+  return static_cast<int>(std::min(most, std::floor(options_.speed_bound * std::max(0.0, seconds) / block) + 1.0));
+}
+
+int OccupancyMap::cellsWithin(double seconds) const {
+  // Cells L apart (Chebyshev, in grid indices) are (L - 1) x resolution apart at least: something at the speed bound
+  // can come from one to the other within `seconds` only when that is less than speed_bound x seconds.
+  const double most = static_cast<double>(std::max(size_[0], std::max(size_[1], size_[2])));
+  return static_cast<int>(
+      std::min(most, std::floor(options_.speed_bound * std::max(0.0, seconds) / options_.resolution) + 1.0));
+}
+
 void OccupancyMap::setSpeedBound(double speed_bound) {
   options_.speed_bound = std::isfinite(speed_bound) ? std::max(0.0, speed_bound) : 0.0;
   if (!options_.hidden_space) return;
-  // A block is watched when a possibly-occupied cell lies within speed_bound x watch_time of one of its cells: blocks
-  // b apart (Chebyshev) have cells (b - 1) x 4 cells apart at least.
-  const double reach = options_.speed_bound * options_.watch_time;
-  const double block = options_.resolution * (1 << kBlockShift);
-  const double most = static_cast<double>(std::max(blocks_[0], std::max(blocks_[1], blocks_[2])));
-  watch_blocks_ = options_.speed_bound > 0.0 ? static_cast<int>(std::min(most, std::floor(reach / block) + 1.0)) : -1;
+  // Until batches come, watch as far as watch_time lets something come; then as far as the batches' interval does.
+  std::fill(intervals_, intervals_ + kIntervals, 0.0);
+  watch_cells_ = options_.speed_bound > 0.0 ? cellsWithin(options_.watch_time) : -1;
   updateWatched(true);
+}
+
+void OccupancyMap::dilateBlocks(int m, std::vector<std::uint8_t>* out) const {
+  // Chebyshev dilation by m of the blocks holding a possibly-occupied cell, with the grid's outside holding some:
+  // separable (x, then y, then z), over block coordinates; *out per block index.
+  const std::int64_t X = blocks_[0], Y = blocks_[1], Z = blocks_[2];
+  auto lin = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return (x * Y + y) * Z + z; };
+  std::vector<std::uint8_t> a(static_cast<std::size_t>(X * Y * Z), 0), t(a.size(), 0);
+  for (std::int64_t x = 0; x < X; ++x) {
+    for (std::int64_t y = 0; y < Y; ++y) {
+      for (std::int64_t z = 0; z < Z; ++z) {
+        const bool edge = x < m || y < m || z < m || x >= X - m || y >= Y - m || z >= Z - m;
+        a[lin(x, y, z)] = edge || block_count_[blockIndex(x, y, z)] != 0 ? 1 : 0;
+      }
+    }
+  }
+  auto pass = [&](const std::vector<std::uint8_t>& in, std::vector<std::uint8_t>* o, int axis) {
+    const std::int64_t n[3] = {X, Y, Z};
+    std::int64_t at[3];
+    for (at[0] = 0; at[0] < X; ++at[0]) {
+      for (at[1] = 0; at[1] < Y; ++at[1]) {
+        for (at[2] = 0; at[2] < Z; ++at[2]) {
+          std::uint8_t any = 0;
+          std::int64_t q[3] = {at[0], at[1], at[2]};
+          const std::int64_t lo = std::max<std::int64_t>(0, at[axis] - m);
+          const std::int64_t hi = std::min<std::int64_t>(n[axis] - 1, at[axis] + m);
+          for (q[axis] = lo; q[axis] <= hi && !any; ++q[axis]) any = in[lin(q[0], q[1], q[2])];
+          (*o)[lin(at[0], at[1], at[2])] = any;
+        }
+      }
+    }
+  };
+  pass(a, &t, 0);
+  pass(t, &a, 1);
+  pass(a, &t, 2);
+  out->assign(block_watched_.size(), 0);
+  std::int64_t at[3];
+  for (std::int64_t b = 0; b < static_cast<std::int64_t>(out->size()); ++b) {
+    blockCoords(b, at);
+    if (at[0] < X && at[1] < Y && at[2] < Z) (*out)[b] = t[lin(at[0], at[1], at[2])];
+  }
 }
 
 void OccupancyMap::blockCoords(std::int64_t b, std::int64_t* at) const {
@@ -67,74 +123,238 @@ std::int64_t OccupancyMap::blockFirstCell(const std::int64_t* block_at) const {
   return cellId(block_at[0] << kBlockShift, block_at[1] << kBlockShift, block_at[2] << kBlockShift);
 }
 
-void OccupancyMap::setWatched(std::int64_t b, bool on) {
-  if ((block_watched_[b] != 0) == on) return;
-  block_watched_[b] = on ? kAllCells : 0;
+void OccupancyMap::setWatched(std::int64_t b, std::uint64_t mask) {
+  const std::uint64_t old = block_watched_[b];
+  if (old == mask) return;
+  block_watched_[b] = mask;
+  // A cell that comes into the watch was farther than the watch from every possibly-occupied cell when it was last
+  // made (unless it turned free since): nothing could be in it before that time plus the watch's distance over the
+  // speed bound. It carries that bound, so that something in hidden space advances at the bound, not a cell a batch.
+  const std::uint64_t carried = mask & ~old & ~turned_free_[b];
+  if (carried != 0 && std::isfinite(watch_made_at_) && options_.speed_bound > 0.0) {
+    const double bound = watch_made_at_ + watch_made_cells_ * options_.resolution / options_.speed_bound;
+    std::int64_t at[3];
+    blockCoords(b, at);
+    const std::int64_t k0 = blockFirstCell(at);
+    for (std::uint64_t bits = carried; bits != 0; bits &= bits - 1) {
+      float& kept = free_until_[static_cast<std::size_t>(k0 + cell_offset_[__builtin_ctzll(bits)])];
+      if (std::isnan(kept) || kept < bound) kept = static_cast<float>(bound);
+    }
+  }
   const std::int64_t s = b >> (3 * kSubShift);
-  super_watched_[s] = static_cast<std::uint16_t>(super_watched_[s] + (on ? 1 : -1));
-  // A view that did not look at the block's clamped cells must not be repeated for them.
-  if (on) block_dirtied_[b] = super_dirtied_[s] = epoch_;
+  if ((old != 0) != (mask != 0))
+    super_watched_[s] = static_cast<std::uint16_t>(super_watched_[s] + (mask != 0 ? 1 : -1));
+  // A view that did not look at a newly watched cell must not be repeated for it.
+  if ((mask & ~old) != 0) block_dirtied_[b] = super_dirtied_[s] = epoch_;
+}
+
+std::uint64_t OccupancyMap::watchMask(const std::int64_t* block_at, int L) const {
+  // The block's free cells within L (Chebyshev, cells) of a possibly-occupied one or of the grid's edge: the rows
+  // along z of the window the block's cells look into, each dilated along z, then along y and x (4 bits a row).
+  const std::int64_t b = blockIndex(block_at[0], block_at[1], block_at[2]);
+  if (block_free_[b] == 0) return 0;
+  if (L > kMaskCells) return block_free_[b];  // a watch this wide looks at every free cell
+  const int W = (1 << kBlockShift) + 2 * L;
+  const std::int64_t i0 = (block_at[0] << kBlockShift) - L, j0 = (block_at[1] << kBlockShift) - L;
+  const std::int64_t k0 = (block_at[2] << kBlockShift) - L;
+  const std::uint64_t span = (std::uint64_t{1} << (2 * L + 1)) - 1;  // a cell's 2L + 1 along z
+  // row[x][y]: which of the block's 4 z-cells have a possibly-occupied cell within L along z at (i0 + x, j0 + y).
+  std::uint8_t rows[64][64];
+  for (int x = 0; x < W; ++x) {
+    const std::int64_t i = i0 + x;
+    for (int y = 0; y < W; ++y) {
+      const std::int64_t j = j0 + y;
+      std::uint64_t bits;  // the window's W cells along z, bit 0 at k0
+      if (i < 0 || j < 0 || i >= size_[0] || j >= size_[1]) {
+        bits = ~std::uint64_t{0};
+      } else {
+        bits = 0;
+        const std::int64_t ka = std::max<std::int64_t>(0, k0), kb = std::min<std::int64_t>(size_[2] - 1, k0 + W - 1);
+        if (ka > 0 || kb < k0 + W - 1) {  // beyond the grid along z counts
+          for (int k = 0; k < W; ++k) {
+            if (k0 + k < 0 || k0 + k >= size_[2]) bits |= std::uint64_t{1} << k;
+          }
+        }
+        const std::int64_t first = cellId(i, j, ka), last = cellId(i, j, kb);
+        std::uint64_t got = 0;
+        for (std::int64_t w = first >> 6, shift = 0; w <= last >> 6; ++w) {
+          std::uint64_t word = occupied_[static_cast<std::size_t>(w)];
+          if (w == first >> 6) {
+            word >>= (first & 63);
+            got |= word;
+            shift = 64 - (first & 63);
+          } else {
+            if (shift < 64) got |= word << shift;
+            shift += 64;
+          }
+        }
+        const int n = static_cast<int>(kb - ka + 1);
+        if (n < 64) got &= (std::uint64_t{1} << n) - 1;
+        bits |= got << (ka - k0);
+      }
+      std::uint8_t r = 0;
+      for (int z = 0; z < (1 << kBlockShift); ++z) {
+        if (((bits >> z) & span) != 0) r |= static_cast<std::uint8_t>(1u << z);  // window cells [z, z + 2L]
+      }
+      rows[x][y] = r;
+    }
+  }
+  std::uint64_t mask = 0;
+  constexpr int e = 1 << kBlockShift;
+  for (int cx = 0; cx < e; ++cx) {
+    for (int cy = 0; cy < e; ++cy) {
+      std::uint8_t r = 0;
+      for (int x = cx; x <= cx + 2 * L; ++x) {
+        for (int y = cy; y <= cy + 2 * L; ++y) r |= rows[x][y];
+      }
+      mask |= static_cast<std::uint64_t>(r) << ((cx << kBlockShift | cy) << kBlockShift);
+    }
+  }
+  return mask & block_free_[b];
+}
+
+void OccupancyMap::watchAll(int L) {
+  // Every cell within L (Chebyshev) of a possibly-occupied cell or of the grid's edge, as a bit set in cell order:
+  // occupied_ dilated by L along z, then y, then x, each a shift of the whole set (a row's, a plane's stride). A shift
+  // carries bits across a row's (plane's) end only into cells within L of the grid's edge, which are set anyway.
+  const std::size_t n = occupied_.size();
+  // out = in | in shifted by +-stride x s cells, for every s in 1..r (one pass of a doubling dilation).
+  auto dilate = [&](std::vector<std::uint64_t>* set, std::vector<std::uint64_t>* tmp, std::int64_t stride, int r) {
+    std::vector<std::uint64_t>& in = *set;
+    tmp->assign(in.begin(), in.end());
+    std::vector<std::uint64_t>& out = *tmp;
+    for (int s = 1; s <= r; ++s) {
+      const std::int64_t bits = stride * s, words = bits >> 6;
+      const int o = static_cast<int>(bits & 63);
+      const auto nn = static_cast<std::int64_t>(n);
+      for (std::int64_t w = 0; w < nn; ++w) {
+        std::uint64_t v = 0;
+        const std::int64_t lo = w - words, hi = w + words;
+        if (lo >= 0) v |= o == 0 ? in[lo] : (in[lo] << o) | (lo >= 1 ? in[lo - 1] >> (64 - o) : 0);
+        if (hi < nn) v |= o == 0 ? in[hi] : (in[hi] >> o) | (hi + 1 < nn ? in[hi + 1] << (64 - o) : 0);
+        out[w] |= v;
+      }
+    }
+    set->swap(*tmp);
+  };
+  // Chebyshev dilation by L along one axis as passes of radius 1, 2, ... (radii add up): fewer shifts than L.
+  auto along = [&](std::vector<std::uint64_t>* set, std::vector<std::uint64_t>* tmp, std::int64_t stride) {
+    for (int done = 0; done < L;) {
+      const int r = std::min(done + 1, L - done);
+      dilate(set, tmp, stride, r);
+      done += r;
+    }
+  };
+  std::vector<std::uint64_t>& a = watch_scratch_a_;
+  std::vector<std::uint64_t>& b = watch_scratch_b_;
+  a.assign(occupied_.begin(), occupied_.end());
+  along(&a, &b, 1);
+  along(&a, &b, size_[2]);
+  along(&a, &b, size_[1] * size_[2]);
+  // The cells within L of the grid's edge, word by word.
+  auto set_range = [&](std::int64_t first, std::int64_t last) {  // cells [first, last]
+    for (std::int64_t w = first >> 6; w <= last >> 6; ++w) {
+      std::uint64_t bits = ~std::uint64_t{0};
+      if (w == first >> 6) bits &= ~std::uint64_t{0} << (first & 63);
+      if (w == last >> 6) bits &= ~std::uint64_t{0} >> (63 - (last & 63));
+      a[static_cast<std::size_t>(w)] |= bits;
+    }
+  };
+  const std::int64_t l = std::min<std::int64_t>(L, std::max(size_[0], std::max(size_[1], size_[2])));
+  for (std::int64_t i = 0; i < size_[0]; ++i) {
+    if (i < l || i >= size_[0] - l) {
+      set_range(cellId(i, 0, 0), cellId(i, size_[1] - 1, size_[2] - 1));
+      continue;
+    }
+    for (std::int64_t j = 0; j < size_[1]; ++j) {
+      const std::int64_t row = cellId(i, j, 0);
+      if (j < l || j >= size_[1] - l) {
+        set_range(row, row + size_[2] - 1);
+      } else {
+        set_range(row, row + std::min<std::int64_t>(l, size_[2]) - 1);
+        set_range(row + std::max<std::int64_t>(0, size_[2] - l), row + size_[2] - 1);
+      }
+    }
+  }
+  // Each block's mask: its 16 rows of 4 cells, of the free ones.
+  const std::int64_t nb = static_cast<std::int64_t>(block_watched_.size());
+  constexpr int e = 1 << kBlockShift;
+  std::int64_t at[3];
+  for (std::int64_t bi = 0; bi < nb; ++bi) {
+    if (block_free_[bi] == 0) {
+      setWatched(bi, 0);
+      continue;
+    }
+    blockCoords(bi, at);
+    std::uint64_t mask = 0;
+    for (int cx = 0; cx < e; ++cx) {
+      const std::int64_t i = (at[0] << kBlockShift) + cx;
+      if (i >= size_[0]) break;
+      for (int cy = 0; cy < e; ++cy) {
+        const std::int64_t j = (at[1] << kBlockShift) + cy;
+        if (j >= size_[1]) break;
+        const std::int64_t k = at[2] << kBlockShift, first = cellId(i, j, k);
+        const int w = static_cast<int>(first >> 6), o = static_cast<int>(first & 63);
+        std::uint64_t bits = a[static_cast<std::size_t>(w)] >> o;
+        if (o > 64 - e && static_cast<std::size_t>(w + 1) < n) bits |= a[static_cast<std::size_t>(w + 1)] << (64 - o);
+        mask |= (bits & ((1u << e) - 1)) << ((cx << kBlockShift | cy) << kBlockShift);
+      }
+    }
+    setWatched(bi, mask & block_free_[bi]);
+  }
 }
 
 void OccupancyMap::updateWatched(bool full) {
   if (block_watched_.empty()) return;
-  const bool active = hiddenSpaceActive() && watch_blocks_ >= 0;
+  if (!options_.integrates) {  // no views look at this map's cells
+    for (std::int64_t b : grown_blocks_) grown_mark_[b] = 0;
+    grown_blocks_.clear();
+    return;
+  }
+  struct Made {  // what the watch is as of now, once it is made
+    OccupancyMap* map;
+    ~Made() {
+      map->watch_made_at_ = map->map_time_;
+      map->watch_made_cells_ = map->watch_cells_;
+      std::fill(map->turned_free_.begin(), map->turned_free_.end(), 0);
+    }
+  } made{this};
+  const bool active = hiddenSpaceActive() && watch_cells_ >= 0;
   const std::int64_t nb = static_cast<std::int64_t>(block_watched_.size());
-  auto inside = [&](const std::int64_t* at) { return at[0] < blocks_[0] && at[1] < blocks_[1] && at[2] < blocks_[2]; };
+  std::int64_t at[3];
   if (!active) {
-    for (std::int64_t b = 0; b < nb; ++b) setWatched(b, false);
-  } else if (full) {
-    // Chebyshev dilation by watch_blocks_ of the blocks holding a possibly-occupied cell, with the grid's outside
-    // holding some: separable (x, then y, then z), over block coordinates.
-    const std::int64_t X = blocks_[0], Y = blocks_[1], Z = blocks_[2], m = watch_blocks_;
-    auto lin = [&](std::int64_t x, std::int64_t y, std::int64_t z) { return (x * Y + y) * Z + z; };
-    std::vector<std::uint8_t> a(static_cast<std::size_t>(X * Y * Z), 0), t(a.size(), 0);
-    for (std::int64_t x = 0; x < X; ++x) {
-      for (std::int64_t y = 0; y < Y; ++y) {
-        for (std::int64_t z = 0; z < Z; ++z) {
-          const bool edge = x < m || y < m || z < m || x >= X - m || y >= Y - m || z >= Z - m;
-          a[lin(x, y, z)] = edge || block_count_[blockIndex(x, y, z)] != 0 ? 1 : 0;
-        }
-      }
-    }
-    auto pass = [&](const std::vector<std::uint8_t>& in, std::vector<std::uint8_t>* out, int axis) {
-      const std::int64_t n[3] = {X, Y, Z};
-      std::int64_t at[3];
-      for (at[0] = 0; at[0] < X; ++at[0]) {
-        for (at[1] = 0; at[1] < Y; ++at[1]) {
-          for (at[2] = 0; at[2] < Z; ++at[2]) {
-            std::uint8_t any = 0;
-            std::int64_t q[3] = {at[0], at[1], at[2]};
-            const std::int64_t lo = std::max<std::int64_t>(0, at[axis] - m);
-            const std::int64_t hi = std::min<std::int64_t>(n[axis] - 1, at[axis] + m);
-            for (q[axis] = lo; q[axis] <= hi && !any; ++q[axis]) any = in[lin(q[0], q[1], q[2])];
-            (*out)[lin(at[0], at[1], at[2])] = any;
-          }
-        }
-      }
-    };
-    pass(a, &t, 0);
-    pass(t, &a, 1);
-    pass(a, &t, 2);
-    std::int64_t at[3];
-    for (std::int64_t b = 0; b < nb; ++b) {
-      blockCoords(b, at);
-      setWatched(b, inside(at) && t[lin(at[0], at[1], at[2])] != 0);
-    }
+    for (std::int64_t b = 0; b < nb; ++b) setWatched(b, 0);
+  } else if (full || grown_blocks_.size() * (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
+                             (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
+                             (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
+                             (4 + 2 * static_cast<std::size_t>(watch_cells_)) *
+                             (4 + 2 * static_cast<std::size_t>(watch_cells_)) >
+                         8 * occupied_.size() * (3 * 2 * static_cast<std::size_t>(watch_cells_) + 1)) {
+    // (the whole grid at once when the blocks near what changed would cost more)
+    watchAll(watch_cells_);
     closes_since_full_watch_ = 0;
   } else {
-    const std::int64_t m = watch_blocks_;
+    // The blocks near a cell that changed (turned possibly occupied or free): their cells' distances changed.
+    const std::int64_t m = (watch_cells_ + (1 << kBlockShift) - 1) >> kBlockShift;
+    std::vector<std::int64_t> todo;
     for (std::int64_t b : grown_blocks_) {
-      if (block_count_[b] == 0) continue;
-      std::int64_t at[3], q[3];
+      std::int64_t q[3];
       blockCoords(b, at);
       for (q[0] = std::max<std::int64_t>(0, at[0] - m); q[0] <= std::min(blocks_[0] - 1, at[0] + m); ++q[0]) {
         for (q[1] = std::max<std::int64_t>(0, at[1] - m); q[1] <= std::min(blocks_[1] - 1, at[1] + m); ++q[1]) {
           for (q[2] = std::max<std::int64_t>(0, at[2] - m); q[2] <= std::min(blocks_[2] - 1, at[2] + m); ++q[2]) {
-            setWatched(blockIndex(q[0], q[1], q[2]), true);
+            const std::int64_t n = blockIndex(q[0], q[1], q[2]);
+            if (grown_mark_[n] == 2) continue;  // listed already
+            grown_mark_[n] = 2;
+            todo.push_back(n);
           }
         }
       }
+    }
+    for (std::int64_t n : todo) {
+      blockCoords(n, at);
+      setWatched(n, watchMask(at, watch_cells_));
+      grown_mark_[n] = 0;
     }
   }
   for (std::int64_t b : grown_blocks_) grown_mark_[b] = 0;
@@ -239,14 +459,20 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree
       // The Chebyshev distance that keeps a cell unreachable until now: (L - 1) res / v >= now - before.
       const int needed = static_cast<int>(std::ceil((now - before) * v / res)) + 1;
       const std::int64_t nb = static_cast<std::int64_t>(block_watched_.size());
+      // The blocks something may have come into since the batch before: the watched ones, or, when this batch came
+      // later than the watch was made for, every block that near (what the views did not look at counts as hidden).
+      const bool wider = cellsWithin(now - before) > watch_cells_;
+      if (wider) dilateBlocks(blocksWithin(now - before), &reach_scratch_);
       std::int64_t at[3];
       for (std::int64_t b = 0; b < nb; ++b) {
-        if (block_watched_[b] == 0) continue;
+        if (wider ? reach_scratch_[b] == 0 : block_watched_[b] == 0) continue;
         ++bs.watched_blocks;
-        if ((block_free_[b] & ~batch_seen_[b]) == 0) continue;
+        // The watched free cells no view saw (wider: every free cell not seen: the views did not look at them all).
+        const std::uint64_t hidden = block_free_[b] & ~batch_seen_[b] & (wider ? ~std::uint64_t{0} : block_watched_[b]);
+        if (hidden == 0) continue;
         blockCoords(b, at);
         const std::int64_t k0 = blockFirstCell(at);
-        for (std::uint64_t bits = block_free_[b] & ~batch_seen_[b]; bits != 0; bits &= bits - 1) {
+        for (std::uint64_t bits = hidden; bits != 0; bits &= bits - 1) {
           const int n = __builtin_ctzll(bits);
           const std::int64_t ci = (at[0] << kBlockShift) + (n >> (2 * kBlockShift));
           const std::int64_t cj = (at[1] << kBlockShift) + ((n >> kBlockShift) & ((1 << kBlockShift) - 1));
@@ -306,8 +532,18 @@ void OccupancyMap::applyClose(const MapUpdate& update) {
   std::vector<std::uint64_t> held;
   held.swap(held_misses_);
   for (std::uint64_t key : held) applyOne(static_cast<std::int64_t>(key), false);
+  // The watch: as far as something may come within the longest of the last batches' intervals (a quarter more).
+  bool resized = false;
+  if (std::isfinite(update.stamp) && std::isfinite(map_time_) && update.stamp > map_time_ && watch_cells_ >= 0) {
+    std::rotate(intervals_, intervals_ + 1, intervals_ + kIntervals);
+    intervals_[kIntervals - 1] = update.stamp - map_time_;
+    const double longest = *std::max_element(intervals_, intervals_ + kIntervals);
+    const int m = std::min(cellsWithin(options_.watch_time), cellsWithin(1.25 * longest));
+    resized = m != watch_cells_;
+    watch_cells_ = m;
+  }
   if (std::isfinite(update.stamp)) map_time_ = std::max(map_time_, update.stamp);
-  updateWatched(++closes_since_full_watch_ >= kFullWatchEvery);
+  updateWatched(resized || ++closes_since_full_watch_ >= kFullWatchEvery);
 }
 
 void OccupancyMap::census(const Eigen::Vector3d& at, double radius, MapCensus* out) const {

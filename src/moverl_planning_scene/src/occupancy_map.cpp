@@ -211,6 +211,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
     m->batch_seen_.assign(static_cast<std::size_t>(blocks), 0);
     m->block_watched_.assign(static_cast<std::size_t>(blocks), 0);
     m->block_free_.assign(static_cast<std::size_t>(blocks), 0);
+    m->turned_free_.assign(static_cast<std::size_t>(blocks), 0);
     m->super_watched_.assign(static_cast<std::size_t>(supers), 0);
     m->grown_mark_.assign(static_cast<std::size_t>(blocks), 0);
     m->stale_.assign(words, 0);
@@ -1198,12 +1199,13 @@ void OccupancyMap::setValue(std::int64_t c, float v) {
   if (dirty && !was_dirty) block_dirtied_[b] = super_dirtied_[s] = epoch_;
   super_dirty_[s] = static_cast<std::uint16_t>(super_dirty_[s] + dirty - was_dirty);
   if (now == testBit(occupied_, c)) return;
+  if (!grown_mark_.empty() && grown_mark_[b] == 0) {
+    grown_mark_[b] = 1;  // hidden_space: the cells watched around it change at the batch's close
+    grown_blocks_.push_back(b);
+  }
   if (now) {
     setBit(&occupied_, c);
-    if (block_count_[b]++ == 0 && !grown_mark_.empty() && grown_mark_[b] == 0) {
-      grown_mark_[b] = 1;  // hidden_space: the blocks watched around it grow at the batch's close
-      grown_blocks_.push_back(b);
-    }
+    ++block_count_[b];
     ++super_count_[s];
   } else {
     clearBit(&occupied_, c);
@@ -1318,7 +1320,15 @@ void OccupancyMap::applyOne(std::int64_t c, bool hit) {
   const bool now = value_[c] >= threshold_;
   if (now != was) countSeen(c, now ? 1 : -1);
   if (!stale_.empty()) {
-    if (!observed || was_occupied != testBit(occupied_, c)) refreshFree(c);
+    if (!observed || was_occupied != testBit(occupied_, c)) {
+      refreshFree(c);
+      if (was_occupied && !testBit(occupied_, c)) {  // possibly occupied until now: seen free at this batch
+        std::int64_t b, s;
+        std::uint64_t bit;
+        boxesOf(c, &b, &s, &bit);
+        turned_free_[b] |= bit;
+      }
+    }
     if (testBit(stale_, c)) {  // seen again: what the view says
       clearBit(&stale_, c);
       --stale_cells_;

@@ -105,6 +105,7 @@ bool OctomapMonitor::init(std::string* error) {
     static_filter_padding_ = requiredParam<double>(pnh_, "octomap/static_filter_padding", kYaml);
     future_tolerance_ = requiredParam<double>(pnh_, "octomap/future_tolerance", kYaml);
     camera_wait_ = requiredParam<double>(pnh_, "octomap/camera_wait", kYaml);
+    batch_wait_ = requiredParam<double>(pnh_, "octomap/batch_wait", kYaml);
     transform_timeout_ = requiredParam<double>(pnh_, "octomap/transform_timeout", kYaml);
     joint_state_wait_ = requiredParam<double>(pnh_, "octomap/joint_state_wait", kYaml);
     cloud_topic = requiredParam<std::string>(pnh_, "octomap/cloud_topic", kYaml);
@@ -132,7 +133,7 @@ bool OctomapMonitor::init(std::string* error) {
         std::make_pair("self_filter_padding", self_filter_padding_),
         std::make_pair("static_filter_padding", static_filter_padding_),
         std::make_pair("future_tolerance", future_tolerance_), std::make_pair("camera_wait", camera_wait_),
-        std::make_pair("lockstep_lag_max_margin", lag_max_margin_)}) {
+        std::make_pair("batch_wait", batch_wait_), std::make_pair("lockstep_lag_max_margin", lag_max_margin_)}) {
     if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
       *error = std::string("octomap/") + p.first + " must be finite and >= 0";
       return false;
@@ -162,7 +163,9 @@ bool OctomapMonitor::init(std::string* error) {
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
   if (lag_) {
-    checked_map_ = OccupancyMap::create(mo, error);
+    OccupancyMapOptions checked = mo;
+    checked.integrates = false;  // it gets map_'s updates: no watch of its own
+    checked_map_ = OccupancyMap::create(checked, error);
     if (!checked_map_) return false;
   }
   CloudIntegratorOptions io;
@@ -338,17 +341,43 @@ void OctomapMonitor::integrateLoop() {
       std::unique_lock<std::mutex> lock(pending_mutex_);
       pending_cv_.wait(lock, [&] { return stop_ || !pending_.empty(); });
       if (stop_) return;
-      // The camera whose last integrated cloud is oldest (never integrated: first).
-      auto pick = pending_.begin();
-      {
-        std::lock_guard<std::mutex> stamps(stamps_mutex_);
+      // The oldest cloud first (the clouds of one instant are one batch of the map: they go in together), among
+      // equals the camera whose last integrated cloud is oldest (never integrated: first), so that no camera starves.
+      auto pick_oldest = [&] {
+        auto pick = pending_.begin();
         auto last = [&](const std::string& frame) {
-          const auto it = frame_stamps_.find(frame);
-          return it == frame_stamps_.end() ? ros::Time() : it->second;
+          const auto it = integrated_.find(frame);
+          return it == integrated_.end() ? ros::Time() : it->second;
         };
         for (auto it = pending_.begin(); it != pending_.end(); ++it) {
-          if (last(it->first) < last(pick->first)) pick = it;
+          const ros::Time a = it->second.front()->header.stamp, b = pick->second.front()->header.stamp;
+          if (a < b || (a == b && last(it->first) < last(pick->first))) pick = it;
         }
+        return pick;
+      };
+      // A later instant's cloud while a camera heard lately has not sent its cloud of the open batch yet, and has none
+      // waiting: wait for it up to octomap/batch_wait (in lockstep it was rendered with the others and is on its way).
+      auto missing = [&](const ros::Time& stamp) {
+        if (open_batch_.isZero() || !(stamp > open_batch_)) return false;
+        std::lock_guard<std::mutex> stamps(stamps_mutex_);
+        for (const auto& cam : cameras_) {
+          const auto it = integrated_.find(cam);
+          if (it == integrated_.end() || it->second >= open_batch_) continue;  // never heard, or in the batch
+          if ((open_batch_ - it->second).toSec() > max_age_) continue;         // not heard lately
+          if (pending_.count(cam) != 0) continue;  // its next cloud is waiting: it skipped this instant
+          return true;
+        }
+        return false;
+      };
+      auto pick = pick_oldest();
+      if (missing(pick->second.front()->header.stamp)) {
+        const auto until =
+            std::chrono::steady_clock::now() +
+            std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(batch_wait_));
+        pending_cv_.wait_until(lock, until,
+                               [&] { return stop_ || !missing(pick_oldest()->second.front()->header.stamp); });
+        if (stop_) return;
+        pick = pick_oldest();
       }
       msg = pick->second.front();
       pick->second.pop_front();
@@ -437,13 +466,20 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     }
     fell_back_[msg->header.frame_id] = fell_back;
   }
-  integrated_[msg->header.frame_id] = std::max(integrated_[msg->header.frame_id], msg->header.stamp);
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    integrated_[msg->header.frame_id] = std::max(integrated_[msg->header.frame_id], msg->header.stamp);
+    const double open = map_->batchStamp();
+    open_batch_ = std::isnan(open) ? ros::Time() : ros::Time(open);
+  }
   intoMaps(update_, msg->header.stamp, msg->header.frame_id);
   ++clouds_;
   // The batch's last camera: close it (what no view of it saw may turn possibly occupied).
   if (!update_.late && batchComplete(msg->header.stamp) &&
       cloud_integrator_->closeBatch(&close_update_, &batch_stats_)) {
     intoMaps(close_update_, msg->header.stamp, "");
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    open_batch_ = ros::Time();
   }
   last_integration_ = (ros::WallTime::now() - t0).toSec();
   last_cloud_stamp_ = msg->header.stamp;
@@ -473,6 +509,7 @@ void OctomapMonitor::intoMaps(const MapUpdate& update, const ros::Time& stamp, c
 }
 
 bool OctomapMonitor::batchComplete(const ros::Time& stamp) {
+  std::lock_guard<std::mutex> pending(pending_mutex_);
   std::lock_guard<std::mutex> lock(stamps_mutex_);
   for (const auto& c : cameras_) {
     const auto it = integrated_.find(c);
@@ -552,7 +589,8 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     }
     return sensedMapAge(cameras, stamp.toSec(), epoch.toSec(), &deciding);
   };
-  if (epoch.toSec() > motion_epoch_.load()) {
+  // (A check's epoch is computed from doubles, stamp - start_time: it jitters by far less than kEpochSlack.)
+  if (epoch.toSec() > motion_epoch_.load() + kEpochSlack) {
     motion_epoch_ = epoch.toSec();
     forget_pending_ = true;
   }
@@ -652,7 +690,11 @@ bool OctomapMonitor::clear(std_srvs::Empty::Request&, std_srvs::Empty::Response&
     std::lock_guard<std::mutex> lock(stamps_mutex_);
     frame_stamps_.clear();  // nothing seen: blind until the cameras' next clouds
   }
-  integrated_.clear();
+  {
+    std::lock_guard<std::mutex> lock(pending_mutex_);
+    integrated_.clear();
+    open_batch_ = ros::Time();
+  }
   batch_stats_ = BatchStats();
   clouds_ = 0;
   update_.stats = MapUpdateStats();

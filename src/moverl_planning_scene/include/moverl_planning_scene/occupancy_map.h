@@ -115,11 +115,15 @@ struct OccupancyMapOptions {
   /// beginView before every view and closeBatch after a batch's last. Off: every cell seen free stays free until a
   /// camera sees something there (a static scene).
   bool hidden_space = false;
+  /// hidden_space: this map integrates clouds (computeUpdate*, closeBatch). false: it only applies the updates another
+  /// map computed (octomap/lockstep_lag's checks' map), and keeps no watch.
+  bool integrates = true;
   /// m/s: how fast anything the cameras may miss moves (hidden_space; the world's sensing: speed_bound).
   double speed_bound = 0.0;
-  /// s: the longest a batch may come after the one before (octomap/watch_time): free cells farther than speed_bound x
-  /// watch_time from every possibly-occupied cell are not watched; a batch later than that finds every free cell
-  /// possibly occupied (the views stopped: nothing is known to be free).
+  /// s: the longest a batch may come after the one before (octomap/watch_time): a batch later than that finds every
+  /// free cell possibly occupied (the views stopped: nothing is known to be free). The views look at every free cell
+  /// within speed_bound x (the longest of the last batches' intervals, a quarter more) of a possibly-occupied one, at
+  /// most watch_time's; a batch later than the watch covers counts the cells they did not look at as hidden.
   double watch_time = kUnset;
 };
 
@@ -424,11 +428,22 @@ class OccupancyMap {
   /// Cells within Chebyshev index distance `up_to` of cell (i, j, k) that count as possibly occupied (occupied_, or
   /// outside the grid): the smallest such distance L in [1, up_to], or a lower bound on it above up_to.
   int chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const;
-  /// Blocks watched: within watch_blocks_ (Chebyshev, in blocks) of a block holding a possibly-occupied cell, or of
-  /// the grid's edge. full: recompute all (else only around the blocks that gained such cells since: grown_blocks_).
+  /// The watched cells: the free cells within watch_cells_ (Chebyshev, in cells) of a possibly-occupied cell or of the
+  /// grid's edge. full: recompute every block's (else only near the blocks whose cells changed since: grown_blocks_).
   void updateWatched(bool full);
-  void setWatched(std::int64_t b, bool on);
-  /// A block's watched cells (every one, or none), as its bits.
+  /// The blocks within m (Chebyshev, in blocks) of one holding a possibly-occupied cell or of the grid's edge: *out
+  /// per block index, 1 for those.
+  void dilateBlocks(int m, std::vector<std::uint8_t>* out) const;
+  /// How many blocks away something at the speed bound may come within `seconds` (blocks - 1 edges < that far).
+  int blocksWithin(double seconds) const;
+  void setWatched(std::int64_t b, std::uint64_t mask);
+  /// Every block's watched cells for a watch of L cells, at once (bit operations over the whole grid).
+  void watchAll(int L);
+  /// The watched cells of the block at block coordinates block_at for a watch of L cells (its bits).
+  std::uint64_t watchMask(const std::int64_t* block_at, int L) const;
+  /// How many cells away (Chebyshev) something at the speed bound may come within `seconds`.
+  int cellsWithin(double seconds) const;
+  /// A block's watched cells, as its bits.
   std::uint64_t watchedBits(std::int64_t b) const { return block_watched_.empty() ? 0 : block_watched_[b]; }
   /// A cell turned possibly occupied because something may have come there since it was seen free.
   void makeStale(std::int64_t c);
@@ -518,9 +533,17 @@ class OccupancyMap {
   std::vector<std::uint64_t> held_misses_;
   std::vector<Eigen::Vector3d> vouch_centres_;  ///< closeBatch's scratch: the would-be stale cells for known_free
   std::vector<std::uint8_t> vouch_known_;
-  std::vector<std::int64_t> grown_blocks_;  ///< blocks that gained a possibly-occupied cell since the watch was updated
-  std::vector<std::uint8_t> grown_mark_;    ///< per block: listed in grown_blocks_
-  int watch_blocks_ = 0;                    ///< blocks (Chebyshev) around a possibly-occupied one that are watched
+  std::vector<std::int64_t>
+      grown_blocks_;                      ///< blocks with a cell that turned possibly occupied or free since the watch
+  std::vector<std::uint8_t> grown_mark_;  ///< per block: listed in grown_blocks_ (1), or in updateWatched's list (2)
+  int watch_cells_ = 0;                   ///< cells (Chebyshev) around a possibly-occupied one that are watched
+  double watch_made_at_ = -std::numeric_limits<double>::infinity();  ///< the map's time when the watch was last made
+  int watch_made_cells_ = 0;                                         ///< and its watch_cells_ then
+  std::vector<std::uint64_t> turned_free_;  ///< per block, its cells that turned free since the watch was made
+  std::vector<std::uint64_t> watch_scratch_a_, watch_scratch_b_;  ///< watchAll's bit sets
+  static constexpr int kIntervals = 8;                            ///< the batches whose intervals size the watch
+  double intervals_[kIntervals] = {};                             ///< s: the last batches' intervals (0: none yet)
+  std::vector<std::uint8_t> reach_scratch_;  ///< closeBatch's blocks, when a batch came later than the watch covers
   int closes_since_full_watch_ = 0;
   double batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
   double map_time_ = -std::numeric_limits<double>::infinity();

@@ -151,7 +151,9 @@ class OctomapMonitor {
   BatchStats batch_stats_;                        // the last batch's close (integration thread)
   std::atomic<double> motion_epoch_{0.0};         // the newest motion epoch a check named (margins)
   std::atomic<bool> forget_pending_{false};       // it is newer than the map: the next batch forgets what it knew free
-  std::map<std::string, ros::Time> integrated_;   // per camera frame: its last cloud in map_ (sensor_mutex_)
+  std::map<std::string, ros::Time> integrated_;   // per camera frame: its last cloud in map_ (pending_mutex_)
+  ros::Time open_batch_;                          // the stamp of map_'s open batch (zero: none; pending_mutex_)
+  double batch_wait_ = 0.0;                       // octomap/batch_wait (s, wall)
   std::map<std::string, std::string> last_drop_;  // per camera frame: why its last dropped cloud was (stamps_)
   double joint_state_wait_ = 0.0, self_filter_padding_ = 0.0, transform_timeout_ = 0.0, last_integration_ = 0.0;
   double static_filter_padding_ = 0.0, future_tolerance_ = 0.0, camera_wait_ = 0.0;

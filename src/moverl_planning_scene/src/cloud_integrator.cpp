@@ -247,6 +247,24 @@ void CloudIntegrator::addKnownFree(const std::vector<std::vector<double>>& confi
     std::unique_lock<std::mutex> lock;
     if (world_mutex_ != nullptr) lock = std::unique_lock<std::mutex>(*world_mutex_);  // the world
     checker_->staticObjectBoxes(static_pad, &boxes_);
+    // The cells wholly inside a static object (their eight corners inside its convex shape): nothing passes there.
+    solid_keys_.clear();
+    for (const Eigen::AlignedBox3d& box : boxes_) {
+      map_->cellsIn(box, &box_centers_, &box_keys_);
+      corners_.clear();
+      const double h = 0.5 * map_->options().resolution;
+      for (const Eigen::Vector3d& c : box_centers_) {
+        for (int n = 0; n < 8; ++n)
+          corners_.emplace_back(c + Eigen::Vector3d(n & 1 ? h : -h, n & 2 ? h : -h, n & 4 ? h : -h));
+      }
+      checker_->staticObjectSolidMask(corners_, &mask_more_);
+      for (std::size_t k = 0; k < box_keys_.size(); ++k) {
+        bool all = true;
+        for (int n = 0; n < 8 && all; ++n) all = mask_more_[8 * k + n] != 0;
+        if (all) solid_keys_.push_back(box_keys_[k]);
+      }
+    }
+    map_->setSolid(solid_keys_);
     turn_free([&](const std::vector<Eigen::Vector3d>& pts,
                   std::vector<std::uint8_t>* m) { checker_->staticObjectPointMask(pts, static_pad, m, pool_.get()); },
               true);

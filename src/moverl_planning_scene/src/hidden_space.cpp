@@ -62,8 +62,9 @@ int OccupancyMap::cellsWithin(double seconds) const {
 void OccupancyMap::setSpeedBound(double speed_bound) {
   options_.speed_bound = std::isfinite(speed_bound) ? std::max(0.0, speed_bound) : 0.0;
   if (!options_.hidden_space) return;
-  // Until batches come, watch as far as watch_time lets something come; then as far as the batches' interval does.
-  std::fill(intervals_, intervals_ + kIntervals, 0.0);
+  // Until batches come, watch as far as watch_time lets something come; then as far as the batches' interval does
+  // (the longest of the last kIntervals: a reset's extra batch a substep after the one before counts as short).
+  std::fill(intervals_, intervals_ + kIntervals, options_.watch_time);
   watch_cells_ = options_.speed_bound > 0.0 ? cellsWithin(options_.watch_time) : -1;
   updateWatched(true);
 }
@@ -361,6 +362,37 @@ void OccupancyMap::updateWatched(bool full) {
   grown_blocks_.clear();
 }
 
+void OccupancyMap::setSolid(const std::vector<std::uint64_t>& keys) {
+  if (solid_.empty()) return;
+  std::fill(solid_.begin(), solid_.end(), 0);
+  for (std::uint64_t key : keys) {
+    if (key < value_.size()) setBit(&solid_, static_cast<std::int64_t>(key));
+  }
+}
+
+void OccupancyMap::cellsIn(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
+                           std::vector<std::uint64_t>* keys) const {
+  centers->clear();
+  keys->clear();
+  if (box.isEmpty()) return;
+  const double r = options_.resolution;
+  std::int64_t lo[3], hi[3];
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil(box.min()[i] / r - 0.5)) - offset_[i]);
+    hi[i] = std::min<std::int64_t>(size_[i] - 1,
+                                   static_cast<std::int64_t>(std::floor(box.max()[i] / r - 0.5)) - offset_[i]);
+    if (lo[i] > hi[i]) return;
+  }
+  for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
+      for (std::int64_t k = lo[2]; k <= hi[2]; ++k) {
+        centers->push_back(centre(i, j, k));
+        keys->push_back(static_cast<std::uint64_t>(cellId(i, j, k)));
+      }
+    }
+  }
+}
+
 int OccupancyMap::chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const {
   // Is any cell of the cube of half-edge L around (i, j, k) possibly occupied (or outside the grid)? Row by row along
   // z: the bits of a row lie side by side in occupied_.
@@ -380,9 +412,74 @@ int OccupancyMap::chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64
     return false;
   };
   const int cells = std::min(up_to, kCellSearch);
-  for (int L = 1; L <= cells; ++L) {
-    if (cube(L)) return L;
+  int found = 0;
+  for (int L = 1; L <= cells && found == 0; ++L) {
+    if (cube(L)) found = L;
   }
+  // Solid cells (inside the static objects) in the cube the straight way would cross: the steps between neighbouring
+  // cells that are not solid, breadth first. A path of length d from a point of one cell to a point of another, around
+  // the solid cells, sampled less than a cell apart, gives neighbouring cells none solid: at most d / resolution + 1
+  // steps; so (steps - 1) x resolution bounds d from below, as Chebyshev L did.
+  const int reach = found != 0 ? found : cells;
+  bool solid = false;
+  for (std::int64_t x = std::max<std::int64_t>(0, i - reach); x <= std::min(size_[0] - 1, i + reach) && !solid; ++x) {
+    for (std::int64_t y = std::max<std::int64_t>(0, j - reach); y <= std::min(size_[1] - 1, j + reach) && !solid; ++y) {
+      const std::int64_t first = cellId(x, y, std::max<std::int64_t>(0, k - reach));
+      const std::int64_t last = cellId(x, y, std::min(size_[2] - 1, k + reach));
+      for (std::int64_t w = first >> 6; w <= last >> 6 && !solid; ++w) {
+        std::uint64_t bits = solid_[static_cast<std::size_t>(w)];
+        if (w == first >> 6) bits &= ~std::uint64_t{0} << (first & 63);
+        if (w == last >> 6) bits &= ~std::uint64_t{0} >> (63 - (last & 63));
+        solid = bits != 0;
+      }
+    }
+  }
+  if (solid) {
+    // Breadth first within the cube of half-edge `cells` (kCellSearch at most: 9^3 cells); beyond it the blocks below
+    // bound the distance, ignoring the solid cells (a lower bound still).
+    constexpr int kSide = 2 * kCellSearch + 1;
+    std::uint8_t seen[kSide][kSide][kSide] = {};
+    std::int64_t frontier[kSide * kSide * kSide][3], next[kSide * kSide * kSide][3];
+    std::size_t nf = 1, nn = 0;
+    frontier[0][0] = i;
+    frontier[0][1] = j;
+    frontier[0][2] = k;
+    seen[cells][cells][cells] = 1;
+    found = 0;
+    for (int step = 1; step <= cells && nf > 0 && found == 0; ++step) {
+      nn = 0;
+      for (std::size_t f = 0; f < nf && found == 0; ++f) {
+        for (int dx = -1; dx <= 1 && found == 0; ++dx) {
+          for (int dy = -1; dy <= 1 && found == 0; ++dy) {
+            for (int dz = -1; dz <= 1; ++dz) {
+              const std::int64_t x = frontier[f][0] + dx, y = frontier[f][1] + dy, z = frontier[f][2] + dz;
+              const std::int64_t lx = x - i + cells, ly = y - j + cells, lz = z - k + cells;
+              if (lx < 0 || ly < 0 || lz < 0 || lx >= kSide || ly >= kSide || lz >= kSide) continue;
+              if (seen[lx][ly][lz] != 0) continue;
+              seen[lx][ly][lz] = 1;
+              if (x < 0 || y < 0 || z < 0 || x >= size_[0] || y >= size_[1] || z >= size_[2]) {
+                found = step;  // the grid's edge
+                break;
+              }
+              const std::int64_t c = cellId(x, y, z);
+              if (testBit(occupied_, c)) {
+                found = step;
+                break;
+              }
+              if (testBit(solid_, c)) continue;
+              next[nn][0] = x;
+              next[nn][1] = y;
+              next[nn][2] = z;
+              ++nn;
+            }
+          }
+        }
+      }
+      std::copy(&next[0][0], &next[0][0] + 3 * nn, &frontier[0][0]);
+      nf = nn;
+    }
+  }
+  if (found != 0) return found;
   if (up_to <= cells) return up_to + 1;
   // Farther: blocks around the cell's block. No possibly-occupied cell within g blocks (Chebyshev) of the cell's own
   // puts the nearest at least g x 4 + 1 cells away; the first g with one bounds the distance from below by the g

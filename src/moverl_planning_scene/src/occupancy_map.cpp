@@ -216,6 +216,7 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
     m->grown_mark_.assign(static_cast<std::size_t>(blocks), 0);
     m->stale_.assign(words, 0);
     m->fixed_.assign(words, 0);
+    m->solid_.assign(words, 0);
     m->free_until_.assign(static_cast<std::size_t>(cells), std::numeric_limits<float>::quiet_NaN());
   }
   m->log_hit_ = logodds(o.prob_hit);
@@ -1348,6 +1349,8 @@ void OccupancyMap::clear() {
     held_misses_.clear();
     batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
     map_time_ = -std::numeric_limits<double>::infinity();
+    std::fill(intervals_, intervals_ + kIntervals, options_.watch_time);
+    if (watch_cells_ >= 0) watch_cells_ = cellsWithin(options_.watch_time);
     recording_ = false;
   }
   fillUnobserved(options_.unknown_occupied);

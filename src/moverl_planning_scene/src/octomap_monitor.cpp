@@ -709,7 +709,8 @@ bool OctomapMonitor::census(moverl_msgs::SensedCensus::Request& req, moverl_msgs
   MapCensus m;
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);
-    (checked_map_ ? checked_map_ : map_)->census(Eigen::Vector3d::Zero(), res.radius, &m);
+    (checked_map_ ? checked_map_ : map_)
+        ->census(Eigen::Vector3d(req.centre.x, req.centre.y, req.centre.z), res.radius, &m);
   }
   res.success = true;
   res.cells = static_cast<uint32_t>(m.cells);

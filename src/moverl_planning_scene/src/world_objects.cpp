@@ -199,6 +199,34 @@ void FclCollisionChecker::setMotionWindow(double t0, double t1) {
 double FclCollisionChecker::obstacleRadius(std::size_t i) const { return world_.at(i).radius; }
 Eigen::Vector3d FclCollisionChecker::obstacleCenter(std::size_t i) const { return world_.at(i).pose.translation(); }
 
+void FclCollisionChecker::staticObjectSolidMask(const std::vector<Eigen::Vector3d>& points,
+                                                std::vector<std::uint8_t>* mask) const {
+  mask->assign(points.size(), 0);
+  for (const Obstacle& ob : world_) {
+    const WorldObject& o = ob.source;
+    Eigen::Vector3d half;
+    if (o.motion.moving() || o.type == ShapeType::kCone || !maskedHalf(o, &half)) continue;
+    const Eigen::Isometry3d inv = o.pose.inverse();
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      if ((*mask)[k] != 0) continue;
+      const Eigen::Vector3d p = inv * points[k];  // in the object's frame (centred)
+      bool in = false;
+      switch (o.type) {
+        case ShapeType::kBox:
+          in = (p.cwiseAbs() - half).maxCoeff() <= 0.0;
+          break;
+        case ShapeType::kSphere:
+          in = p.norm() <= half.x();
+          break;
+        default:  // a cylinder
+          in = std::fabs(p.z()) <= half.z() && p.head<2>().norm() <= half.x();
+          break;
+      }
+      if (in) (*mask)[k] = 1;
+    }
+  }
+}
+
 void FclCollisionChecker::staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
                                                 std::vector<std::uint8_t>* mask, WorkerPool* pool) const {
   mask->assign(points.size(), 0);

@@ -88,6 +88,10 @@ class Backend(ABC):
     shield_enabled: bool
     world: WorldInfo
     restartable: bool = False
+    #: reset() teleports the robot (a simulator's lockstep link): it may stand wherever the simulator accepts it (the
+    #: simulator refuses a pose that touches, or will soon be walked into by, any obstacle), and the cameras see the
+    #: scene from there at once.
+    teleports: bool = False
     #: Where the observed obstacles' poses come from: "world_file" (their motion, computed by the env) or "tracker"
     #: (track() feeds a moverl_gym.tracking.TrackedPoses; launch argument obstacle_poses).
     obstacle_poses: str = "world_file"

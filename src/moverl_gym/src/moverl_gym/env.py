@@ -410,7 +410,7 @@ class MoveRLReachEnv(gym.Env):
             if start is not None:
                 q = np.asarray(start, dtype=np.float64)
             else:
-                q = self._sample_start(near_home=refused < max(1, attempts // 10))
+                q = self._sample_start_or_look_again(near_home=refused < max(1, attempts // 10))
             res = self._backend.reset(q)
             if res.success:
                 return res
@@ -418,6 +418,27 @@ class MoveRLReachEnv(gym.Env):
                 break
             refused += 1
         raise MoveRLError(f"could not bring the robot to the start configuration: {res.message}")
+
+    def _sample_start_or_look_again(self, near_home: bool) -> np.ndarray:
+        """_sample_start; when no start is free and the robot can be teleported, first let the cameras look again.
+
+        With sensed obstacles, the robot's own links hide space from the cameras, and hidden space near what may move
+        turns possibly occupied (docs/sensing.md, "Space no camera sees"): the arm where an episode ended can hide the
+        space next to every start. A simulator may stand the robot elsewhere (it refuses poses that touch or will be
+        walked into by an obstacle, from its ground truth); its cameras then see what the arm hid, and the starts are
+        sampled again from those views.
+        """
+        try:
+            return self._sample_start(near_home=near_home)
+        except MoveRLError:
+            if not getattr(self._backend, "teleports", False) or self._backend.sensed_census() is None:
+                raise
+        lo, hi = self.limits.lower, self.limits.upper
+        for k in range(self.config.start_sampling_attempts):
+            look = self._home if k == 0 else self.np_random.uniform(lo, hi)
+            if self._backend.reset(look).success:
+                break
+        return self._sample_start(near_home=near_home)
 
     def _sample_goal(self) -> np.ndarray:
         """A goal in the reachable region: the end-effector position of a random collision-free configuration

@@ -339,6 +339,11 @@ class RosBackend(Backend):
             self._subscribe()
         simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
         self.restartable = simulated  # never a real robot's graph, nor one this env did not launch
+        launched = rospy.get_param("/moverl/launch_args", None) or self._launch_args
+        self.teleports = (
+            str(launched.get("simulator", True)).lower() != "false"
+            and str(launched.get("driver", "sim_service")) == "sim_service"
+        )
 
     @property
     def graph(self):

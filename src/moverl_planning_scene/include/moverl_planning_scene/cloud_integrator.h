@@ -119,7 +119,8 @@ class CloudIntegrator {
   std::vector<std::uint8_t> band_mask_;
   std::vector<Eigen::AlignedBox3d> boxes_;  ///< addKnownFree's scratch
   std::vector<Eigen::Vector3d> cell_centers_, box_centers_;
-  std::vector<std::uint64_t> cell_keys_, box_keys_, free_keys_;
+  std::vector<std::uint64_t> cell_keys_, box_keys_, free_keys_, solid_keys_;
+  std::vector<Eigen::Vector3d> corners_;
 };
 
 }  // namespace moverl_planning_scene

@@ -131,6 +131,10 @@ class FclCollisionChecker : public CollisionChecker {
   /// \param pool (optional) parts of the points tested on its threads at once (the same mask).
   void staticObjectPointMask(const std::vector<Eigen::Vector3d>& points, double padding,
                              std::vector<std::uint8_t>* mask, WorkerPool* pool = nullptr) const;
+  /// \brief mask[k] = 1 when points[k] (base frame) lies inside a static world object's shape exactly (boxes, spheres
+  ///        and cylinders; never inside a cone). Nothing can be there. Reads the world: callers serialize it with
+  ///        setWorld.
+  void staticObjectSolidMask(const std::vector<Eigen::Vector3d>& points, std::vector<std::uint8_t>* mask) const;
   /// \brief Axis-aligned boxes (base frame) around the bounding sphere of each robot collision shape in configuration
   ///        q, grown by `padding`: where robotPointMask can return 1.
   void robotBoundingBoxes(const double* q, double padding, std::vector<Eigen::AlignedBox3d>* boxes) const;

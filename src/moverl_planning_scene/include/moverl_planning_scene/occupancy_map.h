@@ -293,6 +293,12 @@ class OccupancyMap {
   void forgetAtNextClose() { forget_next_ = true; }
   /// \brief The stamp of the open batch (NaN: none).
   double batchStamp() const { return batch_stamp_; }
+  /// \brief hidden_space: the cells (ids) that lie wholly inside a static object (nothing can pass through them: the
+  ///        reach into hidden space goes around them). Replaces the ones given before.
+  void setSolid(const std::vector<std::uint64_t>& keys);
+  /// \brief Centres and ids of every cell whose centre lies in `box`.
+  void cellsIn(const Eigen::AlignedBox3d& box, std::vector<Eigen::Vector3d>* centers,
+               std::vector<std::uint64_t>* keys) const;
   /// \brief hidden_space: the stamp of the last closed batch applied (-infinity before the first): what the map knows
   ///        is possibly occupied is as of then (a check's age counts from it).
   double mapTime() const { return map_time_; }
@@ -426,7 +432,9 @@ class OccupancyMap {
   /// inside the grid.
   std::int64_t blockFirstCell(const std::int64_t* block_at) const;
   /// Cells within Chebyshev index distance `up_to` of cell (i, j, k) that count as possibly occupied (occupied_, or
-  /// outside the grid): the smallest such distance L in [1, up_to], or a lower bound on it above up_to.
+  ///        outside the grid): the smallest such distance L in [1, up_to], or a lower bound on it above up_to. Near
+  ///        solid cells, the steps of a path between neighbouring cells that are not solid instead (a person goes
+  ///        around a table, not through it).
   int chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const;
   /// The watched cells: the free cells within watch_cells_ (Chebyshev, in cells) of a possibly-occupied cell or of the
   /// grid's edge. full: recompute every block's (else only near the blocks whose cells changed since: grown_blocks_).
@@ -528,7 +536,7 @@ class OccupancyMap {
   std::vector<std::uint64_t>
       block_free_;  ///< per block, its free cells (observed, not occupied): the close's candidates
   std::vector<std::uint16_t> super_watched_;
-  std::vector<std::uint64_t> stale_, fixed_;
+  std::vector<std::uint64_t> stale_, fixed_, solid_;
   std::vector<float> free_until_;
   std::vector<std::uint64_t> held_misses_;
   std::vector<Eigen::Vector3d> vouch_centres_;  ///< closeBatch's scratch: the would-be stale cells for known_free

@@ -575,7 +575,7 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree
           const std::int64_t cj = (at[1] << kBlockShift) + ((n >> kBlockShift) & ((1 << kBlockShift) - 1));
           const std::int64_t ck = (at[2] << kBlockShift) + (n & ((1 << kBlockShift) - 1));
           const std::int64_t c = k0 + cell_offset_[n];
-          if (testBit(fixed_, c)) continue;  // free for good
+          if (testBit(fixed_, c) || testBit(solid_, c)) continue;  // free for good: nothing can be there
           ++bs.hidden;
           const int L = chebyshevToOccupied(ci, cj, ck, needed);
           const double reach = before + std::max(0, L - 1) * res / v;  // nothing there before this
@@ -616,13 +616,13 @@ void OccupancyMap::applyClose(const MapUpdate& update) {
   if (update.forget && !stale_.empty()) {
     const auto cells = static_cast<std::int64_t>(value_.size());
     for (std::int64_t c = 0; c < cells; ++c) {
-      if (testBit(observed_, c) && !testBit(occupied_, c) && !testBit(fixed_, c)) makeStale(c);
+      if (testBit(observed_, c) && !testBit(occupied_, c) && !testBit(fixed_, c) && !testBit(solid_, c)) makeStale(c);
     }
   }
   for (std::uint64_t key : update.stale) {
     const auto c = static_cast<std::int64_t>(key);
     if (c < 0 || c >= static_cast<std::int64_t>(value_.size()) || stale_.empty()) continue;
-    if (testBit(occupied_, c) || testBit(fixed_, c)) continue;  // (the same map state as closeBatch read: never)
+    if (testBit(occupied_, c) || testBit(fixed_, c) || testBit(solid_, c)) continue;  // (as closeBatch read: never)
     makeStale(c);
   }
   // The batch's misses of possibly-occupied cells, in their order.

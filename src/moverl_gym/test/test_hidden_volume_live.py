@@ -19,7 +19,7 @@ policy does (full-speed steps towards each pose, every one checked by the shield
   env's steps from HIDE to INTO run into it.
 * test_a_hand_hidden_by_the_robot_is_not_run_into: no contact, with the robot moving or at rest. Before issue 52 the
   map kept the pocket as last seen, free, as long as no camera saw it: the move into it executed and ran into the
-  hand (its first 3 steps executed as safe, with 5 contact pairs: docs/hidden_volume.md).
+  hand (its first 3 steps executed as safe, with 5 contact pairs: docs/notes/hidden_volume.md).
 * test_without_the_hand_the_move_into_the_pocket_executes: the control, without the hand: the robot gets to INTO, at
   step 3 or, once the cameras have seen the pocket again, at step 4; no contact. The fix is not "refuse everything
   hidden".

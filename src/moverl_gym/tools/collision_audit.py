@@ -484,7 +484,7 @@ def worker(
         if obstacles != "objects":
             from moverl_msgs.msg import OctomapStatus
 
-            # one view from every camera of the world file (the scene starts after startup_clouds of them)
+            # one view from every camera of the world file (the scene starts once each is in)
             cameras = len(load_world(world_path).cameras)
             deadline = time.monotonic() + 30.0
             st = rospy.wait_for_message("/planning_scene/octomap_status", OctomapStatus, timeout=30)

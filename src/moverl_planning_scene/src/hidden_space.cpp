@@ -37,6 +37,9 @@ constexpr int kFullWatchEvery = 32;
 constexpr int kCellSearch = 4;
 /// watchMask's widest watch (cells): its window of rows is 4 + 2 L cells along each axis, up to 64.
 constexpr int kMaskCells = 30;
+/// Blocks whose cells changed beyond which the watch is made anew for the whole grid (watchAll, about 2 ms for the
+/// Panda's map at a watch of one cell) rather than for the blocks near them (watchMask, 27 blocks each at least).
+constexpr std::size_t kIncrementalWatch = 64;
 
 bool testBit(const std::vector<std::uint64_t>& bits, std::int64_t k) { return ((bits[k >> 6] >> (k & 63)) & 1u) != 0; }
 void setBit(std::vector<std::uint64_t>* bits, std::int64_t k) { (*bits)[k >> 6] |= std::uint64_t{1} << (k & 63); }
@@ -325,13 +328,8 @@ void OccupancyMap::updateWatched(bool full) {
   std::int64_t at[3];
   if (!active) {
     for (std::int64_t b = 0; b < nb; ++b) setWatched(b, 0);
-  } else if (full || grown_blocks_.size() * (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
-                             (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
-                             (2 * static_cast<std::size_t>(watch_cells_) / 4 + 3) *
-                             (4 + 2 * static_cast<std::size_t>(watch_cells_)) *
-                             (4 + 2 * static_cast<std::size_t>(watch_cells_)) >
-                         8 * occupied_.size() * (3 * 2 * static_cast<std::size_t>(watch_cells_) + 1)) {
-    // (the whole grid at once when the blocks near what changed would cost more)
+  } else if (full || grown_blocks_.size() > kIncrementalWatch) {
+    // (the whole grid at once when many blocks changed: its bit operations cost less than as many blocks' masks)
     watchAll(watch_cells_);
     closes_since_full_watch_ = 0;
   } else {

@@ -13,13 +13,14 @@
  * instant are one batch, closed after the last of them (the stage "hidden space (batch close)").
  *
  * Usage: map_benchmark [world.yaml] [clouds] [--size WxH] [--recording DIR] [--threads N] [--resolution M] [--check]
- *                      [--identity]
+ *                      [--identity] [--projective-only]
  *   (synthetic: default worlds/human.yaml, 60 clouds, cameras in turn, --size overrides the cameras' images)
  *   --check: exit 1 when either integration sees free a cell whose centre lies inside the synthetic person (a cell
  *   holding part of an obstacle; the static table's cells are the fixture filter's to clear, and are not counted).
  *   --threads N: threads that integrate a cloud (default: config/planning_scene.yaml's octomap/integration_threads).
  *   --resolution M: the map's cell edge in metres (default: config/planning_scene.yaml's octomap/resolution): what
  *   a coarser or finer map costs on the same clouds.
+ *   --projective-only: leave ray casting out (a profiler's or callgrind's run of the projective update alone).
  *   --identity: also integrate every cloud by projection with skip_unchanged_blocks off (every block evaluated, on one
  *   thread) into
  *   a third map; exit 1 when any of its updates differs from the projective run's (the hit and missed cells, as sets,
@@ -208,7 +209,7 @@ void report(const char* what, std::vector<double> t) {
 int usage(const char* why) {
   std::fprintf(stderr,
                "error: %s\nusage: map_benchmark [world.yaml with cameras:] [clouds > 0] [--size WxH] "
-               "[--recording DIR] [--threads N] [--resolution M] [--check] [--identity]\n",
+               "[--recording DIR] [--threads N] [--resolution M] [--check] [--identity] [--projective-only]\n",
                why);
   return 2;
 }
@@ -219,7 +220,7 @@ int main(int argc, char** argv) {
   std::string world = MOVERL_CONFIG_DIR "/../worlds/human.yaml", recording;
   int clouds_wanted = 60, width = 0, height = 0, threads = 0;
   double resolution = 0.0;
-  bool check = false, identity = false;
+  bool check = false, identity = false, projective_only = false;
   std::vector<std::string> positional;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -227,6 +228,8 @@ int main(int argc, char** argv) {
       check = true;
     } else if (a == "--identity") {
       identity = true;
+    } else if (a == "--projective-only") {
+      projective_only = true;
     } else if (a == "--size" || a == "--recording" || a == "--threads" || a == "--resolution") {
       if (i + 1 >= argc) return usage((a + " needs a value").c_str());
       const std::string v = argv[++i];
@@ -245,8 +248,9 @@ int main(int argc, char** argv) {
         return usage("--size takes WxH, both >= 2 (e.g. 640x480)");
       }
     } else if (a.rfind("--", 0) == 0) {
-      return usage(
-          ("unknown option " + a + " (--size, --recording, --threads, --resolution, --check, --identity)").c_str());
+      return usage(("unknown option " + a +
+                    " (--size, --recording, --threads, --resolution, --check, --identity, --projective-only)")
+                       .c_str());
     } else {
       positional.push_back(a);
     }
@@ -429,6 +433,7 @@ int main(int argc, char** argv) {
     // The two integrations take turns going first (the first warms the caches for the second's filters).
     for (int turn = 0; turn < 2; ++turn) {
       Run& r = runs[(turn + compared) % 2];
+      if (projective_only && r.integration != mps::Integration::kProjective) continue;
       mps::CloudTiming t;
       std::string why;
       mps::CloudView view;

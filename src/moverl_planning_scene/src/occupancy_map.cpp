@@ -1426,7 +1426,13 @@ void OccupancyMap::fillUnobserved(bool on) {
     if (testBit(observed_, c) && v >= threshold_) countSeen(c, 1);
   }
   if (options_.hidden_space) {
-    for (std::int64_t c = 0; c < cells; ++c) refreshFree(c);
+    // A free cell is an observed one (never a fresh map's): only those, word by word.
+    std::fill(block_free_.begin(), block_free_.end(), 0);
+    for (std::size_t w = 0; w < observed_.size(); ++w) {
+      for (std::uint64_t bits = observed_[w] & ~occupied_[w]; bits != 0; bits &= bits - 1) {
+        refreshFree(static_cast<std::int64_t>(w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits))));
+      }
+    }
     updateWatched(true);
   }
 }

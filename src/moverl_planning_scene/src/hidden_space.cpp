@@ -33,7 +33,7 @@ constexpr int kBlockShift = OccupancyMap::kBlockBits, kSubShift = OccupancyMap::
 constexpr std::uint64_t kAllCells = ~std::uint64_t{0};
 /// Closes between two full recomputes of the watched blocks (between them the watch only grows, a superset).
 constexpr int kFullWatchEvery = 32;
-/// The cell-by-cell search for the nearest possibly-occupied cell goes this far (Chebyshev, cells); beyond, blocks.
+/// The steps to the nearest possibly-occupied cell are exact this far (cells: GridReach's layers); beyond, blocks.
 constexpr int kCellSearch = 4;
 /// watchMask's widest watch (cells): its window of rows is 4 + 2 L cells along each axis, up to 64.
 constexpr int kMaskCells = 30;
@@ -391,115 +391,23 @@ void OccupancyMap::cellsIn(const Eigen::AlignedBox3d& box, std::vector<Eigen::Ve
   }
 }
 
-int OccupancyMap::chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const {
-  // Is any cell of the cube of half-edge L around (i, j, k) possibly occupied (or outside the grid)? Row by row along
-  // z: the bits of a row lie side by side in occupied_.
-  auto cube = [&](std::int64_t L) {
-    if (i - L < 0 || j - L < 0 || k - L < 0 || i + L >= size_[0] || j + L >= size_[1] || k + L >= size_[2]) return true;
-    for (std::int64_t x = i - L; x <= i + L; ++x) {
-      for (std::int64_t y = j - L; y <= j + L; ++y) {
-        const std::int64_t first = cellId(x, y, k - L), last = cellId(x, y, k + L);
-        for (std::int64_t w = first >> 6; w <= last >> 6; ++w) {
-          std::uint64_t bits = occupied_[static_cast<std::size_t>(w)];
-          if (w == first >> 6) bits &= ~std::uint64_t{0} << (first & 63);
-          if (w == last >> 6) bits &= ~std::uint64_t{0} >> (63 - (last & 63));
-          if (bits != 0) return true;
+void OccupancyMap::buildReach(int needed) {
+  // Exactly up to kCellSearch steps (or needed, if fewer: beyond needed a cell is out of reach anyway), then the
+  // blocks far enough for a bound past needed.
+  const int cells = std::min(needed, kCellSearch);
+  const int levels = needed > kCellSearch ? needed / (1 << kBlockShift) + 2 : 0;
+  const std::int64_t X = blocks_[0], Y = blocks_[1], Z = blocks_[2];
+  reach_blocks_.assign(static_cast<std::size_t>(X * Y * Z), 0);
+  if (levels > 0) {
+    for (std::int64_t x = 0; x < X; ++x) {
+      for (std::int64_t y = 0; y < Y; ++y) {
+        for (std::int64_t z = 0; z < Z; ++z) {
+          reach_blocks_[static_cast<std::size_t>((x * Y + y) * Z + z)] = block_count_[blockIndex(x, y, z)] != 0;
         }
       }
     }
-    return false;
-  };
-  const int cells = std::min(up_to, kCellSearch);
-  int found = 0;
-  for (int L = 1; L <= cells && found == 0; ++L) {
-    if (cube(L)) found = L;
   }
-  // Solid cells (inside the static objects) in the cube the straight way would cross: the steps between neighbouring
-  // cells that are not solid, breadth first. A path of length d from a point of one cell to a point of another, around
-  // the solid cells, sampled less than a cell apart, gives neighbouring cells none solid: at most d / resolution + 1
-  // steps; so (steps - 1) x resolution bounds d from below, as Chebyshev L did.
-  const int reach = found != 0 ? found : cells;
-  bool solid = false;
-  for (std::int64_t x = std::max<std::int64_t>(0, i - reach); x <= std::min(size_[0] - 1, i + reach) && !solid; ++x) {
-    for (std::int64_t y = std::max<std::int64_t>(0, j - reach); y <= std::min(size_[1] - 1, j + reach) && !solid; ++y) {
-      const std::int64_t first = cellId(x, y, std::max<std::int64_t>(0, k - reach));
-      const std::int64_t last = cellId(x, y, std::min(size_[2] - 1, k + reach));
-      for (std::int64_t w = first >> 6; w <= last >> 6 && !solid; ++w) {
-        std::uint64_t bits = solid_[static_cast<std::size_t>(w)];
-        if (w == first >> 6) bits &= ~std::uint64_t{0} << (first & 63);
-        if (w == last >> 6) bits &= ~std::uint64_t{0} >> (63 - (last & 63));
-        solid = bits != 0;
-      }
-    }
-  }
-  if (solid) {
-    // Breadth first within the cube of half-edge `cells` (kCellSearch at most: 9^3 cells); beyond it the blocks below
-    // bound the distance, ignoring the solid cells (a lower bound still).
-    constexpr int kSide = 2 * kCellSearch + 1;
-    std::uint8_t seen[kSide][kSide][kSide] = {};
-    std::int64_t frontier[kSide * kSide * kSide][3], next[kSide * kSide * kSide][3];
-    std::size_t nf = 1, nn = 0;
-    frontier[0][0] = i;
-    frontier[0][1] = j;
-    frontier[0][2] = k;
-    seen[cells][cells][cells] = 1;
-    found = 0;
-    for (int step = 1; step <= cells && nf > 0 && found == 0; ++step) {
-      nn = 0;
-      for (std::size_t f = 0; f < nf && found == 0; ++f) {
-        for (int dx = -1; dx <= 1 && found == 0; ++dx) {
-          for (int dy = -1; dy <= 1 && found == 0; ++dy) {
-            for (int dz = -1; dz <= 1; ++dz) {
-              const std::int64_t x = frontier[f][0] + dx, y = frontier[f][1] + dy, z = frontier[f][2] + dz;
-              const std::int64_t lx = x - i + cells, ly = y - j + cells, lz = z - k + cells;
-              if (lx < 0 || ly < 0 || lz < 0 || lx >= kSide || ly >= kSide || lz >= kSide) continue;
-              if (seen[lx][ly][lz] != 0) continue;
-              seen[lx][ly][lz] = 1;
-              if (x < 0 || y < 0 || z < 0 || x >= size_[0] || y >= size_[1] || z >= size_[2]) {
-                found = step;  // the grid's edge
-                break;
-              }
-              const std::int64_t c = cellId(x, y, z);
-              if (testBit(occupied_, c)) {
-                found = step;
-                break;
-              }
-              if (testBit(solid_, c)) continue;
-              next[nn][0] = x;
-              next[nn][1] = y;
-              next[nn][2] = z;
-              ++nn;
-            }
-          }
-        }
-      }
-      std::copy(&next[0][0], &next[0][0] + 3 * nn, &frontier[0][0]);
-      nf = nn;
-    }
-  }
-  if (found != 0) return found;
-  if (up_to <= cells) return up_to + 1;
-  // Farther: blocks around the cell's block. No possibly-occupied cell within g blocks (Chebyshev) of the cell's own
-  // puts the nearest at least g x 4 + 1 cells away; the first g with one bounds the distance from below by the g
-  // before's.
-  const std::int64_t bi = i >> kBlockShift, bj = j >> kBlockShift, bk = k >> kBlockShift;
-  int bound = cells + 1;  // what the cell search showed
-  for (std::int64_t g = 1;; ++g) {
-    const int shows = static_cast<int>(g * (1 << kBlockShift)) + 1;  // what a clear ring of g blocks shows
-    if (bi - g < 0 || bj - g < 0 || bk - g < 0 || bi + g >= blocks_[0] || bj + g >= blocks_[1] ||
-        bk + g >= blocks_[2]) {
-      return bound;  // the grid's edge
-    }
-    for (std::int64_t x = bi - g; x <= bi + g; ++x) {
-      for (std::int64_t y = bj - g; y <= bj + g; ++y) {
-        for (std::int64_t z = bk - g; z <= bk + g; ++z) {
-          if (block_count_[blockIndex(x, y, z)] != 0) return bound;
-        }
-      }
-    }
-    bound = std::max(bound, shows);
-    if (bound > up_to) return bound;
-  }
+  reach_.build(size_, occupied_, solid_, cells, reach_blocks_, levels);
 }
 
 void OccupancyMap::refreshFree(std::int64_t c) {
@@ -559,6 +467,7 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree
       const bool wider = cellsWithin(now - before) > watch_cells_;
       if (wider) dilateBlocks(blocksWithin(now - before), &reach_scratch_);
       std::int64_t at[3];
+      bool reach_built = false;  // (made when the first hidden cell needs it)
       for (std::int64_t b = 0; b < nb; ++b) {
         if (wider ? reach_scratch_[b] == 0 : block_watched_[b] == 0) continue;
         ++bs.watched_blocks;
@@ -575,7 +484,11 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree
           const std::int64_t c = k0 + cell_offset_[n];
           if (testBit(fixed_, c) || testBit(solid_, c)) continue;  // free for good: nothing can be there
           ++bs.hidden;
-          const int L = chebyshevToOccupied(ci, cj, ck, needed);
+          if (!reach_built) {
+            buildReach(needed);
+            reach_built = true;
+          }
+          const int L = reach_.steps(ci, cj, ck);
           const double reach = before + std::max(0, L - 1) * res / v;  // nothing there before this
           const double kept = std::isnan(free_until_[c]) ? reach : std::max<double>(free_until_[c], reach);
           if (kept < now) {

@@ -75,6 +75,7 @@
 #include <string>
 #include <vector>
 
+#include "moverl_planning_scene/grid_reach.h"
 #include "moverl_planning_scene/pinhole_camera.h"
 #include "moverl_planning_scene/unset.h"
 
@@ -431,11 +432,10 @@ class OccupancyMap {
   /// The cell ids of a block's cells (bit n: cell_offset_[n] from its first cell), first cell id and which bits lie
   /// inside the grid.
   std::int64_t blockFirstCell(const std::int64_t* block_at) const;
-  /// Cells within Chebyshev index distance `up_to` of cell (i, j, k) that count as possibly occupied (occupied_, or
-  ///        outside the grid): the smallest such distance L in [1, up_to], or a lower bound on it above up_to. Near
-  ///        solid cells, the steps of a path between neighbouring cells that are not solid instead (a person goes
-  ///        around a table, not through it).
-  int chebyshevToOccupied(std::int64_t i, std::int64_t j, std::int64_t k, int up_to) const;
+  /// The steps from the cells to the nearest possibly-occupied cell (occupied_) or the grid's outside, around the
+  ///        solid cells (a person goes around a table, not through it): reach_, exact up to needed (kCellSearch at
+  ///        most), a lower bound beyond (GridReach).
+  void buildReach(int needed);
   /// The watched cells: the free cells within watch_cells_ (Chebyshev, in cells) of a possibly-occupied cell or of the
   /// grid's edge. full: recompute every block's (else only near the blocks whose cells changed since: grown_blocks_).
   void updateWatched(bool full);
@@ -551,6 +551,8 @@ class OccupancyMap {
   std::vector<std::uint64_t> watch_scratch_a_, watch_scratch_b_;  ///< watchAll's bit sets
   static constexpr int kIntervals = 8;                            ///< the batches whose intervals size the watch
   double intervals_[kIntervals] = {};                             ///< s: the last batches' intervals (0: none yet)
+  GridReach reach_;                          ///< closeBatch's steps to the possibly-occupied cells (buildReach)
+  std::vector<std::uint8_t> reach_blocks_;   ///< buildReach's blocks holding a possibly-occupied cell, in x, y, z order
   std::vector<std::uint8_t> reach_scratch_;  ///< closeBatch's blocks, when a batch came later than the watch covers
   int closes_since_full_watch_ = 0;
   double batch_stamp_ = std::numeric_limits<double>::quiet_NaN();

@@ -74,7 +74,8 @@ def describe_unseen(census: "SensedCensus | None", world: str) -> str:
     stale = 100.0 * census.stale / census.cells
     return (
         f"{share:.0f} % of the robot's reach (the {census.radius:.2f} m ball around its base) is space no camera "
-        f"sees ({unseen:.0f} % never seen, {stale:.0f} % hidden since it was seen free): {_where(census)}; "
+        f"sees ({unseen:.0f} % never seen, {stale:.0f} % hidden since it was seen free, where something moving at the "
+        f"world's sensing speed_bound may have come since): {_where(census)}; "
         f"world '{world}' counts unseen space as occupied (sensing: unknown_occupied), so the robot may not move "
         f"there. What the cameras see: {CAMERAS_TOOL}; docs/sensing.md, 'Placing your cameras'"
     )

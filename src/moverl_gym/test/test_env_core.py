@@ -202,6 +202,45 @@ def test_starts_are_sampled_over_the_whole_range_when_home_is_blocked():
         env.close()
 
 
+def test_a_later_reset_that_finds_nothing_free_starts_where_the_robot_stands():
+    """Nothing free at the first reset: the world cannot be used as it is (NoFreeConfiguration, not a graph failure to
+    relaunch). Nothing free later (sensed space the arm's own shadow turned possibly occupied): the episode starts
+    where the robot stands, info says why, and the goal is the last one."""
+    from moverl_gym.errors import NoFreeConfiguration
+
+    backend = _HomeBlocked()
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=backend, shield=False, recover=True,
+                   task={"start_sampling_attempts": 20})  # fmt: skip
+    try:
+        _, info = env.reset(seed=0)
+        assert "no_free_start" not in info
+        env.step(env.action_space.sample())
+        u = env.unwrapped
+        stood, goal = u.q.copy(), u.task.goal.copy()
+        backend.everywhere = True
+        with pytest.warns(UserWarning, match="starts where the robot stands"):
+            _, info = env.reset()
+        assert "20 random samples" in info["no_free_start"]
+        np.testing.assert_allclose(u.q, stood, atol=1e-6)
+        np.testing.assert_allclose(u.task.goal, goal)
+        assert info["graph_failures"] == 0 and info["graph_restarts"] == 0
+        _, info = env.reset()  # (warned once)
+        assert "no_free_start" in info
+        backend.everywhere = False
+        _, info = env.reset()
+        assert "no_free_start" not in info
+    finally:
+        env.close()
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=_HomeBlocked(everywhere=True), shield=False, recover=True,
+                   task={"start_sampling_attempts": 20})  # fmt: skip
+    try:
+        with pytest.raises(NoFreeConfiguration, match="no collision-free"):
+            env.reset(seed=0)
+        assert env.unwrapped.graph_failures == 0
+    finally:
+        env.close()
+
+
 def test_the_env_step_deadline_exceeds_the_shields_own_bound():
     """config/env.yaml's step_timeout against the shield's bound from the shipped config files (the env checks the
     live graph's parameters the same way at start-up)."""

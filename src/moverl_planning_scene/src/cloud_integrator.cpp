@@ -198,8 +198,8 @@ Integration CloudIntegrator::compute(const CloudView& cloud, const Eigen::Isomet
   return used;
 }
 
-bool CloudIntegrator::beginView(double stamp, MapUpdate* close) {
-  const bool closed = map_->beginView(stamp, close, &batch_known_free_);
+bool CloudIntegrator::beginView(double stamp, MapUpdate* close, BatchStats* stats) {
+  const bool closed = map_->beginView(stamp, close, &batch_known_free_, stats);
   if (closed) batch_configurations_.clear();
   return closed;
 }

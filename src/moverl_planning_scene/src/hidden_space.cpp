@@ -433,10 +433,10 @@ void OccupancyMap::makeStale(std::int64_t c) {
   refreshFree(c);
 }
 
-bool OccupancyMap::beginView(double stamp, MapUpdate* close, const KnownFree* known_free) {
+bool OccupancyMap::beginView(double stamp, MapUpdate* close, const KnownFree* known_free, BatchStats* stats) {
   if (!options_.hidden_space) return false;
   bool closed = false;
-  if (!std::isnan(batch_stamp_) && stamp > batch_stamp_) closed = closeBatch(close, nullptr, known_free);
+  if (!std::isnan(batch_stamp_) && stamp > batch_stamp_) closed = closeBatch(close, stats, known_free);
   if (std::isnan(batch_stamp_) && stamp > map_time_) batch_stamp_ = stamp;
   recording_ = stamp == batch_stamp_;  // else late: it sees nothing free that another view may contradict
   return closed;

@@ -231,7 +231,13 @@ bool OctomapMonitor::init(std::string* error) {
     listed = !cameras_.empty();
   }
   ros::WallTime camera_deadline;
-  while (clouds_ == 0 || (!unheard.empty() && ros::WallTime::now() < camera_deadline)) {
+  // (The others' wait counts from the first cloud: set in the condition, so that a first cloud that came during the
+  // sleep below does not end the wait before it began.)
+  auto others_waited = [&] {
+    if (camera_deadline.isZero()) camera_deadline = ros::WallTime::now() + ros::WallDuration(camera_wait_);
+    return ros::WallTime::now() >= camera_deadline;
+  };
+  while (clouds_ == 0 || (!unheard.empty() && !others_waited())) {
     if (!ros::ok()) {
       *error = "shut down while waiting for the first point clouds";
       return false;
@@ -257,8 +263,6 @@ bool OctomapMonitor::init(std::string* error) {
                joint_sub_.getTopic() + "?";
       return false;
     }
-    if (clouds_ > 0 && camera_deadline.isZero())
-      camera_deadline = ros::WallTime::now() + ros::WallDuration(camera_wait_);
     ros::WallDuration(0.01).sleep();
     unheard = unheardCameras();
   }
@@ -447,8 +451,8 @@ void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   // The world's motions restarted (a reset teleported what moves): nothing hidden is known to be free any more.
   if (forget_pending_.exchange(false)) map_->forgetAtNextClose();
   // The clouds of one instant are one batch of the map's hidden space: a cloud stamped later closes the open one.
-  if (cloud_integrator_->beginView(msg->header.stamp.toSec(), &close_update_)) {
-    batch_stats_ = BatchStats();
+  // (A batch closed here, by the next instant's first cloud, reports what it found as one closed by its last.)
+  if (cloud_integrator_->beginView(msg->header.stamp.toSec(), &close_update_, &batch_stats_)) {
     intoMaps(close_update_, ros::Time(close_update_.stamp), "");
   }
   const Integration used = cloud_integrator_->compute(view, pose, configurations_, &update_, nullptr, &why);

@@ -24,7 +24,7 @@ from moverl_msgs.srv import ShieldStepResponse as _Step
 from moverl_msgs.srv import ValidateMotionResponse as _Motion
 
 from .backend import Backend
-from .errors import MoveRLError
+from .errors import MoveRLError, NoFreeConfiguration
 from .graph import GraphError
 from .launch_args import LaunchArgError
 from .launch_args import check as check_launch_args
@@ -176,6 +176,9 @@ class MoveRLReachEnv(gym.Env):
         self._failure = None  # what failed, until the next reset relaunches the graph
         self._restarts_in_a_row = 0
         self._steps_since_restart = 0
+        self._resets_done = 0  # successful resets (the first one raises NoFreeConfiguration; later ones stay put)
+        self._no_free_start = ""
+        self._warned_no_free_start = False
         self._backend = None
         # Every launch argument checked before anything starts (moverl_gym.launch_args). world and robot are checked
         # by the backend that uses them as files (the PyBullet one; the ROS one when it launches a graph): attached to a
@@ -333,6 +336,8 @@ class MoveRLReachEnv(gym.Env):
             restarted = self._relaunch()
         try:
             obs, info = self._reset(options)
+        except NoFreeConfiguration:
+            raise  # the graph works: a relaunch would find the same world
         except MoveRLError as exc:
             if not self.recover:
                 raise
@@ -375,7 +380,13 @@ class MoveRLReachEnv(gym.Env):
         if "goal" in options:
             self.task = self._make_task(options["goal"])
         elif self.config.goal_noise > 0:
-            self.task = self._make_task(self._sample_goal())
+            try:
+                self.task = self._make_task(self._sample_goal())
+            except NoFreeConfiguration:
+                if self._resets_done == 0:
+                    raise
+                # (later: the episode keeps the last goal; the start below says whether anything is free)
+        self._no_free_start = ""
         res = self._reset_robot(options.get("start"))
         self._episode_steps = 0
         self.q = res.q
@@ -388,6 +399,9 @@ class MoveRLReachEnv(gym.Env):
         info.update(distance=self.distance, is_success=self.task.is_success(self.distance))
         if res.moves:  # a planned reset (a driver that cannot teleport): what it ran
             info["reset_moves"], info["reset_path_duration"] = res.moves, res.path_duration
+        if self._no_free_start:
+            info["no_free_start"] = self._no_free_start
+        self._resets_done += 1
         return self._observation(), info
 
     def _reset_robot(self, start):
@@ -410,7 +424,19 @@ class MoveRLReachEnv(gym.Env):
             if start is not None:
                 q = np.asarray(start, dtype=np.float64)
             else:
-                q = self._sample_start_or_look_again(near_home=refused < max(1, attempts // 10))
+                try:
+                    q = self._sample_start_or_look_again(near_home=refused < max(1, attempts // 10))
+                except NoFreeConfiguration as exc:
+                    if self._resets_done == 0:
+                        raise  # the world as the env first sees it leaves nothing free: say so
+                    # Later (the arm's own shadow, a person standing close): the episode starts where the robot
+                    # stands, which the shield keeps safe (it moves only into space known free), rather than end a
+                    # training run whose graph works.
+                    if not self._warned_no_free_start:
+                        gym.logger.warn(f"{exc}; the episode starts where the robot stands (info['no_free_start'])")
+                        self._warned_no_free_start = True
+                    self._no_free_start = str(exc)
+                    return self._reset_robot("current")
             res = self._backend.reset(q)
             if res.success:
                 return res
@@ -449,7 +475,7 @@ class MoveRLReachEnv(gym.Env):
             q = self.np_random.uniform(lo, hi)
             if self._backend.check_state(q):
                 return self._backend.ee_pose(q)[:3]
-        raise MoveRLError(
+        raise NoFreeConfiguration(
             f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
             f"random samples of world '{self.world_name}'{self._unseen_reason()}"
         )
@@ -469,7 +495,7 @@ class MoveRLReachEnv(gym.Env):
                     self.task.distance(self._backend.ee_pose(q)[:3])
                 ):
                     return q
-        raise MoveRLError(
+        raise NoFreeConfiguration(
             f"no collision-free start configuration found in {self.config.start_sampling_attempts} random samples "
             f"{'near home nor as many ' if len(ranges) > 1 else ''}over the joint range of world '{self.world_name}'"
             f"{self._unseen_reason()}"

@@ -83,8 +83,9 @@ class CloudIntegrator {
   ///        free again (unknown_occupied). Call from the thread that calls compute.
   void staticObjectsChanged() { static_known_free_ = true; }
   /// \brief The map's hidden space (OccupancyMapOptions::hidden_space): the next cloud is stamped `stamp` (s);
-  ///        OccupancyMap::beginView, the batch it closes vouched for as closeBatch below. True with *close to apply.
-  bool beginView(double stamp, MapUpdate* close);
+  ///        OccupancyMap::beginView, the batch it closes vouched for as closeBatch below. True with *close to apply
+  ///        (and *stats, optional, what the close found).
+  bool beginView(double stamp, MapUpdate* close, BatchStats* stats = nullptr);
   /// \brief OccupancyMap::closeBatch, the robot's padding band in the configurations of the batch's clouds known free
   ///        (as compute's addKnownFree: nobody stands there).
   bool closeBatch(MapUpdate* close, BatchStats* stats = nullptr);

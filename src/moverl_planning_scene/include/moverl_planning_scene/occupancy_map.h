@@ -281,8 +281,8 @@ class OccupancyMap {
   ///        before it is open, that batch is closed first into *close (closeBatch, with known_free) and true is
   ///        returned: apply it, to every map, before this view's update. A view stamped before the open batch, or at
   ///        or before the last closed one, is late (its update says so: MapUpdate::late). Off (not hidden_space):
-  ///        false, nothing to do.
-  bool beginView(double stamp, MapUpdate* close, const KnownFree* known_free = nullptr);
+  ///        false, nothing to do. stats: what the close found (optional, as closeBatch's).
+  bool beginView(double stamp, MapUpdate* close, const KnownFree* known_free = nullptr, BatchStats* stats = nullptr);
   /// \brief hidden_space: close the open batch into *close (apply it to every map): the free cells no view of the
   ///        batch saw, that known_free (optional) does not vouch for, and that something possibly occupied may have
   ///        reached by the batch's stamp turn possibly occupied, then the batch's held misses go in. False (nothing to

@@ -23,7 +23,7 @@ from control_msgs.msg import FollowJointTrajectoryResult as _Fjt
 from moverl_msgs.srv import ShieldStepResponse as _Step
 from moverl_msgs.srv import ValidateMotionResponse as _Motion
 
-from .backend import Backend
+from .backend import Backend, StepResult
 from .errors import MoveRLError, NoFreeConfiguration
 from .graph import GraphError
 from .launch_args import LaunchArgError
@@ -85,6 +85,9 @@ FAILURES = {
     _Step.DRIVER_UNAVAILABLE: "robot driver",
     _Step.STATE_UNAVAILABLE: "robot joint states",
 }
+#: The verdict of a step that has none (it failed before the shield answered, or with a FAILURES verdict, and the env
+#: recovers: info["verdict"] is "graph_failed"); no ShieldStep code.
+_NO_VERDICT = -1
 #: The driver stopped the move on the way (e.g. the arm was blocked): the episode ends (truncated).
 ABORTED = _Step.ABORTED
 #: control_msgs/FollowJointTrajectoryResult error codes by value (info["driver_error"]).
@@ -527,28 +530,20 @@ class MoveRLReachEnv(gym.Env):
             if not self.recover:
                 raise
             self._fail(exc)
-            # The episode ends here; the next reset() relaunches the graph. The robot did not move.
-            info = {
-                "verdict": "graph_failed",
-                "graph_failure": str(exc),
-                "graph_restarts": self.graph_restarts,
-                "graph_failures": self.graph_failures,
-                "collision_type": None,
-                "discarded": False,
-                "replanned": False,
-                "contacts": 0,
-                "contact_substeps": 0,
-                "contacts_moving": 0,
-                "contacts_resting": 0,
-                "cost": 0.0,
-                "cost_contact": 0.0,
-                "distance": self.distance,
-                "is_success": False,
-                "driver_error": None,
-                "message": str(exc),
-                "strategy": "",
-                "planning_time": 0.0,
-            }
+            # The episode ends here; the next reset() relaunches the graph. The robot did not move, and nothing of the
+            # step was measured: no answer, the facts of a step where nothing happened.
+            nothing = StepResult(
+                _NO_VERDICT,
+                str(exc),
+                self.q,
+                self._stamp,
+                self.ee,
+                contacts=0,
+                contact_substeps=0,
+                contacts_moving=0,
+                contacts_resting=0,
+            )
+            info = self._step_info(nothing, self.distance, False, None, failure=str(exc))
             return self._observation(), 0.0, False, True, info
         round_trip = time.perf_counter() - t0
         self._steps_since_restart += 1
@@ -565,10 +560,36 @@ class MoveRLReachEnv(gym.Env):
         reward = self.task.reward(self.distance, d, discarded, res.contacts)
         self.distance = d
         success = self.task.is_success(d)
-        contacts = res.contacts
         self.last_timing = dict(round_trip=round_trip, **res.timing)
+        info = self._step_info(res, d, success, tracks)
+        # The driver stopped the move on the way (a path or goal tolerance, e.g. the arm was blocked): the robot
+        # stands where it stopped, and the episode ends here (truncated; info["driver_error"] says why).
+        aborted = verdict == ABORTED
+        self._episode_steps += 1
+        truncated = aborted or (not success and self._episode_steps >= self.config.max_episode_steps)
+        return self._observation(), reward, success, truncated, info
+
+    def _step_info(
+        self, res: StepResult, distance: float, success: bool, tracks: "dict | None", failure: "str | None" = None
+    ) -> dict:
+        """A step's info (docs/env.md, "info"), from the step's facts: the backend's answer `res`, the goal distance
+        and success after the step, the tracker's ages (track_ages and tracks_lost; {} without a tracker, None when
+        they were not read) and, for a step that failed (recover), what failed.
+
+        Every step has every key, whatever its path; only graph_failure (a failed step), driver_message (an aborted
+        step) and cost_contact (absent when contacts are unknown) come and go. A failed step's answer is the facts of
+        a step where nothing happened (no verdict, no contact, map_age -1 and sensed_margin 0: no map measured) and
+        its tracks are unread (age inf, lost).
+        """
+        verdict, contacts = res.verdict, res.contacts
+        discarded = verdict in DISCARDED
+        if tracks is None:
+            tracks = {}
+            if self._tracked is not None:
+                ages = np.full(len(self._tracked.ids), np.inf)
+                tracks = {"track_ages": ages, "tracks_lost": self._tracked.lost(ages)}
         info = {
-            "verdict": VERDICTS.get(verdict, str(verdict)),
+            "verdict": "graph_failed" if failure is not None else VERDICTS.get(verdict, str(verdict)),
             "collision_type": _collision_type(verdict, res.unsafe_cause),
             "discarded": discarded,
             "replanned": verdict == _Step.REPLANNED,
@@ -580,7 +601,7 @@ class MoveRLReachEnv(gym.Env):
             "contacts_moving": int(res.contacts_moving),
             "contacts_resting": int(res.contacts_resting),
             "cost": float(discarded or contacts > 0),
-            "distance": d,
+            "distance": distance,
             "is_success": success,
             "driver_error": DRIVER_ERRORS.get(res.driver_error_code) if res.driver_error_code else None,
             "message": res.message,  # the shield's words on the step (why an action was discarded, ...)
@@ -592,18 +613,16 @@ class MoveRLReachEnv(gym.Env):
             "graph_failures": self.graph_failures,
             **tracks,
         }
+        if failure is not None:
+            info["graph_failure"] = failure
         # Ground truth for constrained RL: 1.0 if the step's motion made contact. Absent when contacts are unknown (a
         # driver without ground truth: a constrained agent cannot learn there, and NaN would make equal steps unequal).
         if contacts >= 0:
             info["cost_contact"] = float(contacts > 0)
-        # The driver stopped the move on the way (a path or goal tolerance, e.g. the arm was blocked): the robot
-        # stands where it stopped, and the episode ends here (truncated; info["driver_error"] says why).
-        aborted = verdict == ABORTED
-        if aborted:
+        # The driver stopped the move on the way: info["driver_error"] says why, and this the driver's words.
+        if verdict == ABORTED:
             info["driver_message"] = res.message
-        self._episode_steps += 1
-        truncated = aborted or (not success and self._episode_steps >= self.config.max_episode_steps)
-        return self._observation(), reward, success, truncated, info
+        return info
 
     def _observation(self) -> np.ndarray:
         # [joints] ee goal obstacles, written into the preallocated float64 buffer (no list, no concatenate).

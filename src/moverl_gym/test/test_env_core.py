@@ -121,8 +121,8 @@ def test_the_bullet_backend_has_no_shield():
 class _FailsOnce(moverl_gym.bullet_backend.BulletBackend):
     """The PyBullet backend with one failure injected where a graph's can happen: at a step or at a reset."""
 
-    def __init__(self, where: str):
-        super().__init__("table")
+    def __init__(self, where: str, world: str = "table"):
+        super().__init__(world)
         self.where, self.failed, self.restarts = where, False, 0
 
     def _maybe_fail(self, where):
@@ -164,6 +164,40 @@ def test_recovery_counts_a_failure_found_at_a_step_or_at_a_reset(where):
         assert backend.restarts == 1
         _, _, _, _, info = env.step(np.zeros(7, dtype=np.float32))
         assert info["verdict"] == "unchecked" and info["graph_failures"] == 1
+    finally:
+        env.close()
+
+
+class _TrackedFailsOnce(_FailsOnce):
+    """_FailsOnce with the observed obstacles' poses from a tracker (obstacle_poses:=tracker) that never delivers one:
+    every track is lost, age inf."""
+
+    obstacle_poses = "tracker"
+
+    def track(self, tracked):
+        self.tracked = tracked
+
+
+@pytest.mark.parametrize("tracker", [False, True], ids=["world_file", "tracker"])
+def test_a_failed_step_has_every_key_of_a_step(tracker):
+    """A step that failed (recover: verdict graph_failed) has the info keys of a step the backend answered, and
+    graph_failure besides (tools/benchmark.py reads info["map_age"] of every step); what it did not measure has the
+    value of no measurement: map_age -1 and sensed_margin 0 (no sensed map), track ages inf (never seen)."""
+    backend = (_TrackedFailsOnce if tracker else _FailsOnce)("step", world="human")
+    env = gym.make("MoveRL/PandaReachHuman-v0", backend=backend, shield=False, recover=True)
+    try:
+        env.reset(seed=0)
+        _, _, _, _, failed = env.step(np.zeros(7, dtype=np.float32))
+        assert failed["verdict"] == "graph_failed"
+        env.reset()
+        _, _, _, _, answered = env.step(np.zeros(7, dtype=np.float32))
+        assert answered["verdict"] == "unchecked"
+        assert sorted(failed) == sorted([*answered, "graph_failure"])
+        assert failed["map_age"] == -1.0 and failed["sensed_margin"] == 0.0
+        assert ("track_ages" in failed) == tracker
+        if tracker:
+            assert len(failed["track_ages"]) == len(answered["track_ages"]) == 4
+            assert np.all(np.isinf(failed["track_ages"])) and failed["tracks_lost"] == 4
     finally:
         env.close()
 

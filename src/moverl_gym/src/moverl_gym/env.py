@@ -619,7 +619,7 @@ class MoveRLReachEnv(gym.Env):
         # driver without ground truth: a constrained agent cannot learn there, and NaN would make equal steps unequal).
         if contacts >= 0:
             info["cost_contact"] = float(contacts > 0)
-        # The driver stopped the move on the way: info["driver_error"] says why, and this the driver's words.
+        # The driver stopped the move on the way (info["driver_error"] says why): its message under this key too.
         if verdict == ABORTED:
             info["driver_message"] = res.message
         return info

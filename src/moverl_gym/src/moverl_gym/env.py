@@ -436,7 +436,8 @@ class MoveRLReachEnv(gym.Env):
                     # stands, which the shield keeps safe (it moves only into space known free), rather than end a
                     # training run whose graph works.
                     if not self._warned_no_free_start:
-                        gym.logger.warn(f"{exc}; the episode starts where the robot stands (info['no_free_start'])")
+                        # (warn formats its message with %: the reason holds percentages)
+                        gym.logger.warn("%s; the episode starts where the robot stands (info['no_free_start'])", exc)
                         self._warned_no_free_start = True
                     self._no_free_start = str(exc)
                     return self._reset_robot("current")

@@ -335,14 +335,14 @@ def python_tuple(path: Path, pattern: str) -> set[str]:
     return set(ast.literal_eval(found.group(1)))
 
 
-SIM_NODE = REPO / "src/moverl_sim/scripts/sim_node"
+SIM_NODE_CONFIG = REPO / "src/moverl_sim/src/moverl_sim/node_config.py"  # the simulator node's parameter checks
 NODE_LISTS = {
     "strategy": shield_strategies,
     "profile": shield_profiles,
     "driver": shield_drivers,
     "obstacles": scene_obstacles,
-    "mode": lambda: python_tuple(SIM_NODE, "self.mode not in "),
-    "control": lambda: python_tuple(SIM_NODE, "control not in "),
+    "mode": lambda: python_tuple(SIM_NODE_CONFIG, "mode not in "),
+    "control": lambda: python_tuple(SIM_NODE_CONFIG, "control not in "),
     "control (moverl_sim.core)": lambda: python_tuple(
         REPO / "src/moverl_sim/src/moverl_sim/core.py", "control not in "
     ),

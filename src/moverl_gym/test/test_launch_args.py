@@ -27,7 +27,7 @@ import yaml
 
 import moverl_gym  # noqa: F401  (registers the env ids)
 import moverl_gym.env  # noqa: F401  (imported here, so that the refusals below are not timed with the import)
-from moverl_gym import reaper
+from moverl_gym import launch_args, reaper
 from moverl_gym.graph import LaunchedGraph
 from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, LaunchArgError, check, launch_value
 from moverl_gym.paths import launch_file, repo_root
@@ -180,6 +180,59 @@ def test_a_wrong_robot_config_is_refused_naming_the_file_and_key(tmp_path):
     assert "did you mean 'acceleration_limits'" in msg and "valid keys: name, urdf, joints" in msg
     _, msg = refused(lambda: gym.make(ENV_ID, backend="bullet", shield=False, launch_args={"robot_config": str(bad)}))
     assert "accel_limits" in msg
+
+
+class Launched(Exception):
+    """Raised where a graph's reaper would start: the arguments got through."""
+
+
+def checks_until_launch(monkeypatch, make) -> list[list[str]]:
+    """The names each check of launch arguments got (one list per check), in process, from make() until a graph's
+    reaper would start (it does not: make() stops there)."""
+    calls = []
+    real = launch_args._check
+
+    def counting(args, whole, base):
+        calls.append(sorted(args))
+        return real(args, whole, base)
+
+    def launch(*args, **kwargs):
+        raise Launched
+
+    monkeypatch.setattr(launch_args, "_check", counting)
+    monkeypatch.setattr(reaper.Handle, "__init__", launch)
+    monkeypatch.delenv("ROS_MASTER_URI", raising=False)
+    with pytest.raises(Launched):
+        make()
+    return calls
+
+
+def test_each_value_is_checked_once_on_the_way_to_a_graph(monkeypatch):
+    """Issue 54 item 2: the env checks its launch_args once, the ROS backend adds the world and robot (checked then,
+    with what they combine with), LaunchedGraph takes the result as it is; roslaunch's own check is another process.
+    A graph launched without an env is checked once, by LaunchedGraph."""
+    given = {"mode": "realtime", "obstacles": "sensed", "mute_cameras": "[left]", "initial_positions": [0.0] * 6}
+    calls = checks_until_launch(
+        monkeypatch, lambda: gym.make(ENV_ID, world="human", robot="xarm6", graph="launch", launch_args=given)
+    )
+    assert calls == [sorted(["shield", *given]), ["robot", "world"]], calls
+    calls = checks_until_launch(monkeypatch, lambda: LaunchedGraph({"world": "human", **given, "robot": "xarm6"}))
+    assert calls == [sorted(["world", "robot", *given])], calls
+
+
+def test_a_check_that_needs_the_world_or_the_robot_waits_for_it():
+    """The env's launch_args come without the world and the robot: the checks that need them run when they come (the
+    joints of the env's robot, not of the default one), and only those; a whole launch takes the defaults."""
+    partial = launch_args.checked({"initial_positions": [0.0] * 6, "mute_cameras": "[nope]"})
+    assert not partial.whole and partial.values["initial_positions"] == "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]"
+    _, msg = refused(lambda: partial.adding({"world": "human", "robot": "panda"}))
+    assert "has 6 numbers; robot panda has 7" in msg and "no camera nope" in msg, msg
+    _, msg = refused(lambda: launch_args.checked(partial, whole=True))
+    assert "robot panda has 7" in msg and "no camera nope" in msg, msg
+    fine = launch_args.checked({"initial_positions": [0.0] * 6}).adding({"world": "human", "robot": "xarm6"}, True)
+    assert fine.whole and launch_args.checked(fine, whole=True) is fine
+    launched = fine.with_world_file().values
+    assert "world" not in launched and launched["world_file"] == str(REPO / "worlds" / "human.yaml")
 
 
 # -- roslaunch -----------------------------------------------------------------------------------------------------

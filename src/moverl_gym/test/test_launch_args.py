@@ -10,7 +10,6 @@ running their command params, and never starts a master or a node).
   nodes that parse a value themselves (the shield's C++, the simulator node): a value added in one place only fails.
 """
 
-import ast
 import os
 import re
 import shlex
@@ -27,11 +26,13 @@ import yaml
 
 import moverl_gym  # noqa: F401  (registers the env ids)
 import moverl_gym.env  # noqa: F401  (imported here, so that the refusals below are not timed with the import)
-from moverl_gym import reaper
+from moverl_gym import launch_args, reaper
 from moverl_gym.graph import LaunchedGraph
 from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, LaunchArgError, check, launch_value
 from moverl_gym.paths import launch_file, repo_root
 from moverl_gym.proctree import TreeWatch
+from moverl_sim import core as sim_core
+from moverl_sim import node_config
 
 pytestmark = pytest.mark.core
 
@@ -182,6 +183,59 @@ def test_a_wrong_robot_config_is_refused_naming_the_file_and_key(tmp_path):
     assert "accel_limits" in msg
 
 
+class Launched(Exception):
+    """Raised where a graph's reaper would start: the arguments got through."""
+
+
+def checks_until_launch(monkeypatch, make) -> list[list[str]]:
+    """The names each check of launch arguments got (one list per check), in process, from make() until a graph's
+    reaper would start (it does not: make() stops there)."""
+    calls = []
+    real = launch_args._check
+
+    def counting(args, whole, base):
+        calls.append(sorted(args))
+        return real(args, whole, base)
+
+    def launch(*args, **kwargs):
+        raise Launched
+
+    monkeypatch.setattr(launch_args, "_check", counting)
+    monkeypatch.setattr(reaper.Handle, "__init__", launch)
+    monkeypatch.delenv("ROS_MASTER_URI", raising=False)
+    with pytest.raises(Launched):
+        make()
+    return calls
+
+
+def test_each_value_is_checked_once_on_the_way_to_a_graph(monkeypatch):
+    """Issue 54 item 2: the env checks its launch_args once, the ROS backend adds the world and robot (checked then,
+    with what they combine with), LaunchedGraph takes the result as it is; roslaunch's own check is another process.
+    A graph launched without an env is checked once, by LaunchedGraph."""
+    given = {"mode": "realtime", "obstacles": "sensed", "mute_cameras": "[left]", "initial_positions": [0.0] * 6}
+    calls = checks_until_launch(
+        monkeypatch, lambda: gym.make(ENV_ID, world="human", robot="xarm6", graph="launch", launch_args=given)
+    )
+    assert calls == [sorted(["shield", *given]), ["robot", "world"]], calls
+    calls = checks_until_launch(monkeypatch, lambda: LaunchedGraph({"world": "human", **given, "robot": "xarm6"}))
+    assert calls == [sorted(["world", "robot", *given])], calls
+
+
+def test_a_check_that_needs_the_world_or_the_robot_waits_for_it():
+    """The env's launch_args come without the world and the robot: the checks that need them run when they come (the
+    joints of the env's robot, not of the default one), and only those; a whole launch takes the defaults."""
+    partial = launch_args.checked({"initial_positions": [0.0] * 6, "mute_cameras": "[nope]"})
+    assert not partial.whole and partial.values["initial_positions"] == "[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]"
+    _, msg = refused(lambda: partial.adding({"world": "human", "robot": "panda"}))
+    assert "has 6 numbers; robot panda has 7" in msg and "no camera nope" in msg, msg
+    _, msg = refused(lambda: launch_args.checked(partial, whole=True))
+    assert "robot panda has 7" in msg and "no camera nope" in msg, msg
+    fine = launch_args.checked({"initial_positions": [0.0] * 6}).adding({"world": "human", "robot": "xarm6"}, True)
+    assert fine.whole and launch_args.checked(fine, whole=True) is fine
+    launched = fine.with_world_file().values
+    assert "world" not in launched and launched["world_file"] == str(REPO / "worlds" / "human.yaml")
+
+
 # -- roslaunch -----------------------------------------------------------------------------------------------------
 def roslaunch(*args: str, launch: Path | None = None) -> tuple[float, subprocess.CompletedProcess]:
     """roslaunch --dump-params launch/moverl.launch <args> (reads the files, runs their command params, never starts
@@ -328,24 +382,18 @@ def scene_obstacles() -> set[str]:
     return set(re.findall(r'obstacles_ != "(\w+)"', check_line))
 
 
-def python_tuple(path: Path, pattern: str) -> set[str]:
-    """The tuple literal after `pattern` (e.g. 'control not in ') in a Python source."""
-    found = re.search(re.escape(pattern) + r"(\([^)]*\))", path.read_text())
-    assert found, f"{pattern!r} not in {path}"
-    return set(ast.literal_eval(found.group(1)))
-
-
-SIM_NODE_CONFIG = REPO / "src/moverl_sim/src/moverl_sim/node_config.py"  # the simulator node's parameter checks
+#: Each node's own list of the values it accepts. The simulator's are its modules' constants, the ones its checks
+#: use (moverl_sim.node_config, moverl_sim.core). The C++ nodes' are read from their source: no way to ask them exists
+#: without a ROS master (a node reads its parameters from one, and refuses a value only then), no binary prints its
+#: list, and no data file is read by both sides; so a reformat of those functions breaks these readers.
 NODE_LISTS = {
     "strategy": shield_strategies,
     "profile": shield_profiles,
     "driver": shield_drivers,
     "obstacles": scene_obstacles,
-    "mode": lambda: python_tuple(SIM_NODE_CONFIG, "mode not in "),
-    "control": lambda: python_tuple(SIM_NODE_CONFIG, "control not in "),
-    "control (moverl_sim.core)": lambda: python_tuple(
-        REPO / "src/moverl_sim/src/moverl_sim/core.py", "control not in "
-    ),
+    "mode": lambda: set(node_config.MODES),
+    "control": lambda: set(node_config.CONTROLS),
+    "control (moverl_sim.core)": lambda: set(sim_core.CONTROLS),
 }
 
 

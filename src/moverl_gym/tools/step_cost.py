@@ -42,9 +42,8 @@ from moverl_gym.workers import run_json_worker
 
 
 def parse_id(text: str) -> tuple[str, dict]:
-    """ "ID[,key=value...]" -> (ID, launch arguments), checked as the launch checks them."""
-    from moverl_gym.launch_args import check
-
+    """ "ID[,key=value...]" -> (ID, launch arguments), as given (main checks them before any worker starts; a worker's
+    env checks them once more, in its own process)."""
     env_id, *pairs = text.split(",")
     launch_args = {}
     for pair in pairs:
@@ -52,7 +51,6 @@ def parse_id(text: str) -> tuple[str, dict]:
         if not sep:
             raise SystemExit(f"step_cost.py: {pair!r} in {text!r} is not key=value")
         launch_args[key] = value
-    check(launch_args)
     return env_id, launch_args
 
 
@@ -237,11 +235,11 @@ def main(argv=None) -> int:
     if args.worker:
         print(json.dumps(worker(args.worker, args.steps, args.seed, args.profile)))
         return 0
-    from moverl_gym.launch_args import LaunchArgError
+    from moverl_gym.launch_args import LaunchArgError, check
 
     for text in args.ids:  # a wrong launch argument is refused before anything starts
         try:
-            parse_id(text)
+            check(parse_id(text)[1])
         except LaunchArgError as exc:
             raise SystemExit(f"step_cost.py: {text}: {exc}") from None
     results: dict[str, list] = {i: [] for i in args.ids}

@@ -27,7 +27,7 @@ from .backend import Backend, StepResult
 from .errors import MoveRLError, NoFreeConfiguration
 from .graph import GraphError
 from .launch_args import LaunchArgError
-from .launch_args import check as check_launch_args
+from .launch_args import checked as checked_launch
 from .paths import config_file
 from .robot import ActionScaler, JointLimits, chain_reach
 from .task import ReachTask, TaskConfig
@@ -183,14 +183,15 @@ class MoveRLReachEnv(gym.Env):
         self._no_free_start = ""
         self._warned_no_free_start = False
         self._backend = None
-        # Every launch argument checked before anything starts (moverl_gym.launch_args). world and robot are checked
-        # by the backend that uses them as files (the PyBullet one; the ROS one when it launches a graph): attached to a
-        # graph, world is only the name of the graph's world, and robot is not used.
+        # Every launch argument checked once, before anything starts (moverl_gym.launch_args): the backends take the
+        # result as it is. world and robot are checked by the backend that uses them as files (the PyBullet one; the
+        # ROS one when it launches a graph, with their combinations with these): attached to a graph, world is only
+        # the name of the graph's world, and robot is not used.
         launch_args = dict(launch_args or {})
         for name, instead in ENV_LAUNCH_ARGS.items():
             if name in launch_args:
                 raise LaunchArgError(f"launch_args[{name!r}]: give it as the env's argument {instead}")
-        check_launch_args(dict(shield=shield, **launch_args))
+        launch = checked_launch(dict(shield=shield, **launch_args))
         try:
             if isinstance(backend, Backend):
                 self._backend = backend
@@ -208,10 +209,12 @@ class MoveRLReachEnv(gym.Env):
 
                 self._backend = RosBackend(
                     graph,
-                    dict(world=world, robot=robot, shield=shield, **launch_args),
+                    launch,
                     call_timeout=self.config.step_timeout,
                     reset_timeout=self.config.reset_timeout,
                     step_duration=self.config.dt,
+                    world=world,
+                    robot=robot,
                 )
             else:
                 raise ValueError(f"backend must be 'ros', 'bullet' or a Backend, got {backend!r}")

@@ -24,10 +24,11 @@ import tempfile
 import time
 import uuid
 import xmlrpc.client
+from collections.abc import Mapping
 from pathlib import Path
 
 from . import reaper
-from .launch_args import check as check_launch_args
+from .launch_args import CheckedLaunch, checked
 from .paths import launch_file, repo_root
 
 #: Environment variable: the host name or address under which other hosts reach this machine. When set, graphs
@@ -88,7 +89,8 @@ class LaunchedGraph:
     bound to a master port must reuse it, see env.py).
 
     Args:
-        launch_args: roslaunch arguments (world, robot, shield, gui, ...).
+        launch_args: roslaunch arguments (world, robot, shield, gui, ...): a mapping, checked here (once, before
+            anything starts), or a CheckedLaunch, taken as it is (the env's, checked where it entered).
         port: master port; a free one by default.
         wait_for: services that must exist before the graph counts as up.
         timeout: seconds to wait for them (start-up as a whole).
@@ -105,7 +107,7 @@ class LaunchedGraph:
 
     def __init__(
         self,
-        launch_args: dict,
+        launch_args: Mapping[str, object] | CheckedLaunch,
         port: int | None = None,
         wait_for=(),
         timeout: float = 60.0,
@@ -113,7 +115,7 @@ class LaunchedGraph:
         grace: float | None = None,
         attempts: int = 5,
     ):
-        launch_args = check_launch_args(launch_args, whole=True)
+        launch_args = dict(checked(launch_args, whole=True).values)
         for tool in ("roslaunch", "rosmaster"):
             if shutil.which(tool) is None:
                 raise GraphError(f"{tool} is not on PATH: source devel/setup.bash (see README) first")

@@ -8,15 +8,20 @@ valid keys (moverl_sim.robot_config). It takes milliseconds; without it a wrong 
 the graph started (``roslaunch exited with code 0:``), a 60 s wait for services that never came, or not at all (an
 unknown value or name silently meant the default).
 
-Who checks with it:
+Who checks with it, each value once where it enters:
 
-* The env (MoveRLReachEnv, before it makes a backend) and LaunchedGraph (before its reaper starts anything), in
-  process.
+* In process, the entry point: the env (MoveRLReachEnv, before it makes a backend) checks its launch_args and shield
+  once (checked(), a CheckedLaunch); the ROS backend adds the world and robot when it launches a graph (their checks,
+  and those that combine them with the checked values, run then: CheckedLaunch.adding), and LaunchedGraph takes the
+  result as it is. A tool or test that builds a LaunchedGraph from a plain mapping has it checked there, once (before
+  its reaper starts anything).
 * roslaunch: moverl.launch's first tag after its arguments is ``<param name="moverl/launch_args" command=...>``,
   which runs scripts/check_launch_args.py with every argument while roslaunch reads the file; roslaunch starts nothing
   (no master, no node) when the command fails. roslaunch ignores a command-line argument that the file does not
   declare (``obstacle:=sensed``); the script checks those names too (from roslaunch's command line) when roslaunch
-  was asked to launch moverl.launch itself.
+  was asked to launch moverl.launch itself. This check is the launch file's own, in roslaunch's process: it guards
+  every way in (roslaunch, rostest, a file that includes moverl.launch) and writes /moverl/launch_args, so a graph the
+  env launches passes it too.
 
 Why a Python module, and not a commented YAML list in config/ read through roslaunch's ``$(eval)``: roslaunch cannot
 refuse a value by itself (``<arg>`` has no choices; ``$(eval)`` has no imports and fails with nothing better than the
@@ -39,7 +44,9 @@ import math
 import os
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from xml.etree import ElementTree
 
 import yaml
@@ -70,8 +77,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "profile": ("linear", "min_jerk"),  # moverl_shield/src/trajectory.cpp: profileName, parseProfile
     "obstacles": ("objects", "octomap", "both", "sensed"),  # moverl_planning_scene/src/scene_server.cpp
     "scene_process": ("shield", "own"),  # launch files only: moverl.launch maps it onto shield.launch's scene
-    "mode": ("lockstep", "realtime"),  # moverl_sim.node_config (moverl.launch derives the sim's mode from it)
-    "control": ("", "kinematic", "dynamic"),  # moverl_sim.node_config and .core; "": config/sim.yaml's
+    "mode": ("lockstep", "realtime"),  # moverl_sim.node_config.MODES (moverl.launch derives the sim's mode from it)
+    "control": ("", "kinematic", "dynamic"),  # moverl_sim.node_config.CONTROLS and .core's; "": config/sim.yaml's
     "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).
@@ -129,8 +136,9 @@ def check(args: Mapping[str, object], whole: bool = False) -> dict[str, str]:
     Args:
         args: name -> value (a string, a bool, a number, a list for initial_positions, a path).
         whole: these are all the arguments of a launch (the rest take their defaults): checks that need the world
-            file (sensing, mute_cameras) read the default world when none is given. False: some arguments only (the
-            env's launch_args, whose world comes separately): those checks wait for a world.
+            file (sensing, mute_cameras) or the robot (initial_positions' length) read the default world or robot when
+            none is given. False: some arguments only (the env's launch_args, whose world and robot come separately):
+            those checks wait for a world or a robot.
 
     Returns:
         name -> the value as ``name:=value`` text (launch_value), for the same names.
@@ -138,19 +146,76 @@ def check(args: Mapping[str, object], whole: bool = False) -> dict[str, str]:
     Raises:
         LaunchArgError: naming every wrong argument with its valid names or choices.
     """
+    return dict(_check(args, whole, None).values)
+
+
+@dataclass(frozen=True)
+class CheckedLaunch:
+    """Arguments of moverl.launch that check() accepted, as roslaunch's text: what the code below an entry point takes
+    as it is (RosBackend, LaunchedGraph), so that each value is checked once, where it enters. Made by checked() and
+    adding() only.
+
+    Attributes:
+        values: name -> the value as ``name:=value`` text, every one checked.
+        whole: they are all the arguments of a launch: the checks that need the world or the robot ran, with the
+            default world or robot where none is given (check's ``whole``).
+    """
+
+    values: Mapping[str, str]
+    whole: bool = False
+    #: The robot configs read while checking (path -> robot: section, None when wrong), for initial_positions' length.
+    _robots: Mapping = field(default_factory=dict, repr=False, compare=False)
+
+    def adding(self, args: Mapping[str, object], whole: bool = False) -> CheckedLaunch:
+        """These arguments with more: the new ones are checked, and so are the checks that combine them with these
+        (a new world's sensing with obstacles, a new robot's joints with initial_positions, ...), or that waited for
+        ``whole``; nothing checked already is checked again.
+
+        Raises:
+            LaunchArgError: naming every wrong new argument (or combination) with its valid names or choices.
+        """
+        return _check(args, whole or self.whole, self)
+
+    def with_world_file(self) -> CheckedLaunch:
+        """The same launch with its world given as a file (world_file, the world's file: checked with world), for
+        moverl.launch, whose world is a name."""
+        if "world" not in self.values:
+            return self
+        values = {k: v for k, v in self.values.items() if k != "world"}
+        values["world_file"] = str(world_file(self.values["world"]))
+        return CheckedLaunch(MappingProxyType(values), self.whole, self._robots)
+
+
+def checked(args: "Mapping[str, object] | CheckedLaunch", whole: bool = False) -> CheckedLaunch:
+    """Arguments for moverl.launch, checked once: a mapping is checked (check()); a CheckedLaunch is taken as it is
+    (with ``whole``, its checks that waited for the world or the robot run now, if they have not).
+
+    Raises:
+        LaunchArgError: naming every wrong argument with its valid names or choices.
+    """
+    if isinstance(args, CheckedLaunch):
+        return args if args.whole or not whole else args.adding({}, whole=True)
+    return _check(args, whole, None)
+
+
+def _check(args: Mapping[str, object], whole: bool, base: CheckedLaunch | None) -> CheckedLaunch:
+    """args checked, on top of base's checked values (None: none), as a CheckedLaunch; LaunchArgError otherwise."""
     problems = []
-    values = {}
+    new = {}
     for name, value in args.items():
         if name in ARGS:
-            values[name] = launch_value(value)
+            new[name] = launch_value(value)
         else:
             problems.append(_unknown_name(str(name)))
-    for name, text in values.items():
+    for name, text in new.items():
         if name in CHOICES:
             problems.append(_choice(name, text))
             if CHOICES[name] is BOOL:
-                values[name] = text.lower()
-    problems += _open_values(values, whole)
+                new[name] = text.lower()
+    before = base.values if base is not None else {}
+    values = {**before, **new}
+    robots = dict(base._robots) if base is not None else {}
+    problems += _open_values(values, new, whole, before, base is not None and base.whole, robots)
     problems = [p for p in problems if p]
     if len(problems) == 1:
         raise LaunchArgError(f"launch/moverl.launch: {problems[0]}")
@@ -158,7 +223,7 @@ def check(args: Mapping[str, object], whole: bool = False) -> dict[str, str]:
         raise LaunchArgError(
             f"launch/moverl.launch: {len(problems)} wrong arguments:\n" + "\n".join(f"  {p}" for p in problems)
         )
-    return values
+    return CheckedLaunch(MappingProxyType(values), whole, MappingProxyType(robots))
 
 
 def _closest(word: str, valid) -> str:
@@ -178,19 +243,36 @@ def _choice(name: str, text: str) -> str:
     return f"{name}={text!r} is not one of: {shown}{_closest(text, [c for c in choices if c])}"
 
 
-def _open_values(values: dict[str, str], whole: bool) -> list[str]:
-    """The problems of the arguments whose values are not a closed set (worlds, robots, names, numbers)."""
+#: The arguments each check of a combination reads (besides the world or the robot they need).
+_WORLD_INPUTS = ("world", "world_file", "obstacles", "mute_cameras")
+_ROBOT_INPUTS = ("robot", "robot_config", "initial_positions")
+
+
+def _knows_world(values: Mapping[str, str], whole: bool) -> bool:
+    return whole or "world" in values or "world_file" in values
+
+
+def _knows_robot(values: Mapping[str, str], whole: bool) -> bool:
+    return whole or "robot" in values or "robot_config" in values
+
+
+def _open_values(
+    values: dict[str, str], new: dict[str, str], whole: bool, before: Mapping[str, str], was_whole: bool, configs: dict
+) -> list[str]:
+    """The problems of the arguments whose values are not a closed set (worlds, robots, names, numbers): of the new
+    ones, and of the combinations a new one enters or that waited for a world or a robot (the rest, `before`, was
+    checked). configs: robot config file -> its robot: section (None when wrong), those read so far; more are added."""
     problems = []
     world = None
     if "world" in values:
         world = world_file(values["world"])
-        if not world.is_file():
-            known = worlds_available()
-            problems.append(
-                f"world={values['world']!r}: no world file {world} (worlds available: {known})"
-                f"{_closest(values['world'], known)}"
-            )
-    if "world_file" in values:
+    if "world" in new and not world.is_file():
+        known = worlds_available()
+        problems.append(
+            f"world={values['world']!r}: no world file {world} (worlds available: {known})"
+            f"{_closest(values['world'], known)}"
+        )
+    if "world_file" in new:
         path = Path(values["world_file"]).expanduser().resolve()
         # moverl.launch's default world_file is worlds/<world>.yaml: a wrong world is reported once, above.
         if not path.is_file() and path != world:
@@ -199,19 +281,19 @@ def _open_values(values: dict[str, str], whole: bool) -> list[str]:
                 f"world_file={values['world_file']!r}: no world file {path} (worlds available: {known})"
                 f"{_closest(path.stem, known)}"
             )
-    configs = {}  # robot config file -> its robot: section, or None when it is wrong
     robot = None
     if "robot" in values:
-        path = robot = robot_config_file(values["robot"])
-        if not path.is_file():
+        robot = robot_config_file(values["robot"])
+    if "robot" in new:
+        if not robot.is_file():
             known = robots_available()
             problems.append(
                 f"robot={values['robot']!r}: no robot config {values['robot']} (available: {', '.join(known)})"
                 f"{_closest(values['robot'], known)}"
             )
-        else:
-            problems.append(_robot_config(path, configs))
-    if "robot_config" in values:
+        elif robot not in configs:
+            problems.append(_robot_config(robot, configs))
+    if "robot_config" in new:
         path = Path(values["robot_config"]).expanduser().resolve()
         # moverl.launch's default robot_config is config/robots/<robot>.yaml: a wrong robot is reported once, above.
         if not path.is_file() and path != robot:
@@ -219,18 +301,23 @@ def _open_values(values: dict[str, str], whole: bool) -> list[str]:
         elif path.is_file() and path not in configs:
             problems.append(_robot_config(path, configs))
     for name in ("action", "joint_states"):
-        if name in values and not _ROS_NAME.match(values[name]):
+        if name in new and not _ROS_NAME.match(values[name]):
             problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
     for name in ("physics_hz", "motion_time_scale", "camera_rate"):
-        if values.get(name):
+        if name in new and values[name]:
             try:
                 x = float(values[name])
             except ValueError:
                 x = math.nan
             if not (math.isfinite(x) and x > 0):
                 problems.append(f"{name}={values[name]!r} is not {OPEN[name]}")
-    problems += _world_problems(values, whole)
-    if values.get("initial_positions"):
+    if _knows_world(values, whole) and (not _knows_world(before, was_whole) or any(n in new for n in _WORLD_INPUTS)):
+        problems += _world_problems(values)
+    positions = values.get("initial_positions")
+    if positions and "initial_positions" in new:
+        problems.append(_initial_positions(positions))
+    robot_due = not _knows_robot(before, was_whole) or any(n in new for n in _ROBOT_INPUTS)
+    if positions and _knows_robot(values, whole) and robot_due:
         # The robot the graph loads: robot_config, whose default is config/robots/<robot>.yaml.
         if "robot_config" in values:
             path = Path(values["robot_config"]).expanduser().resolve()
@@ -238,19 +325,19 @@ def _open_values(values: dict[str, str], whole: bool) -> list[str]:
             path = robot_config_file(values.get("robot", launch_defaults()["robot"]))
         if path not in configs and path.is_file():
             problems.append(_robot_config(path, configs))
-        problems.append(_initial_positions(values["initial_positions"], configs.get(path)))
+        problems.append(_joint_count(positions, configs.get(path)))
     return problems
 
 
-def _world_problems(values: dict[str, str], whole: bool) -> list[str]:
+def _world_problems(values: dict[str, str]) -> list[str]:
     """The world file the graph would load, where the other arguments need it: its sensing in the sensed modes (a
     speed bound below its fastest motion, no cameras: moverl_sim.world.sensing_problems), and mute_cameras' ids."""
     from moverl_sim.world import WorldFileError, load_world, sensing_problems
 
     sensed = values.get("obstacles", launch_defaults()["obstacles"]) in SENSED_OBSTACLES
     mute = values.get("mute_cameras", "")
-    if not sensed and not mute or not (whole or "world" in values or "world_file" in values):
-        return []  # (the env checks its launch_args before it knows the world; the launch checks them all again)
+    if not sensed and not mute:
+        return []
     world_name = values.get("world", launch_defaults()["world"])
     path = Path(values["world_file"]) if "world_file" in values else world_file(world_name)
     if not path.expanduser().is_file():
@@ -301,17 +388,25 @@ def _robot_config(path: Path, configs: dict) -> str:
     return ""
 
 
-def _initial_positions(text: str, robot: dict | None) -> str:
+def _positions(text: str) -> list | None:
+    """initial_positions' text as a list of finite numbers, or None."""
     try:
         q = yaml.safe_load(text)
     except yaml.YAMLError:
-        q = None
+        return None
     ok = isinstance(q, list) and all(
         isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in q
     )
-    if not ok:
-        return f"initial_positions={text!r} is not {OPEN['initial_positions']}"
-    if robot is not None and len(q) != len(robot["joints"]):
+    return q if ok else None
+
+
+def _initial_positions(text: str) -> str:
+    return "" if _positions(text) is not None else f"initial_positions={text!r} is not {OPEN['initial_positions']}"
+
+
+def _joint_count(text: str, robot: dict | None) -> str:
+    q = _positions(text)
+    if q is not None and robot is not None and len(q) != len(robot["joints"]):
         return (
             f"initial_positions={text!r} has {len(q)} numbers; robot {robot['name']} has {len(robot['joints'])} "
             f"controlled joints ({', '.join(robot['joints'])})"

@@ -18,6 +18,7 @@ import math
 import os
 import threading
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -27,8 +28,7 @@ from moverl_sim.world import ObjectMotion
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
 from .errors import MoveRLError
 from .graph import GraphError, LaunchedGraph, master_alive, service_exists
-from .launch_args import check as check_launch_args
-from .paths import world_file
+from .launch_args import CheckedLaunch, checked
 
 SHIELD_STEP = "/shield/step"
 SHIELD_RESET = "/shield/reset"
@@ -225,27 +225,36 @@ class RosBackend(Backend):
 
     Args:
         graph: "auto" (attach to $ROS_MASTER_URI if it serves MoveRL, else launch), "attach" or "launch".
-        launch_args: roslaunch arguments for a launched graph: world (a name or a path), robot, shield, driver, ...
+        launch_args: roslaunch arguments for a launched graph (shield, driver, ...; not world nor robot): a
+            CheckedLaunch (the env's), taken as it is, or a mapping, checked here.
         call_timeout: deadline of every call but resets (config/env.yaml step_timeout). Checked at start-up against
             the shield's own bound for a step of `step_duration` (shield_step_bound): it must be longer, so that a
             stalled component is reported by the shield (naming it) before this deadline reports the shield.
         reset_timeout: deadline of the shield's ~reset (config/env.yaml reset_timeout).
         step_duration: s a direct move lasts (the env's dt).
         wait_timeout: seconds to wait for the services at start-up.
+        world: the world (a name or a path) of a graph it launches; attached, it is not used.
+        robot: the robot config name of a graph it launches; attached, it is not used. These two are checked, with
+            their combinations with launch_args (a world's sensing, a robot's joints), when a graph is launched.
     """
 
     def __init__(
         self,
         graph: str,
-        launch_args: dict,
+        launch_args: Mapping[str, object] | CheckedLaunch,
         call_timeout: float,
         reset_timeout: float,
         step_duration: float,
         wait_timeout: float = 30.0,
+        *,
+        world: str = "table",
+        robot: str = "panda",
     ):
         if graph not in ("auto", "attach", "launch"):
             raise ValueError(f"graph must be 'auto', 'attach' or 'launch', got {graph!r}")
-        self._launch_args = dict(launch_args)
+        self._launch = checked(launch_args)
+        self._where = dict(world=world, robot=robot)
+        self._launched: CheckedLaunch | None = None  # the launch with its world and robot, once checked
         self._timeouts = (call_timeout, reset_timeout, wait_timeout)
         self._step_duration = step_duration
         self._graph = None
@@ -280,10 +289,9 @@ class RosBackend(Backend):
             )
         self.attached = not (graph == "launch" or (graph == "auto" and not attachable))
         if not self.attached:
-            check_launch_args(self._launch_args)  # the world and robot too, before anything starts
-            # moverl.launch's world is a name; world_file takes a path too.
-            args = {k: v for k, v in self._launch_args.items() if k != "world"}
-            args["world_file"] = str(world_file(self._launch_args["world"]))
+            if self._launched is None:  # the world and robot are checked before anything starts (a restart reuses)
+                # moverl.launch's world is a name; world_file takes a path too.
+                self._launched = self._launch.adding(self._where, whole=True).with_world_file()
             port = None
             if _NODE_MASTER is not None:  # rospy is bound to one master per process: reuse its port
                 port = int(_NODE_MASTER.rsplit(":", 1)[1])
@@ -292,7 +300,7 @@ class RosBackend(Backend):
                         "this process already runs a MoveRL graph; close that env first, or use "
                         "one process per env (SubprocVecEnv)"
                     )
-            self._graph = LaunchedGraph(args, port=port, wait_for=REQUIRED_SERVICES)
+            self._graph = LaunchedGraph(self._launched, port=port, wait_for=REQUIRED_SERVICES)
             uri = self._graph.uri
         init_node(uri)
         call_timeout, reset_timeout, wait_timeout = self._timeouts
@@ -333,13 +341,13 @@ class RosBackend(Backend):
         self.world = _world_info(self._world(GetWorld._request_class()).world)
         # The arguments the graph was launched with (moverl.launch stores them, checked): an attached graph's too.
         self.obstacle_poses = str(
-            (rospy.get_param("/moverl/launch_args", None) or self._launch_args).get("obstacle_poses", "world_file")
+            (rospy.get_param("/moverl/launch_args", None) or self._launch.values).get("obstacle_poses", "world_file")
         )
         if self._tracked is not None:  # a restart: the new master does not know the old subscribers
             self._subscribe()
-        simulated = not self.attached and str(self._launch_args.get("simulator", True)).lower() != "false"
+        simulated = not self.attached and str(self._launch.values.get("simulator", True)).lower() != "false"
         self.restartable = simulated  # never a real robot's graph, nor one this env did not launch
-        launched = rospy.get_param("/moverl/launch_args", None) or self._launch_args
+        launched = rospy.get_param("/moverl/launch_args", None) or self._launch.values
         self.teleports = (
             str(launched.get("simulator", True)).lower() != "false"
             and str(launched.get("driver", "sim_service")) == "sim_service"

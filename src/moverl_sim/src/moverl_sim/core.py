@@ -32,11 +32,14 @@ __all__ = [
     "InvalidTrajectory",
     "LimitViolation",
     "collision_shape",
+    "CONTROLS",
 ]
 
 POSITION_TOLERANCE = 1e-6  # rad (or m): tolerance on the joint position limits
 VELOCITY_TOLERANCE = 1e-6  # relative tolerance on the velocity limits
 START_TOLERANCE = 1e-4  # a first point at t=0 must be this close to the current state
+#: The values control accepts (moverl_gym/test/test_launch_args.py compares them with moverl_gym.launch_args.CHOICES).
+CONTROLS = ("kinematic", "dynamic")
 # Bullet's broadphase collision filter groups (btBroadphaseProxy): a fixed base's collider is static, and static
 # colliders do not collide with each other.
 #: What may draw the depth cameras' images (Simulator's camera_renderer; config/sim.yaml says which and why).
@@ -252,8 +255,8 @@ class Simulator:
         simplified_faces=None,
         camera_renderer,
     ):
-        if control not in ("kinematic", "dynamic"):
-            raise ValueError("control must be 'kinematic' or 'dynamic', got %r" % (control,))
+        if control not in CONTROLS:
+            raise ValueError("control must be %s, got %r" % (" or ".join(repr(c) for c in CONTROLS), control))
         physics_hz = float(physics_hz)
         if not math.isfinite(physics_hz) or physics_hz <= 0:
             raise ValueError("physics_hz must be positive, got %r" % (physics_hz,))

@@ -20,10 +20,21 @@ from typing import Any
 
 from .tracker import TrackerOptions, TrackerOptionsError
 
-__all__ = ["SimNodeConfig", "SimNodeConfigError"]
+__all__ = ["CONTROLS", "INTERFACES", "MODES", "SimNodeConfig", "SimNodeConfigError"]
+
+#: The values ~mode, ~control and ~interface accept (moverl_gym/test/test_launch_args.py compares MODES and CONTROLS
+#: with moverl_gym.launch_args.CHOICES).
+MODES = ("lockstep", "realtime")
+CONTROLS = ("kinematic", "dynamic")
+INTERFACES = ("extras", "standard")
 
 #: What a parameter getter returns for a parameter that is not set: the default it is given.
 _UNSET = object()
+
+
+def _one_of(values: tuple) -> str:
+    """A check's choices as its message names them: 'a' or 'b'."""
+    return " or ".join(repr(v) for v in values)
 
 
 class SimNodeConfigError(ValueError):
@@ -123,17 +134,16 @@ class SimNodeConfig:
         if not reset_clearance_time >= 0.0:
             raise SimNodeConfigError("~reset_clearance_time must be >= 0 s, got %r" % reset_clearance_time)
         constraints = param("constraints", dict)
-        if interface not in ("extras", "standard"):
-            raise SimNodeConfigError("~interface must be 'extras' or 'standard', got %r" % (interface,))
+        if interface not in INTERFACES:
+            raise SimNodeConfigError("~interface must be %s, got %r" % (_one_of(INTERFACES), interface))
         if interface == "standard" and mode != "realtime":
             raise SimNodeConfigError(
                 "~interface standard needs ~mode realtime (a real robot's time does not stand still)"
             )
-        # (moverl_gym/test/test_launch_args.py compares these two tuples with moverl_gym.launch_args.CHOICES)
-        if mode not in ("lockstep", "realtime"):
-            raise SimNodeConfigError("~mode must be 'lockstep' or 'realtime', got %r" % (mode,))
-        if control not in ("kinematic", "dynamic"):
-            raise SimNodeConfigError("~control must be 'kinematic' or 'dynamic', got %r" % (control,))
+        if mode not in MODES:
+            raise SimNodeConfigError("~mode must be %s, got %r" % (_one_of(MODES), mode))
+        if control not in CONTROLS:
+            raise SimNodeConfigError("~control must be %s, got %r" % (_one_of(CONTROLS), control))
         if not math.isfinite(physics_hz) or physics_hz <= 0:
             raise SimNodeConfigError("~physics_hz must be positive, got %r" % (physics_hz,))
         if not world_file:

@@ -94,60 +94,30 @@ OctomapMonitor::~OctomapMonitor() {
 }
 
 bool OctomapMonitor::init(std::string* error) {
-  OccupancyMapOptions mo;
-  std::string cloud_topic, joint_topic;
-  int queue = 0, threads = 0;
-  std::string integration;
-  double startup_timeout = 0.0;
-  try {
-    readOccupancyMapTunables(RosTunables(pnh_, kYaml), &mo);
-    self_filter_padding_ = requiredParam<double>(pnh_, "octomap/self_filter_padding", kYaml);
-    static_filter_padding_ = requiredParam<double>(pnh_, "octomap/static_filter_padding", kYaml);
-    future_tolerance_ = requiredParam<double>(pnh_, "octomap/future_tolerance", kYaml);
-    camera_wait_ = requiredParam<double>(pnh_, "octomap/camera_wait", kYaml);
-    batch_wait_ = requiredParam<double>(pnh_, "octomap/batch_wait", kYaml);
-    transform_timeout_ = requiredParam<double>(pnh_, "octomap/transform_timeout", kYaml);
-    joint_state_wait_ = requiredParam<double>(pnh_, "octomap/joint_state_wait", kYaml);
-    cloud_topic = requiredParam<std::string>(pnh_, "octomap/cloud_topic", kYaml);
-    joint_topic = requiredParam<std::string>(pnh_, "octomap/joint_states_topic", kYaml);
-    queue = requiredParam<int>(pnh_, "octomap/queue_size", kYaml);
-    queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
-    startup_timeout = requiredParam<double>(pnh_, "octomap/startup_timeout", kYaml);
-    yaml_speed_bound_ = requiredParam<double>(pnh_, "octomap/speed_bound", kYaml);
-    latency_ = requiredParam<double>(pnh_, "octomap/latency", kYaml);
-    plan_horizon_ = requiredParam<double>(pnh_, "octomap/plan_horizon", kYaml);
-    max_age_ = requiredParam<double>(pnh_, "octomap/max_age", kYaml);
-    stale_wait_ = requiredParam<double>(pnh_, "octomap/stale_wait", kYaml);
-    lockstep_ = requiredParam<bool>(pnh_, "octomap/lockstep", kYaml);
-    lag_ = lockstep_ && requiredParam<bool>(pnh_, "octomap/lockstep_lag", kYaml);
-    lag_max_margin_ = requiredParam<double>(pnh_, "octomap/lockstep_lag_max_margin", kYaml);
-    integration = requiredParam<std::string>(pnh_, "octomap/integration", kYaml);
-    threads = requiredParam<int>(pnh_, "octomap/integration_threads", kYaml);
-  } catch (const std::exception& e) {
-    *error = e.what();
-    return false;
-  }
-  for (const auto& p :
-       {std::make_pair("speed_bound", yaml_speed_bound_), std::make_pair("latency", latency_),
-        std::make_pair("plan_horizon", plan_horizon_), std::make_pair("stale_wait", stale_wait_),
-        std::make_pair("self_filter_padding", self_filter_padding_),
-        std::make_pair("static_filter_padding", static_filter_padding_),
-        std::make_pair("future_tolerance", future_tolerance_), std::make_pair("camera_wait", camera_wait_),
-        std::make_pair("batch_wait", batch_wait_), std::make_pair("lockstep_lag_max_margin", lag_max_margin_)}) {
-    if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
-      *error = std::string("octomap/") + p.first + " must be finite and >= 0";
-      return false;
-    }
-  }
-  if (!parseIntegration(integration, &integration_, error)) return false;
-  if (threads < 1) {
-    *error = "octomap/integration_threads must be >= 1, not " + std::to_string(threads);
-    return false;
-  }
-  if (!(max_age_ > 0.0)) {  // inf: no age limit
-    *error = "octomap/max_age must be > 0 (.inf: no limit)";
-    return false;
-  }
+  OctomapMonitorOptions o;
+  if (!readOctomapMonitorOptions(RosTunables(pnh_, kYaml), &o, error)) return false;
+  OccupancyMapOptions mo = o.map;
+  const std::string& cloud_topic = o.cloud_topic;
+  const std::string& joint_topic = o.joint_states_topic;
+  const int queue = o.queue_size;
+  const double startup_timeout = o.startup_timeout;
+  self_filter_padding_ = o.self_filter_padding;
+  static_filter_padding_ = o.static_filter_padding;
+  future_tolerance_ = o.future_tolerance;
+  camera_wait_ = o.camera_wait;
+  batch_wait_ = o.batch_wait;
+  transform_timeout_ = o.transform_timeout;
+  joint_state_wait_ = o.joint_state_wait;
+  queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
+  yaml_speed_bound_ = o.speed_bound;
+  latency_ = o.latency;
+  plan_horizon_ = o.plan_horizon;
+  max_age_ = o.max_age;
+  stale_wait_ = o.stale_wait;
+  lockstep_ = o.lockstep;
+  lag_ = o.lockstep && o.lockstep_lag;
+  lag_max_margin_ = o.lockstep_lag_max_margin;
+  integration_ = o.integration;
   if (speed_bound_ < 0.0) speed_bound_ = yaml_speed_bound_;  // the world did not give one
   // Map only what the robot can reach (padded), plus the largest predictive margin a query may use: something
   // farther away cannot touch the robot within the margin's time. Beams are clipped there, which keeps integration
@@ -173,7 +143,7 @@ bool OctomapMonitor::init(std::string* error) {
   io.static_filter_padding = static_filter_padding_;
   io.filter_static = filter_static_;
   io.integration = integration_;
-  io.threads = threads;
+  io.threads = o.integration_threads;
   cloud_integrator_ = std::make_unique<CloudIntegrator>(map_.get(), &scene_->checker(), scene_mutex_, io);
   {
     std::lock_guard<std::mutex> lock(*scene_mutex_);

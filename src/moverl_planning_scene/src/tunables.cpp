@@ -1,5 +1,6 @@
 #include "moverl_planning_scene/tunables.h"
 
+#include <cmath>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -146,6 +147,61 @@ void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
   o->clamp_max = t.require<double>("octomap/clamp_max");
   o->occupancy_threshold = t.require<double>("octomap/occupancy_threshold");
   o->watch_time = t.require<double>("octomap/watch_time");
+}
+
+bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std::string* error) {
+  std::string integration;
+  try {
+    readOccupancyMapTunables(t, &o->map);
+    o->self_filter_padding = t.require<double>("octomap/self_filter_padding");
+    o->static_filter_padding = t.require<double>("octomap/static_filter_padding");
+    o->future_tolerance = t.require<double>("octomap/future_tolerance");
+    o->camera_wait = t.require<double>("octomap/camera_wait");
+    o->batch_wait = t.require<double>("octomap/batch_wait");
+    o->transform_timeout = t.require<double>("octomap/transform_timeout");
+    o->joint_state_wait = t.require<double>("octomap/joint_state_wait");
+    o->cloud_topic = t.require<std::string>("octomap/cloud_topic");
+    o->joint_states_topic = t.require<std::string>("octomap/joint_states_topic");
+    o->queue_size = t.require<int>("octomap/queue_size");
+    o->startup_timeout = t.require<double>("octomap/startup_timeout");
+    o->speed_bound = t.require<double>("octomap/speed_bound");
+    o->latency = t.require<double>("octomap/latency");
+    o->plan_horizon = t.require<double>("octomap/plan_horizon");
+    o->max_age = t.require<double>("octomap/max_age");
+    o->stale_wait = t.require<double>("octomap/stale_wait");
+    o->lockstep = t.require<bool>("octomap/lockstep");
+    o->lockstep_lag = o->lockstep && t.require<bool>("octomap/lockstep_lag");
+    o->lockstep_lag_max_margin = t.require<double>("octomap/lockstep_lag_max_margin");
+    integration = t.require<std::string>("octomap/integration");
+    o->integration_threads = t.require<int>("octomap/integration_threads");
+  } catch (const std::exception& e) {
+    if (error != nullptr) *error = e.what();
+    return false;
+  }
+  for (const auto& p : {std::make_pair("speed_bound", o->speed_bound), std::make_pair("latency", o->latency),
+                        std::make_pair("plan_horizon", o->plan_horizon), std::make_pair("stale_wait", o->stale_wait),
+                        std::make_pair("self_filter_padding", o->self_filter_padding),
+                        std::make_pair("static_filter_padding", o->static_filter_padding),
+                        std::make_pair("future_tolerance", o->future_tolerance),
+                        std::make_pair("camera_wait", o->camera_wait), std::make_pair("batch_wait", o->batch_wait),
+                        std::make_pair("lockstep_lag_max_margin", o->lockstep_lag_max_margin)}) {
+    if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
+      if (error != nullptr) *error = std::string("octomap/") + p.first + " must be finite and >= 0";
+      return false;
+    }
+  }
+  if (!parseIntegration(integration, &o->integration, error)) return false;
+  if (o->integration_threads < 1) {
+    if (error != nullptr) {
+      *error = "octomap/integration_threads must be >= 1, not " + std::to_string(o->integration_threads);
+    }
+    return false;
+  }
+  if (!(o->max_age > 0.0)) {  // inf: no age limit
+    if (error != nullptr) *error = "octomap/max_age must be > 0 (.inf: no limit)";
+    return false;
+  }
+  return true;
 }
 
 }  // namespace moverl_planning_scene

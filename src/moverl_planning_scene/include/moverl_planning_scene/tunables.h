@@ -10,6 +10,7 @@
 #include <string>
 
 #include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/octomap_monitor_options.h"
 #include "moverl_planning_scene/planning_scene.h"
 
 namespace moverl_planning_scene {
@@ -61,6 +62,13 @@ void readSceneTunables(const Tunables& t, PlanningSceneOptions* o);
 /// \brief Fill the occupancy map's tunables (octomap/resolution, max_range, prob_hit, prob_miss, clamp_min, clamp_max,
 ///        occupancy_threshold, watch_time). Throws std::runtime_error naming a missing key.
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
+
+/// \brief Fill the sensed-obstacle monitor's tunables (every key of the octomap: section: the map's by
+///        readOccupancyMapTunables, octomap/lockstep_lag in lockstep only) and check them. False with *error naming the
+///        first missing key, or the first value out of its range (the nine durations and paddings of the monitor and
+///        octomap/lockstep_lag_max_margin finite and >= 0, integration projective or ray_casting, integration_threads
+///        >= 1, max_age > 0); *o may then be partly filled.
+bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std::string* error);
 
 /// \brief The robot's options from a robot config (config/robots/<robot>.yaml: robot/joints, base_link, ee_link,
 ///        fixed_joint_positions), for tools and tests without a ROS parameter server; *urdf_uri gets robot/urdf as

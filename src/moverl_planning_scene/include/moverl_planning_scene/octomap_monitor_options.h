@@ -1,0 +1,47 @@
+/**
+ * \file octomap_monitor_options.h
+ * \brief The sensed-obstacle monitor's tunables (the octomap: section of config/planning_scene.yaml, where each is
+ *        commented), as readOctomapMonitorOptions (tunables.h) reads and checks them for OctomapMonitor::init. No
+ *        defaults: a value the YAML did not give is an error of the reader. ROS-free.
+ */
+#pragma once
+
+#include <string>
+
+#include "moverl_planning_scene/cloud_integrator.h"
+#include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/unset.h"
+
+namespace moverl_planning_scene {
+
+struct OctomapMonitorOptions {
+  /// octomap/resolution, max_range, prob_hit, prob_miss, clamp_min, clamp_max, occupancy_threshold, watch_time
+  /// (readOccupancyMapTunables); the monitor sets the rest (bounds, unknown_occupied, hidden_space, speed_bound).
+  OccupancyMapOptions map;
+  std::string cloud_topic;                ///< octomap/cloud_topic
+  std::string joint_states_topic;         ///< octomap/joint_states_topic
+  int queue_size = 0;                     ///< octomap/queue_size, as written (the monitor keeps at least 1)
+  double startup_timeout = kUnset;        ///< octomap/startup_timeout (s, wall)
+  double camera_wait = kUnset;            ///< octomap/camera_wait (s, wall; >= 0)
+  double batch_wait = kUnset;             ///< octomap/batch_wait (s, wall; >= 0)
+  double transform_timeout = kUnset;      ///< octomap/transform_timeout (s)
+  double joint_state_wait = kUnset;       ///< octomap/joint_state_wait (s)
+  double future_tolerance = kUnset;       ///< octomap/future_tolerance (s; >= 0)
+  double self_filter_padding = kUnset;    ///< octomap/self_filter_padding (m; >= 0)
+  double static_filter_padding = kUnset;  ///< octomap/static_filter_padding (m; >= 0)
+  Integration integration = Integration::kRayCasting;  ///< octomap/integration (the reader parses it)
+  int integration_threads = 0;                         ///< octomap/integration_threads (>= 1)
+  bool lockstep = false;                               ///< octomap/lockstep
+  /// octomap/lockstep_lag, read in lockstep only (real time: false, and the key need not be set).
+  bool lockstep_lag = false;
+  double lockstep_lag_max_margin = kUnset;  ///< octomap/lockstep_lag_max_margin (m; >= 0)
+  /// The sensed margin (sensed_margin.h): octomap/speed_bound (m/s; a world's sensing: speed_bound replaces it),
+  /// latency (s), plan_horizon (s), max_age (s; > 0, .inf: no limit), stale_wait (s, wall); all but max_age >= 0.
+  double speed_bound = kUnset;
+  double latency = kUnset;
+  double plan_horizon = kUnset;
+  double max_age = kUnset;
+  double stale_wait = kUnset;
+};
+
+}  // namespace moverl_planning_scene

@@ -1,13 +1,13 @@
 """Triangle meshes of a robot's visuals, read and simplified for the simulator's depth cameras. ROS-free.
 
 A depth camera at 160x120 sees a link of the Panda over a few hundred pixels, yet its visual mesh has up to 22,000
-triangles: PyBullet's TinyRenderer spends nine tenths of an image on them (docs/notes/sensing_history.md, render_cost.py). Drawn as
-a quadric-error simplification of itself (fast_simplification, the decimation of pyvista) with at most ``faces``
-triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the depths move) and
-the Panda's 160x120 image costs about a quarter (4.7 ms against 18). Meshes this module reads: Wavefront OBJ
-(vertices and faces; texture and normal indices ignored), STL (ASCII or binary) and COLLADA (pycollada: the triangles
-of the visual scene's geometries, placed by their nodes' transforms and scaled by the file's <unit>, its <up_axis> not
-applied, as PyBullet reads them); any other format is drawn as it is.
+triangles: PyBullet's TinyRenderer spends nine tenths of an image on them (docs/notes/sensing_history.md,
+render_cost.py). Drawn as a quadric-error simplification of itself (fast_simplification, the decimation of pyvista)
+with at most ``faces`` triangles, a link keeps its silhouette within millimetres (render_cost.py measures how far the
+depths move) and the Panda's 160x120 image costs about a quarter (4.7 ms against 18). Meshes this module reads:
+Wavefront OBJ (vertices and faces; texture and normal indices ignored), STL (ASCII or binary) and COLLADA (pycollada:
+the triangles of the visual scene's geometries, placed by their nodes' transforms and scaled by the file's <unit>, its
+<up_axis> not applied, as PyBullet reads them); any other format is drawn as it is.
 """
 
 from __future__ import annotations

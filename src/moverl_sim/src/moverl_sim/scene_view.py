@@ -10,16 +10,13 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet
 import yaml
 
-from .core import Simulator
-from .settings import _ROOT, sim_settings
-from .urdf import robot_description
+from .settings import _ROOT, simulator_for
 
 GOAL_RADIUS = 0.025  # m, the goal marker
 REACH = 0.9  # metres around the robot base that the camera always shows
@@ -91,21 +88,8 @@ class SceneView:
     def __init__(self, robot: dict, world, settings: ViewSettings | None = None):
         self.world = world
         self.settings = settings or ViewSettings.from_yaml()
-        text = robot_description(robot["urdf"])
-        with tempfile.TemporaryDirectory(prefix="moverl_view_") as tmp:
-            urdf = os.path.join(tmp, "robot.urdf")
-            with open(urdf, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            self.sim = Simulator(
-                urdf,
-                robot["joints"],
-                robot["base_link"],
-                robot.get("fixed_joint_positions") or {},
-                world,
-                gui=False,
-                # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
-                **{**sim_settings(), "robot_visuals": "visual", "camera_renderer": "tinyrenderer"},
-            )
+        # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
+        self.sim = simulator_for(robot, world, robot_visuals="visual", camera_renderer="tinyrenderer")
         p = self.sim._p
         for oid, (body, link) in self.sim._object_links.items():
             p.changeVisualShape(body, link, rgbaColor=object_colour(world.object(oid)))

@@ -73,7 +73,7 @@ class BulletBackend(Backend):
         self._ee = {name: i for i, name in self.sim.link_names.items()}[self.ee_link]
 
     def _ee_now(self) -> np.ndarray:
-        s = self.sim._p.getLinkState(self.sim.robot, self._ee, computeForwardKinematics=True)
+        s = self.sim.client.getLinkState(self.sim.robot, self._ee, computeForwardKinematics=True)
         return np.array(list(s[4]) + list(s[5]))
 
     def step(self, target: np.ndarray, duration: float) -> StepResult:

@@ -90,8 +90,8 @@ class SceneView:
         self.settings = settings or ViewSettings.from_yaml()
         # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
         self.sim = simulator_for(robot, world, robot_visuals="visual", camera_renderer="tinyrenderer")
-        p = self.sim._p
-        for oid, (body, link) in self.sim._object_links.items():
+        p = self.sim.client
+        for oid, (body, link) in self.sim.object_bodies.items():
             p.changeVisualShape(body, link, rgbaColor=object_colour(world.object(oid)))
         self._goal_body = None
         s = self.settings
@@ -117,7 +117,7 @@ class SceneView:
         self.sim.place_obstacles(motion_time)
         if goal is None:
             return
-        p = self.sim._p
+        p = self.sim.client
         if self._goal_body is None:
             vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=GOAL_RADIUS, rgbaColor=[0.9, 0.05, 0.05, 1])
             self._goal_body = p.createMultiBody(baseMass=0, baseVisualShapeIndex=vis, basePosition=list(goal))
@@ -127,7 +127,7 @@ class SceneView:
     def image(self) -> np.ndarray:
         """The picture as posed: (height, width, 3) uint8."""
         s = self.settings
-        _, _, rgba, _, _ = self.sim._p.getCameraImage(
+        _, _, rgba, _, _ = self.sim.client.getCameraImage(
             s.width,
             s.height,
             viewMatrix=self._view,

@@ -83,7 +83,7 @@ class _Kinematics:
     """The robot of a Simulator as points that move with its controlled joints."""
 
     def __init__(self, sim: Simulator, ee_link: str, home):
-        self.sim, self.p, self.robot = sim, sim._p, sim.robot
+        self.sim, self.p, self.robot = sim, sim.client, sim.robot
         names = sim.link_names
         index = {v: k for k, v in names.items()}
         if ee_link not in index:
@@ -103,7 +103,7 @@ class _Kinematics:
             link = self.p.getJointInfo(self.robot, link)[16]
         self.chain = [base] + chain[::-1]
         self.ee = index[ee_link]
-        self.base_fixed = sim._base_fixed_links
+        self.base_fixed = sim.base_fixed_links
         # Every link's collision geometry in its inertial frame (PyBullet's link frame): hull vertices and box corners,
         # spheres as centre + radius (the distance to a sphere's farthest point is the centre's plus the radius).
         self.set(self.home)

@@ -124,7 +124,7 @@ class Tool:
 
         rc = load_robot_config(robot_config_file(robot))
         self.sim = simulator_for(rc, World(name="empty"))
-        p, robot = self.sim._p, self.sim.robot
+        p, robot = self.sim.client, self.sim.robot
         index = {p.getJointInfo(robot, j)[12].decode(): j for j in range(p.getNumJoints(robot))}
         self.ee = index[rc["ee_link"]]
         parents = {j: p.getJointInfo(robot, j)[16] for j in range(p.getNumJoints(robot))}
@@ -143,15 +143,15 @@ class Tool:
     def lowest(self, q):
         """The tool's lowest point (m, z) in configuration q."""
         self.sim.reset_robot(list(q))
-        return min(self.sim._p.getAABB(self.sim.robot, j)[0][2] for j in self.tool)
+        return min(self.sim.client.getAABB(self.sim.robot, j)[0][2] for j in self.tool)
 
     def ee_xyz(self, q):
         self.sim.reset_robot(list(q))
-        return np.array(self.sim._p.getLinkState(self.sim.robot, self.ee, computeForwardKinematics=True)[4])
+        return np.array(self.sim.client.getLinkState(self.sim.robot, self.ee, computeForwardKinematics=True)[4])
 
     def ik(self, xyz, seed):
         """Joint angles that put the end effector at xyz, pointing down (from seed)."""
-        p, robot = self.sim._p, self.sim.robot
+        p, robot = self.sim.client, self.sim.robot
         q = np.asarray(seed, dtype=float)
         for _ in range(5):  # refine from the last answer
             self.sim.reset_robot(list(q))

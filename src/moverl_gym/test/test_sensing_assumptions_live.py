@@ -113,7 +113,7 @@ def test_a_hand_held_next_to_a_link_is_seen(tmp_path, tool):
     # The hand 2 cm beside the robot's end-effector link at home, on the +y side (seen by the left camera), then the
     # arm pushed into it: joint 1 turning towards +y, with noise, and pushing on when held.
     q0 = tool.home
-    p, robot = tool.sim._p, tool.sim.robot
+    p, robot = tool.sim.client, tool.sim.robot
     tool.sim.reset_robot(list(q0))
     boxes = [p.getAABB(robot, j) for j in [tool.ee, *tool.tool]]  # the end-effector link and the tool below it
     lo = np.min([b[0] for b in boxes], axis=0)

@@ -53,12 +53,12 @@ def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual
     # The robot as a real camera sees it, its visual meshes by default (--robot-visuals: as the simulator's cameras
     # draw it, config/sim.yaml robot_visuals), so that the distance measured is that surface's from the shapes.
     sim = simulator_for(rc, world, robot_visuals=looks)
-    p = sim._p
+    p = sim.client
     probe = p.createMultiBody(0, p.createCollisionShape(pybullet.GEOM_SPHERE, radius=PROBE_RADIUS), -1, [9, 9, 9])
     cams = [Camera(c) for c in world.cameras]
     static = {o.id for o in world.objects if o.motion is None}
     bodies = {}  # body unique id -> "robot" or a static object id
-    for oid, (body, _) in sim._object_links.items():
+    for oid, (body, _) in sim.object_bodies.items():
         if oid in static:
             bodies[body] = oid
     bodies[sim.robot] = "robot"

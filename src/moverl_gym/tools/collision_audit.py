@@ -359,24 +359,24 @@ SENSED = "octomap"  # the scene's name for the sensed map in colliding pairs
 def physics_gap(sim, a: str, b: str, horizon: float = 0.2) -> float:
     """Physics distance (m) between robot link a and robot link b or world object b (SENSED: the nearest world
     object) in the current configuration (PyBullet closest points; negative when penetrating; horizon when
-    farther). Uses the Simulator's internals (diagnostics only)."""
+    farther)."""
     import pybullet
 
-    links = sim._link_index
+    links = sim.link_index
     if a not in links:
         a, b = b, a
     la = links[a]
     if b in links:
         targets = [(sim.robot, links[b])]
     elif b == SENSED:
-        targets = list(sim._object_links.values())  # (body, link): grouped movers are links
+        targets = list(sim.object_bodies.values())  # (body, link): grouped movers are links
     else:
-        targets = [sim._object_links[b]]
+        targets = [sim.object_bodies[b]]
     gaps = [
         pt[8]
         for body, lb in targets
         for pt in pybullet.getClosestPoints(
-            sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb, physicsClientId=sim._cid
+            sim.robot, body, horizon, linkIndexA=la, linkIndexB=lb, physicsClientId=sim.client_id
         )
     ]
     return min(gaps, default=horizon)

@@ -60,27 +60,13 @@ def _pushing_module():
 
 def make_sim(world: str):
     """A Simulator of the robot and world as the simulator node builds it (same URDF text, settings, home)."""
-    import tempfile
-
     from moverl_gym.paths import robot_config_file, world_file
-    from moverl_sim.core import Simulator
     from moverl_sim.robot_config import load_robot_config
-    from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import robot_description
+    from moverl_sim.settings import simulator_for
     from moverl_sim.world import load_world
 
     rc = load_robot_config(robot_config_file(ROBOT))
-    with tempfile.NamedTemporaryFile("w", suffix=".urdf", delete=False) as f:
-        f.write(robot_description(rc["urdf"]))
-    sim = Simulator(
-        f.name,
-        rc["joints"],
-        rc["base_link"],
-        rc.get("fixed_joint_positions"),
-        load_world(str(world_file(world))),
-        **sim_settings(),
-    )
-    Path(f.name).unlink()
+    sim = simulator_for(rc, load_world(str(world_file(world))))
     sim.reset_robot(rc["home"])  # the node's start-up configuration (/robot/home)
     return sim
 

@@ -199,7 +199,7 @@ def test_the_scene_refuses_to_draw_a_world_it_was_not_built_for(panda_urdf, tabl
     try:
         assert sim.camera_renderer == "raster" and sim.camera_renderer_fallback is None
         cam = Camera(table_world.cameras[0])
-        sim._p.createMultiBody(baseMass=0, baseVisualShapeIndex=sim._p.createVisualShape(pybullet.GEOM_SPHERE))
+        sim.client.createMultiBody(baseMass=0, baseVisualShapeIndex=sim.client.createVisualShape(pybullet.GEOM_SPHERE))
         with pytest.raises(ValueError, match="bodies were added or removed since the depth scene was built"):
             sim.render_depth(cam)
     finally:

@@ -234,7 +234,7 @@ def test_start_point_may_be_the_clamped_state_of_a_robot_beyond_its_limit(panda_
         s.reset_robot(HOME)
         beyond = list(HOME)
         beyond[3] = s.upper[3] + 0.004  # an encoder a little past the stop
-        s._p.resetJointState(s.robot, s.joint_indices[3], beyond[3])
+        s.client.resetJointState(s.robot, s.joint_indices[3], beyond[3])
         clamped = list(np.clip(beyond, s.lower, s.upper))
         back = list(clamped)
         back[3] -= 0.1

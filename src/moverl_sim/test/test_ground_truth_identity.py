@@ -25,22 +25,12 @@ DEPTH_TOL = 1e-9  # m
 
 def make_sim(record):
     """The simulator the node builds for the recording's robot and world (its start-up configuration included)."""
-    import tempfile
-
-    from moverl_sim.core import Simulator
     from moverl_sim.robot_config import load_robot_config
-    from moverl_sim.settings import sim_settings
-    from moverl_sim.urdf import robot_description
+    from moverl_sim.settings import simulator_for
     from moverl_sim.world import load_world
 
     rc = load_robot_config(os.path.join(REPO_DIR, "config", "robots", record["robot"] + ".yaml"))
-    with tempfile.NamedTemporaryFile("w", suffix=".urdf", delete=False) as f:
-        f.write(robot_description(rc["urdf"]))
-    try:
-        world = load_world(os.path.join(REPO_DIR, "worlds", record["world"] + ".yaml"))
-        sim = Simulator(f.name, rc["joints"], rc["base_link"], rc.get("fixed_joint_positions"), world, **sim_settings())
-    finally:
-        os.unlink(f.name)
+    sim = simulator_for(rc, load_world(os.path.join(REPO_DIR, "worlds", record["world"] + ".yaml")))
     sim.reset_robot(rc["home"])
     return sim
 

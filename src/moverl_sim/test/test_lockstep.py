@@ -302,7 +302,7 @@ def test_a_robot_that_cannot_be_put_back_is_an_error_not_a_refusal(panda_urdf, t
     s = make_sim(panda_urdf, table_world, control="dynamic", physics_hz=HZ)
     try:
         s.reset_robot(HOME)
-        s._p.resetJointState(s.robot, s.joint_indices[3], s.upper[3] + 0.004)
+        s.client.resetJointState(s.robot, s.joint_indices[3], s.upper[3] + 0.004)
         with pytest.raises(RuntimeError, match="cannot put the robot back where it was: reset: joint panda_joint4"):
             lockstep.reset_robot(s, INTO_TABLE)
     finally:

@@ -81,7 +81,7 @@ def _assert_exact_layout(sim, world, t):
     """Every object's collision AABB and frame are those of its own body at motion time t (within 1e-9 m)."""
     expected = _separate_bodies(world, t)
     for obj in world.objects:
-        body, link = sim._object_links[obj.id]
+        body, link = sim.object_bodies[obj.id]
         aabb = pybullet.getAABB(body, link, physicsClientId=sim.client_id)
         for got, want in zip(aabb, expected[obj.id]):
             assert got == pytest.approx(want, abs=1e-9), (obj.id, t, aabb, expected[obj.id])
@@ -95,7 +95,7 @@ def test_objects_sharing_a_motion_are_one_body(panda_urdf):
     worlds = _worlds()
     s = make_sim(panda_urdf, worlds["human"])
     try:
-        links = s._object_links
+        links = s.object_bodies
         person = {links[o.id][0] for o in worlds["human"].moving_objects}
         assert len(person) == 1 and len(s._movers) == 1 and links["human_torso"][1] == -1
         assert sorted(link for body, link in links.values() if body in person) == list(range(-1, 7))
@@ -107,7 +107,7 @@ def test_objects_sharing_a_motion_are_one_body(panda_urdf):
         s.close()
     s = make_sim(panda_urdf, worlds["mixed"])
     try:
-        links = s._object_links
+        links = s.object_bodies
         assert len(s._movers) == 3  # sway group, bob group, the single mover
         assert links["slab"][0] == links["rod"][0] == links["knob"][0]
         assert [links[i][1] for i in ("slab", "rod", "knob")] == [-1, 0, 1]  # world file order; the first is the base
@@ -176,9 +176,9 @@ def test_scene_view_colours_every_object(panda_urdf):
     robot = {"urdf": PANDA_URI, "joints": JOINTS, "base_link": "panda_link0", "fixed_joint_positions": FIXED}
     view = SceneView(robot, world, ViewSettings(width=32, height=24, yaw=0.0, pitch=-30.0, fov=60.0))
     try:
-        p = view.sim._p
+        p = view.sim.client
         for obj in world.objects:
-            body, link = view.sim._object_links[obj.id]
+            body, link = view.sim.object_bodies[obj.id]
             colours = {d[1]: d[7] for d in p.getVisualShapeData(body)}
             assert colours[link] == pytest.approx(object_colour(obj))
     finally:

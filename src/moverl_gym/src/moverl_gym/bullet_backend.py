@@ -61,29 +61,19 @@ class BulletBackend(Backend):
         self._start()
 
     def _start(self) -> None:
-        import os
-        import tempfile
-
         from moverl_sim.core import Simulator
         from moverl_sim.settings import sim_settings
 
         _, rc = self._args
-        fd, self._urdf_path = tempfile.mkstemp(prefix="moverl_bullet_", suffix=".urdf")
-        with os.fdopen(fd, "w") as f:
-            f.write(self.urdf)
-        self.sim = Simulator(
-            self._urdf_path,
-            self.joints,
-            rc["base_link"],
-            rc.get("fixed_joint_positions"),
-            self._world,
-            **sim_settings(),
+        # The URDF text read at construction (self.urdf, which the env reads too), resolved as the node resolves it.
+        self.sim = Simulator.from_robot(
+            rc, self._world, description=self.urdf, description_name=rc["urdf"], **sim_settings()
         )
         self.sim.reset_robot(np.clip(self.home, self.sim.lower, self.sim.upper))
         self._ee = {name: i for i, name in self.sim.link_names.items()}[self.ee_link]
 
     def _ee_now(self) -> np.ndarray:
-        s = self.sim._p.getLinkState(self.sim.robot, self._ee, computeForwardKinematics=True)
+        s = self.sim.client.getLinkState(self.sim.robot, self._ee, computeForwardKinematics=True)
         return np.array(list(s[4]) + list(s[5]))
 
     def step(self, target: np.ndarray, duration: float) -> StepResult:
@@ -130,9 +120,6 @@ class BulletBackend(Backend):
         self._start()
 
     def close(self) -> None:
-        import os
-
         if self.sim is not None:
             self.sim.close()
             self.sim = None
-            os.unlink(self._urdf_path)

@@ -13,6 +13,7 @@ import os
 import shutil
 import tempfile
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Dict, NamedTuple, Tuple
 
 import numpy as np
@@ -21,7 +22,7 @@ from pybullet_utils import bullet_client
 
 from .depth_scene import DepthScene
 from .follow import spline_at
-from .urdf import JointLimits, UrdfError, collision_as_visual, simplified_visuals
+from .urdf import JointLimits, UrdfError, collision_as_visual, rewrite_mesh_paths, robot_description, simplified_visuals
 from .world import World
 
 __all__ = [
@@ -218,7 +219,7 @@ def _relative_pose(base_xyz, base_quat, xyz, quat):
 class Simulator:
     """One robot (fixed base at the world origin) and static obstacles in a PyBullet world.
 
-    urdf_path: URDF file with resolvable (absolute) mesh paths.
+    urdf_path: URDF file with resolvable (absolute) mesh paths (Simulator.from_robot writes one as the node does).
     joints: controlled joint names, in the order of every position vector.
     base_link: link mounted to the world; its contacts (and those of links rigidly fixed to it) with
         the world are ignored.
@@ -345,6 +346,51 @@ class Simulator:
             body, idx, q, v, physicsClientId=cid
         )
         self.reset_robot([min(max(0.0, lo), hi) for lo, hi in zip(self.lower, self.upper)])
+
+    @classmethod
+    def from_robot(cls, robot, world=None, *, description=None, description_name="robot description", **settings):
+        """The simulator of a robot config's robot, its URDF resolved as the simulator node resolves it: the one way to
+        build a Simulator of a robot (the node; moverl_sim.settings.simulator_for, hence the env's PyBullet backend,
+        the tools and the pictures).
+
+        The URDF text is `description` (the node's /robot_description) when given, else the file robot["urdf"] names
+        (moverl_sim.urdf.robot_description: mesh paths resolved against the file's folder). Its mesh paths are then
+        rewritten absolute (moverl_sim.urdf.rewrite_mesh_paths: package:// through the ROS packages) and the text is
+        written to a scratch folder of this call's, which PyBullet loads and which is removed once the simulator is
+        built, or has failed to build (nothing reads it later).
+
+        Args:
+            robot: a robot config's robot: mapping (moverl_sim.robot_config): urdf (not read when description is
+                given), joints, base_link and, optional, fixed_joint_positions.
+            world: a moverl_sim.world.World (None: an empty world).
+            description: URDF text to build from instead of the file robot["urdf"].
+            description_name: what error messages call `description` (the node: "/robot_description").
+            **settings: the keyword arguments of Simulator (physics_hz, control, moving_speed, robot_visuals, ...):
+                the node's parameters, or config/sim.yaml's (moverl_sim.settings.sim_settings).
+
+        Returns:
+            The Simulator (close() it).
+
+        Raises:
+            UrdfError: the URDF file cannot be read, the text is not a URDF, or a mesh it names does not exist.
+            ValueError: the simulator cannot be built from it (as Simulator raises).
+        """
+        if description is None:
+            source = robot["urdf"]
+            text = robot_description(source)
+        else:
+            source, text = description_name, description
+        text = rewrite_mesh_paths(text, source=source)
+        scratch = tempfile.mkdtemp(prefix="moverl_sim_")
+        try:
+            urdf_path = os.path.join(scratch, "robot.urdf")
+            with open(urdf_path, "w", encoding="utf-8") as fh:
+                fh.write(text)
+            return cls(
+                urdf_path, robot["joints"], robot["base_link"], robot.get("fixed_joint_positions"), world, **settings
+            )
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)
 
     # ------------------------------------------------------------------ setup
     def _setup_robot(self, urdf_path, joints, base_link, fixed):
@@ -611,6 +657,25 @@ class Simulator:
     def client_id(self):
         """PyBullet physicsClientId of this simulator's world (e.g. for moverl_sim.camera rendering)."""
         return self._cid
+
+    @property
+    def client(self):
+        """The pybullet_utils BulletClient of this simulator's world (None once closed), for what the simulator does
+        not do itself: reading link states, AABBs, closest points and camera images, colouring, adding markers or
+        probe bodies (moverl_sim.scene_view, the audits). Moving the robot or the obstacles through it bypasses the
+        simulator's own state (use reset_robot and place_obstacles): a caller that does so on purpose says why."""
+        return self._p
+
+    @property
+    def link_index(self):
+        """Robot link name -> PyBullet link index (-1: the URDF's root link): link_names inverted, read-only."""
+        return MappingProxyType(self._link_index)
+
+    @property
+    def base_fixed_links(self):
+        """frozenset of the robot's link indices rigidly attached to the base link (they never move; their contacts
+        with the world are ignored)."""
+        return self._base_fixed_links
 
     @property
     def object_bodies(self):

@@ -10,16 +10,13 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet
 import yaml
 
-from .core import Simulator
-from .settings import _ROOT, sim_settings
-from .urdf import robot_description
+from .settings import _ROOT, simulator_for
 
 GOAL_RADIUS = 0.025  # m, the goal marker
 REACH = 0.9  # metres around the robot base that the camera always shows
@@ -91,23 +88,10 @@ class SceneView:
     def __init__(self, robot: dict, world, settings: ViewSettings | None = None):
         self.world = world
         self.settings = settings or ViewSettings.from_yaml()
-        text = robot_description(robot["urdf"])
-        with tempfile.TemporaryDirectory(prefix="moverl_view_") as tmp:
-            urdf = os.path.join(tmp, "robot.urdf")
-            with open(urdf, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            self.sim = Simulator(
-                urdf,
-                robot["joints"],
-                robot["base_link"],
-                robot.get("fixed_joint_positions") or {},
-                world,
-                gui=False,
-                # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
-                **{**sim_settings(), "robot_visuals": "visual", "camera_renderer": "tinyrenderer"},
-            )
-        p = self.sim._p
-        for oid, (body, link) in self.sim._object_links.items():
+        # a picture for people: the robot as it looks; no depth camera here, so no depth scene to read
+        self.sim = simulator_for(robot, world, robot_visuals="visual", camera_renderer="tinyrenderer")
+        p = self.sim.client
+        for oid, (body, link) in self.sim.object_bodies.items():
             p.changeVisualShape(body, link, rgbaColor=object_colour(world.object(oid)))
         self._goal_body = None
         s = self.settings
@@ -133,7 +117,7 @@ class SceneView:
         self.sim.place_obstacles(motion_time)
         if goal is None:
             return
-        p = self.sim._p
+        p = self.sim.client
         if self._goal_body is None:
             vis = p.createVisualShape(pybullet.GEOM_SPHERE, radius=GOAL_RADIUS, rgbaColor=[0.9, 0.05, 0.05, 1])
             self._goal_body = p.createMultiBody(baseMass=0, baseVisualShapeIndex=vis, basePosition=list(goal))
@@ -143,7 +127,7 @@ class SceneView:
     def image(self) -> np.ndarray:
         """The picture as posed: (height, width, 3) uint8."""
         s = self.settings
-        _, _, rgba, _, _ = self.sim._p.getCameraImage(
+        _, _, rgba, _, _ = self.sim.client.getCameraImage(
             s.width,
             s.height,
             viewMatrix=self._view,

@@ -33,16 +33,13 @@ def sim_settings(path: str | None = None) -> dict:
 def simulator_for(robot_config: dict, world, **overrides):
     """A Simulator of a robot config's robot (moverl_sim.robot_config: its URDF resolved as the node resolves it, its
     joints, base and fixed joints) in `world`, with config/sim.yaml's settings, `overrides` replacing some (e.g.
-    robot_visuals="visual"): the one way the tools, tests and pictures build the simulator the node runs."""
-    from .core import Simulator
-    from .urdf import resolve_uri
+    robot_visuals="visual"): the one way the tools, tests and pictures build the simulator the node runs
+    (Simulator.from_robot, which the node calls with its parameters).
 
-    rc = robot_config
-    return Simulator(
-        resolve_uri(rc["urdf"]),
-        rc["joints"],
-        rc["base_link"],
-        rc.get("fixed_joint_positions"),
-        world,
-        **{**sim_settings(), **overrides},
-    )
+    Raises:
+        moverl_sim.urdf.UrdfError: the URDF or one of its meshes cannot be found or read.
+        ValueError: the simulator cannot be built from it.
+    """
+    from .core import Simulator
+
+    return Simulator.from_robot(robot_config, world, **{**sim_settings(), **overrides})

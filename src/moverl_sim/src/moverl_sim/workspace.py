@@ -19,16 +19,13 @@ sweep never decreases the distance. moverl_sim.coverage uses both facts (what su
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 import pybullet
 
 from .core import Simulator, _frame, collision_shape
-from .settings import sim_settings
-from .urdf import robot_description
+from .settings import simulator_for
 
 __all__ = ["Workspace", "ON_AXIS", "STARTS"]
 
@@ -75,19 +72,7 @@ class Workspace:
             ValueError: the end-effector link is not in the URDF, or not below the base link.
             moverl_sim.urdf.UrdfError: the URDF or one of its meshes cannot be found.
         """
-        text = robot_description(robot["urdf"])
-        with tempfile.TemporaryDirectory(prefix="moverl_workspace_") as tmp:
-            urdf = os.path.join(tmp, "robot.urdf")
-            with open(urdf, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            sim = Simulator(
-                urdf,
-                robot["joints"],
-                robot["base_link"],
-                robot.get("fixed_joint_positions") or {},
-                gui=False,
-                **{**sim_settings(), "camera_renderer": "tinyrenderer"},  # no depth camera: no depth scene to read
-            )
+        sim = simulator_for(robot, None, camera_renderer="tinyrenderer")  # no depth camera: no depth scene to read
         try:
             return _Kinematics(sim, robot["ee_link"], robot["home"]).workspace()
         finally:
@@ -98,7 +83,7 @@ class _Kinematics:
     """The robot of a Simulator as points that move with its controlled joints."""
 
     def __init__(self, sim: Simulator, ee_link: str, home):
-        self.sim, self.p, self.robot = sim, sim._p, sim.robot
+        self.sim, self.p, self.robot = sim, sim.client, sim.robot
         names = sim.link_names
         index = {v: k for k, v in names.items()}
         if ee_link not in index:
@@ -118,7 +103,7 @@ class _Kinematics:
             link = self.p.getJointInfo(self.robot, link)[16]
         self.chain = [base] + chain[::-1]
         self.ee = index[ee_link]
-        self.base_fixed = sim._base_fixed_links
+        self.base_fixed = sim.base_fixed_links
         # Every link's collision geometry in its inertial frame (PyBullet's link frame): hull vertices and box corners,
         # spheres as centre + radius (the distance to a sphere's farthest point is the centre's plus the radius).
         self.set(self.home)

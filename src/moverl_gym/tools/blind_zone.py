@@ -54,7 +54,9 @@ def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual
     # draw it, config/sim.yaml robot_visuals), so that the distance measured is that surface's from the shapes.
     sim = simulator_for(rc, world, robot_visuals=looks)
     p = sim.client
-    probe = p.createMultiBody(0, p.createCollisionShape(pybullet.GEOM_SPHERE, radius=PROBE_RADIUS), -1, [9, 9, 9])
+    # The probe is added only while distances are measured: the simulator's depth scene (camera_renderer raster) draws
+    # the bodies it was built with and refuses to render once another is added.
+    probe_shape = p.createCollisionShape(pybullet.GEOM_SPHERE, radius=PROBE_RADIUS)
     cams = [Camera(c) for c in world.cameras]
     static = {o.id for o in world.objects if o.motion is None}
     bodies = {}  # body unique id -> "robot" or a static object id
@@ -71,8 +73,9 @@ def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual
         if sim.contacts_now().in_contact:
             continue
         configs += 1
-        for cam in cams:
-            depth, seg = sim.render_segmented(cam)  # config/sim.yaml camera_renderer draws it
+        views = [(cam, *sim.render_segmented(cam)) for cam in cams]  # config/sim.yaml camera_renderer draws them
+        probe = p.createMultiBody(0, probe_shape, -1, [9, 9, 9])
+        for cam, depth, seg in views:
             seg = seg.reshape(-1)
             pts = cam.optical_to_world(cam.points_from_depth(depth))
             body_of = seg & ((1 << 24) - 1)  # PyBullet packs (link + 1) << 24 | body into the mask
@@ -82,6 +85,7 @@ def measure(robot: str, world_name: str, n: int, seed: int, looks: str = "visual
                     continue
                 d = _distances(p, probe, body, pts[mask])
                 (robot_d if name == "robot" else static_d).append(d)
+        p.removeBody(probe)
     sim.close()
 
     def stats(ds):

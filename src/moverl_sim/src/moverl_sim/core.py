@@ -22,6 +22,7 @@ from pybullet_utils import bullet_client
 
 from .depth_scene import DepthScene
 from .follow import spline_at
+from .trajectory import sample_linear, segment_velocities, substep_count
 from .urdf import JointLimits, UrdfError, collision_as_visual, rewrite_mesh_paths, robot_description, simplified_visuals
 from .world import World
 
@@ -867,11 +868,11 @@ class Simulator:
         return self._prepare_checked(times, positions, path_tolerance, velocities, accelerations)
 
     def _prepare_linear(self, times, positions, path_tolerance=None):
-        """prepare() of a valid trajectory for kinematic control, in plain Python: the same doubles as
-        _prepare_checked's numpy code (the same operations in the same order on IEEE doubles), at a fraction of its
-        cost for the few points and joints of an env step (numpy's per-call overhead dominated the simulator's step).
-        None when anything is off (a bad value, a limit, a start away from the current state): _prepare_checked then
-        names it."""
+        """prepare() of a valid trajectory for kinematic control, checked in plain Python: _prepare_checked's checks
+        (the same comparisons on the same doubles) at a fraction of their numpy cost for the few points and joints of
+        an env step (numpy's per-call overhead dominated the simulator's step); both sample with
+        moverl_sim.trajectory. None when anything is off (a bad value, a limit, a start away from the current
+        state): _prepare_checked then names it."""
         n = len(self.joint_indices)
         isfinite = math.isfinite
         try:
@@ -905,32 +906,14 @@ class Simulator:
             t.insert(0, 0.0)
             P.insert(0, current)
         P = [[min(max(x, a), b) for x, a, b in zip(row, lower, upper)] for row in P]
-        T = t[-1]
-        nsub = int(math.ceil(T * self.physics_hz - 1e-9)) if T > 0 else 0
+        nsub = substep_count(t[-1], self.physics_hz)
         if nsub == 0:
             return Motion([], [], tuple(P[-1]), None)
-        segments = len(t) - 1
-        dts = [t[i + 1] - t[i] for i in range(segments)]
-        vel = [[(b - a) / dt for a, b in zip(P[i], P[i + 1])] for i, dt in enumerate(dts)]
+        vel = segment_velocities(t, P)
         vmax = self._vmax_tol
         if any(abs(v) > limit for row in vel for v, limit in zip(row, vmax)):
             return None
-        dt = self.dt
-        targets, velocities = [], []
-        s = 0
-        start, t0, span, rows = P[0], t[0], dts[0], [[v] for v in vel[0]]  # segment s (rows: shared by its substeps)
-        step = [y - x for x, y in zip(P[0], P[1])]
-        for k in range(1, nsub + 1):
-            ts = min(k * dt, T)
-            if s + 1 < segments and t[s + 1] < ts:  # searchsorted(side="left") - 1, clipped
-                while s + 1 < segments and t[s + 1] < ts:
-                    s += 1
-                start, t0, span, rows = P[s], t[s], dts[s], [[v] for v in vel[s]]
-                step = [y - x for x, y in zip(P[s], P[s + 1])]
-            alpha = (ts - t0) / span
-            targets.append([[x + alpha * d] for x, d in zip(start, step)])
-            velocities.append(rows)
-        targets[-1] = [[x] for x in P[-1]]
+        targets, velocities = sample_linear(t, P, vel, self.dt, nsub)
         return Motion(targets, velocities, tuple(P[-1]), None)
 
     def _prepare_checked(self, times, positions, path_tolerance=None, velocities=None, accelerations=None):
@@ -992,11 +975,12 @@ class Simulator:
             P = np.vstack((current, P))
         P = np.minimum(np.maximum(P, self._lower_np), self._upper_np)
         T = float(t[-1])
-        nsub = int(math.ceil(T * self.physics_hz - 1e-9)) if T > 0 else 0
+        nsub = substep_count(T, self.physics_hz)
         if nsub == 0:
             return Motion([], [], tuple(P[-1].tolist()), tolerance)
-        dts = t[1:] - t[:-1]
-        vel = (P[1:] - P[:-1]) / dts[:, None]
+        times, points = t.tolist(), P.tolist()
+        rates = segment_velocities(times, points)
+        vel = np.array(rates)
         over = np.abs(vel) > self._vmax_np * (1.0 + VELOCITY_TOLERANCE)
         if over.max():
             s, j = np.unravel_index(int(np.argmax(over)), over.shape)
@@ -1004,26 +988,23 @@ class Simulator:
                 "segment %.3g s -> %.3g s: joint %s moves at %.6g rad/s, above its velocity "
                 "limit %.6g" % (t[s], t[s + 1], self.joint_names[j], abs(vel[s, j]), self.velocity_limits[j])
             )
-        ts = np.minimum(np.arange(1, nsub + 1, dtype=float) * self.dt, T)
-        seg = t.searchsorted(ts, side="left") - 1
-        np.clip(seg, 0, len(dts) - 1, out=seg)
-        alpha = (ts - t[seg]) / dts[seg]
-        q = P[seg] + alpha[:, None] * (P[seg + 1] - P[seg])
-        q[-1] = P[-1]
-        velocity, setpoints = vel[seg], None
+        V = A = setpoints = None
         if self.control == "dynamic":
             V, A = self._spline_data(velocities, accelerations, len(positions), t.shape[0], n)
+        if V is None:  # linear between the points
+            targets, velocity = sample_linear(times, points, rates, self.dt, nsub)
+        if self.control == "dynamic":
+            ts = np.minimum(np.arange(1, nsub + 1, dtype=float) * self.dt, T)
             if V is not None:  # the controller's spline through the points
                 q, _ = spline_at(t, P, V, A, ts)
                 q[-1] = P[-1]
+                targets = q[:, :, None].tolist()
             # Motor setpoints: the trajectory at each substep's start (see Motion.setpoints).
             sp, sv = spline_at(t, P, V, A, np.concatenate(([0.0], ts[:-1])))
             setpoints = sp.tolist()
             if V is not None:
-                velocity = sv
-        return Motion(
-            q[:, :, None].tolist(), velocity[:, :, None].tolist(), tuple(P[-1].tolist()), tolerance, setpoints=setpoints
-        )
+                velocity = sv[:, :, None].tolist()
+        return Motion(targets, velocity, tuple(P[-1].tolist()), tolerance, setpoints=setpoints)
 
     @staticmethod
     def _spline_data(velocities, accelerations, points, rows, n):

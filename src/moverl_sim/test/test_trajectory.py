@@ -1,6 +1,12 @@
 """Trajectory sampling (Simulator.prepare, its kinematic fast path and its checked path) gives the doubles it gave
 when this test was written, bit for bit, on many random trajectories, valid and not, under kinematic and dynamic
-control. No roscore.
+control; the fast path gives the checked path's doubles and refuses what the checked path refuses. No roscore.
+
+The trajectories: segments shorter and longer than a substep, ends on and off the substep grid, a first point at
+t = 0 or not, points beyond a limit by less than its tolerance (clamped), path tolerances (checked; then unused under
+kinematic control), per-point velocities and accelerations (the dynamic robot follows the spline through them), and
+one thing wrong in some (a NaN or inf, times not increasing or negative, a limit, a start away from the current
+state, a row or a path tolerance of the wrong size, no points).
 
 The outputs (every motion's targets, velocities, setpoints, final state and path tolerance, or the exception's type
 and message) are hashed through their repr, which names each double exactly (the sign of a zero too): a change of
@@ -21,8 +27,8 @@ pytestmark = pytest.mark.core
 
 CASES = 400  # random trajectories per control mode
 DIGEST = {
-    "kinematic": "ddc432b2e3b96590d06ef5c5f2c17ea2569545ad9ff7906e931857e7047190f9",
-    "dynamic": "b4da1252e3a3faa95464f61f6897205131fe5ec1484172a3e537d67463c48a66",
+    "kinematic": "115e94716b7c952e8ca8126b677c34eb3a79d36f221939e665d93014be00dcb2",
+    "dynamic": "6f0377062be62936f2d169b3444aeda0e50a8d133be0cce97eea5bb76cd9eec6",
 }
 
 
@@ -91,6 +97,10 @@ def random_case(rng, i, lower, upper, vmax, hz):
         rows[-1] = rows[-1][:6]
     elif wrong == 11 and velocities is not None and velocities[0]:
         velocities[0][0] = math.inf
+    elif wrong == 12:
+        times[-1] = math.inf
+    elif wrong == 13:
+        times, rows, velocities, accelerations = [], [], None, None
     return start.tolist(), times, rows, tolerance, velocities, accelerations
 
 
@@ -131,8 +141,8 @@ def records(sim, seed):
             fast = sim._prepare_linear(times, rows, tolerance)
             record.append(motion_record(fast))
             counts["fast"] += fast is not None
-            if fast is not None:  # the fast path's doubles are the checked path's
-                assert record[1] == ("motion", record[-1])
+            # The fast path gives the checked path's doubles, and refuses (None) what the checked path refuses.
+            assert record[1] == ("motion", record[-1]) if fast is not None else record[1][0] != "motion", i
         counts["motion" if record[0][0] == "motion" else "refused"] += 1
         out.append(record)
     return out, counts
@@ -143,7 +153,7 @@ def digest(recs):
 
 
 @pytest.mark.parametrize("control", ["kinematic", "dynamic"])
-def test_sampling_gives_the_recorded_doubles(panda_urdf, table_world, control):
+def test_prepare_gives_the_recorded_doubles(panda_urdf, table_world, control):
     sim = make_sim(panda_urdf, table_world, control=control, physics_hz=240.0)  # (the digest is of 240 Hz)
     try:
         recs, counts = records(sim, seed=54)

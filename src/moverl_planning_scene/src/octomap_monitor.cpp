@@ -58,15 +58,22 @@ OctomapMonitor::OctomapMonitor(ros::NodeHandle nh, ros::NodeHandle pnh, Planning
 
 void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied,
                                      const std::vector<std::string>& camera_frames) {
-  world_speed_bound_ = speed_bound >= 0.0 && std::isfinite(speed_bound);
-  if (world_speed_bound_) speed_bound_ = speed_bound;
+  const bool bound_given = speed_bound >= 0.0 && std::isfinite(speed_bound);
+  const double bound = bound_given ? speed_bound : speed_bound_.load();
+  bool cameras_changed = false;
   {
     std::lock_guard<std::mutex> lock(stamps_mutex_);
+    cameras_changed = cameras_ != camera_frames;
     cameras_ = camera_frames;
   }
-  static_known_free_ = true;  // the static objects may have changed
+  static_known_free_ = true;  // the static objects may have changed (the integrator's next cloud)
+  const bool bound_changed = bound_given != world_speed_bound_.exchange(bound_given) || bound != speed_bound_.load();
+  speed_bound_ = bound;
   const bool switched = unknown_occupied_.exchange(unknown_occupied) != unknown_occupied;
-  if (!map_) return;
+  // Nothing the maps hold changed (a world whose objects moved, the start-up world latched again): done, without
+  // waiting for the sensor thread, which in real time with every camera at 30 Hz may hold its lock for seconds on end
+  // (the caller is the queue that answers the env's calls).
+  if (!map_ || (!switched && !bound_changed && !cameras_changed)) return;
   std::lock_guard<std::mutex> sensor_lock(sensor_mutex_);
   if (lag_) publishHeld(nullptr);  // the updates computed before the change, first (as map_ had them)
   {

@@ -274,6 +274,7 @@ bool SceneServer::getWorld(moverl_msgs::GetWorld::Request&, moverl_msgs::GetWorl
 }
 
 void SceneServer::onWorld(const moverl_msgs::World::ConstPtr& msg) {
+  if (*msg == world()) return;  // the world init fetched, latched on the topic: applied already
   std::string error;
   if (!applyWorld(*msg, &error)) {
     ROS_ERROR("planning_scene: world update '%s' rejected, previous world kept: %s", msg->name.c_str(), error.c_str());

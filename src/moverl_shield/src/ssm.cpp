@@ -1,0 +1,92 @@
+#include "moverl_shield/ssm.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace moverl_shield {
+
+namespace {
+
+bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
+
+void checkParams(const SsmParams& p) {
+  if (!(p.hand_speed > 0.0) || !(p.body_speed > 0.0) || !std::isfinite(p.hand_speed) ||
+      !std::isfinite(p.body_speed)) {
+    throw std::invalid_argument("ssm: hand_speed and body_speed must be positive");
+  }
+  for (double x : {p.reach_distance, p.intrusion, p.max_acceleration, p.max_speed, p.max_track_age,
+                   p.sensor_uncertainty, p.robot_uncertainty}) {
+    if (!finiteNonNegative(x)) {
+      throw std::invalid_argument("ssm: reach_distance, intrusion, max_acceleration, max_speed, max_track_age and "
+                                  "the uncertainties must be finite and >= 0");
+    }
+  }
+}
+
+void checkPart(const PartState& part) {
+  if (!finiteNonNegative(part.age) || !finiteNonNegative(part.speed) || !finiteNonNegative(part.radius)) {
+    throw std::invalid_argument("ssm: a part's age, speed and radius must be finite and >= 0");
+  }
+}
+
+}  // namespace
+
+bool monitored(const PartState& part, const SsmParams& params) {
+  return part.tracked && part.age <= params.max_track_age;
+}
+
+double iso13855Distance(double t, const SsmParams& params) {
+  checkParams(params);
+  if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
+  const double near = params.hand_speed * t + params.intrusion;
+  if (near <= params.reach_distance) return near;
+  return std::max(params.reach_distance, params.body_speed * t + params.intrusion);
+}
+
+double personReach(const PartState& part, double t, const SsmParams& params) {
+  checkParams(params);
+  checkPart(part);
+  if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
+  const double horizon = part.age + t;
+  if (!monitored(part, params)) return iso13855Distance(horizon, params);
+  // Accelerating at max_acceleration from the measured speed up to the cap (a part measured faster than max_speed
+  // keeps its speed: the cap never lowers what was seen).
+  const double cap = std::max(params.max_speed, part.speed);
+  const double a = params.max_acceleration;
+  double travel;
+  const double t_cap = a > 0.0 ? (cap - part.speed) / a : 0.0;
+  if (horizon <= t_cap) {
+    travel = part.speed * horizon + 0.5 * a * horizon * horizon;
+  } else {
+    travel = part.speed * t_cap + 0.5 * a * t_cap * t_cap + cap * (horizon - t_cap);
+  }
+  return travel + part.radius;
+}
+
+double protectiveSeparation(const PartState& part, const StopBound& stop, const std::vector<double>& radius_bounds,
+                            const SsmParams& params) {
+  return personReach(part, stop.duration(), params) + pointTravelBound(stop.travel, radius_bounds) +
+         params.sensor_uncertainty + params.robot_uncertainty;
+}
+
+double speedScale(double distance, const PartState& part, const std::vector<double>& q, const std::vector<double>& v,
+                  const StopLimits& limits, const std::vector<double>& radius_bounds, const SsmParams& params,
+                  double resolution) {
+  if (!(resolution > 0.0)) throw std::invalid_argument("ssm: the speed scale's resolution must be positive");
+  auto separation = [&](double s) {
+    std::vector<double> vs(v);
+    for (double& x : vs) x *= s;
+    return protectiveSeparation(part, failsafeStop(q, vs, limits), radius_bounds, params);
+  };
+  if (!(distance >= separation(0.0))) return 0.0;  // (NaN: stop)
+  if (separation(1.0) <= distance) return 1.0;
+  double ok = 0.0, bad = 1.0;  // S_p grows with the speed: bisect
+  while (bad - ok > resolution) {
+    const double mid = 0.5 * (ok + bad);
+    (separation(mid) <= distance ? ok : bad) = mid;
+  }
+  return ok;
+}
+
+}  // namespace moverl_shield

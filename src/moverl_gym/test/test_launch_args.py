@@ -31,7 +31,6 @@ from moverl_gym.graph import LaunchedGraph
 from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, LaunchArgError, check, launch_value
 from moverl_gym.paths import launch_file, repo_root
 from moverl_gym.proctree import TreeWatch
-from moverl_sim import core as sim_core
 from moverl_sim import node_config
 
 pytestmark = pytest.mark.core
@@ -393,7 +392,6 @@ NODE_LISTS = {
     "obstacles": scene_obstacles,
     "mode": lambda: set(node_config.MODES),
     "control": lambda: set(node_config.CONTROLS),
-    "control (moverl_sim.core)": lambda: set(sim_core.CONTROLS),
 }
 
 

@@ -78,7 +78,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "obstacles": ("objects", "octomap", "both", "sensed"),  # moverl_planning_scene/src/scene_server.cpp
     "scene_process": ("shield", "own"),  # launch files only: moverl.launch maps it onto shield.launch's scene
     "mode": ("lockstep", "realtime"),  # moverl_sim.node_config.MODES (moverl.launch derives the sim's mode from it)
-    "control": ("", "kinematic", "dynamic"),  # moverl_sim.node_config.CONTROLS and .core's; "": config/sim.yaml's
+    "control": ("", "kinematic", "dynamic"),  # moverl_sim.core.CONTROLS (node_config's); "": config/sim.yaml's
     "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).

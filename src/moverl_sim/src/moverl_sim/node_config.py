@@ -18,14 +18,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from .core import CONTROLS
 from .tracker import TrackerOptions, TrackerOptionsError
 
 __all__ = ["CONTROLS", "INTERFACES", "MODES", "SimNodeConfig", "SimNodeConfigError"]
 
-#: The values ~mode, ~control and ~interface accept (moverl_gym/test/test_launch_args.py compares MODES and CONTROLS
-#: with moverl_gym.launch_args.CHOICES).
+#: The values ~mode and ~interface accept, and (moverl_sim.core's) ~control: moverl_gym/test/test_launch_args.py
+#: compares MODES and CONTROLS with moverl_gym.launch_args.CHOICES.
 MODES = ("lockstep", "realtime")
-CONTROLS = ("kinematic", "dynamic")
 INTERFACES = ("extras", "standard")
 
 #: What a parameter getter returns for a parameter that is not set: the default it is given.

@@ -65,8 +65,8 @@ StopBound failsafeStop(const std::vector<double>& q, const std::vector<double>& 
   return b;
 }
 
-TimedTrajectory brakingTrajectory(const std::vector<double>& q, const std::vector<double>& v,
-                                  const StopLimits& limits, double sample_period) {
+TimedTrajectory brakingTrajectory(const std::vector<double>& q, const std::vector<double>& v, const StopLimits& limits,
+                                  double sample_period) {
   checkState(q, v, limits);
   if (!(sample_period > 0.0) || !std::isfinite(sample_period)) {
     throw std::invalid_argument("failsafe stop: the sample period must be positive");

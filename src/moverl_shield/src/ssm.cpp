@@ -11,15 +11,15 @@ namespace {
 bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
 
 void checkParams(const SsmParams& p) {
-  if (!(p.hand_speed > 0.0) || !(p.body_speed > 0.0) || !std::isfinite(p.hand_speed) ||
-      !std::isfinite(p.body_speed)) {
+  if (!(p.hand_speed > 0.0) || !(p.body_speed > 0.0) || !std::isfinite(p.hand_speed) || !std::isfinite(p.body_speed)) {
     throw std::invalid_argument("ssm: hand_speed and body_speed must be positive");
   }
   for (double x : {p.reach_distance, p.intrusion, p.max_acceleration, p.max_speed, p.max_track_age,
                    p.sensor_uncertainty, p.robot_uncertainty}) {
     if (!finiteNonNegative(x)) {
-      throw std::invalid_argument("ssm: reach_distance, intrusion, max_acceleration, max_speed, max_track_age and "
-                                  "the uncertainties must be finite and >= 0");
+      throw std::invalid_argument(
+          "ssm: reach_distance, intrusion, max_acceleration, max_speed, max_track_age and "
+          "the uncertainties must be finite and >= 0");
     }
   }
 }

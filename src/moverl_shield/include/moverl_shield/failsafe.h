@@ -30,8 +30,8 @@ struct StopLimits {
 
 /// \brief A failsafe stop from one joint state: its time bound and, per joint, the interval the joint stays in.
 struct StopBound {
-  double reaction_time = 0.0;  ///< T_r
-  double braking_time = 0.0;   ///< t_b (0 from standstill)
+  double reaction_time = 0.0;        ///< T_r
+  double braking_time = 0.0;         ///< t_b (0 from standstill)
   std::vector<double> lower, upper;  ///< per joint: every position the joint can take until standstill
   /// Per joint: the largest travel from the start in either direction (max(q - lower, upper - q)).
   std::vector<double> travel;
@@ -47,8 +47,8 @@ StopBound failsafeStop(const std::vector<double>& q, const std::vector<double>& 
 ///        decelerating uniformly to standstill at t_b = max_i |v_i| / a_i: positions, velocities and accelerations
 ///        every sample_period (and at t_b). From standstill: one point, (q, 0, 0) at t = 0.
 /// \throws std::invalid_argument as failsafeStop, or a non-positive sample_period.
-TimedTrajectory brakingTrajectory(const std::vector<double>& q, const std::vector<double>& v,
-                                  const StopLimits& limits, double sample_period);
+TimedTrajectory brakingTrajectory(const std::vector<double>& q, const std::vector<double>& v, const StopLimits& limits,
+                                  double sample_period);
 
 /// \brief A bound on how far any robot point moves when each joint i moves by at most travel[i]: sum_i r_i travel_i,
 ///        with r_i the planning scene's joint_radius_bounds (the largest distance of a robot point from joint i's axis,

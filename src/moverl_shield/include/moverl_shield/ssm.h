@@ -22,13 +22,13 @@ namespace moverl_shield {
 
 /// \brief The person model: ISO 13855's speeds and what a tracked part can do.
 struct SsmParams {
-  double hand_speed = 2.0;       ///< m/s, ISO 13855's K within reach (approach distances up to reach_distance)
-  double body_speed = 1.6;       ///< m/s, ISO 13855's K beyond it
-  double reach_distance = 0.5;   ///< m, where ISO 13855 switches from hand_speed to body_speed
-  double intrusion = 0.0;        ///< m, C for an unmonitored part (ISO 13855: 8 (d - 14) mm for resolution d mm)
-  double max_acceleration = 0.0; ///< m/s^2 of a tracked part (SaRA's model: 20-50)
-  double max_speed = 0.0;        ///< m/s no tracked part exceeds (the speed the reach is capped at)
-  double max_track_age = 0.0;    ///< s: an older track is lost (ISO's speeds)
+  double hand_speed = 2.0;          ///< m/s, ISO 13855's K within reach (approach distances up to reach_distance)
+  double body_speed = 1.6;          ///< m/s, ISO 13855's K beyond it
+  double reach_distance = 0.5;      ///< m, where ISO 13855 switches from hand_speed to body_speed
+  double intrusion = 0.0;           ///< m, C for an unmonitored part (ISO 13855: 8 (d - 14) mm for resolution d mm)
+  double max_acceleration = 0.0;    ///< m/s^2 of a tracked part (SaRA's model: 20-50)
+  double max_speed = 0.0;           ///< m/s no tracked part exceeds (the speed the reach is capped at)
+  double max_track_age = 0.0;       ///< s: an older track is lost (ISO's speeds)
   double sensor_uncertainty = 0.0;  ///< m, Z_d
   double robot_uncertainty = 0.0;   ///< m, Z_r (the shield's tracking_budget)
 };

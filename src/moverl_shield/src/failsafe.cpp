@@ -55,11 +55,12 @@ StopBound failsafeStop(const std::vector<double>& q, const std::vector<double>& 
   b.upper.resize(n);
   b.travel.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
-    // Reaction: v t +- a t^2 / 2. Braking with every joint at rest at tb: a joint starting at speed u travels u tb / 2
-    // (its deceleration |u| / tb is within its limit, as tb >= |u| / a).
+    // Reaction: v t +- a t^2 / 2 (concave and convex in t: the extremes at t = 0, the start, or at T_r). Braking with
+    // every joint at rest at tb: a joint starting at speed u travels u tb / 2 (its deceleration |u| / tb is within its
+    // limit, as tb >= |u| / a), away from where the reaction left it.
     const double drift = 0.5 * limits.deceleration[i] * tr * tr;
-    b.lower[i] = q[i] + v[i] * tr - drift + std::min(0.0, u_lo[i]) * 0.5 * tb;
-    b.upper[i] = q[i] + v[i] * tr + drift + std::max(0.0, u_hi[i]) * 0.5 * tb;
+    b.lower[i] = std::min(q[i], q[i] + v[i] * tr - drift + std::min(0.0, u_lo[i]) * 0.5 * tb);
+    b.upper[i] = std::max(q[i], q[i] + v[i] * tr + drift + std::max(0.0, u_hi[i]) * 0.5 * tb);
     b.travel[i] = std::max(q[i] - b.lower[i], b.upper[i] - q[i]);
   }
   return b;

@@ -85,6 +85,8 @@ TEST(FailsafeStop, AMeasuredSpeedBeyondTheLimitIsTakenAsItIs) {
   const StopBound b = failsafeStop({0.0, 0.0}, {2.5, 0.0}, limits2(0.05));
   EXPECT_NEAR(b.braking_time, 0.25, 1e-12);
   EXPECT_NEAR(b.upper[0], 2.5 * 0.05 + 0.5 * 10.0 * 0.05 * 0.05 + 2.5 * 0.125, 1e-12);
+  // Even braking as hard as it can during the reaction, the joint ends ahead of its start: the start bounds it.
+  EXPECT_EQ(b.lower[0], 0.0);
 }
 
 TEST(FailsafeStop, BadInputIsRefused) {

@@ -116,6 +116,16 @@ SsmParams iso() {
   return p;
 }
 
+/// A part a track explains: its measured speed (m/s), the measurement's age (s), its radius (m).
+PartState tracked(double speed, double age = 0.0, double radius = 0.0) {
+  PartState part;
+  part.tracked = true;
+  part.speed = speed;
+  part.age = age;
+  part.radius = radius;
+  return part;
+}
+
 TEST(Ssm, Iso13855SwitchesToTheBodySpeedBeyondReach) {
   SsmParams p = iso();
   EXPECT_NEAR(iso13855Distance(0.2, p), 0.4, 1e-12);   // 2.0 m/s: 0.4 m <= 0.5 m
@@ -127,12 +137,8 @@ TEST(Ssm, Iso13855SwitchesToTheBodySpeedBeyondReach) {
 
 TEST(Ssm, ATrackedPartAcceleratesUpToItsCap) {
   const SsmParams p = iso();
-  PartState part;
-  part.tracked = true;
-  part.speed = 0.5;
-  part.age = 0.05;
-  part.radius = 0.1;
-  // 0.05 + 0.05 = 0.1 s at 20 m/s^2 from 0.5 m/s: 0.05 + 0.1 = 0.15 m (the cap, 2 m/s, is reached at 0.075 s).
+  const PartState part = tracked(0.5, 0.05, 0.1);
+  // 0.05 + 0.05 = 0.1 s from 0.5 m/s at 20 m/s^2: the cap, 2 m/s, is reached at 0.075 s; 0.144 m, plus the radius.
   const double t_cap = 1.5 / 20.0;
   const double expect = 0.5 * t_cap + 10.0 * t_cap * t_cap + 2.0 * (0.1 - t_cap) + 0.1;
   EXPECT_NEAR(personReach(part, 0.05, p), expect, 1e-12);
@@ -141,10 +147,7 @@ TEST(Ssm, ATrackedPartAcceleratesUpToItsCap) {
 
 TEST(Ssm, ALostOrStaleTrackFallsBackToIsoSpeeds) {
   const SsmParams p = iso();
-  PartState part;
-  part.tracked = true;
-  part.speed = 0.0;
-  part.age = 0.25;  // older than max_track_age (0.2)
+  PartState part = tracked(0.0, 0.25);  // older than max_track_age (0.2)
   EXPECT_FALSE(monitored(part, p));
   EXPECT_NEAR(personReach(part, 0.1, p), iso13855Distance(0.35, p), 1e-12);
   part.tracked = false;
@@ -154,9 +157,7 @@ TEST(Ssm, ALostOrStaleTrackFallsBackToIsoSpeeds) {
 
 TEST(Ssm, ATrackFasterThanTheCapKeepsItsSpeed) {
   const SsmParams p = iso();
-  PartState part;
-  part.tracked = true;
-  part.speed = 3.0;
+  const PartState part = tracked(3.0);
   EXPECT_NEAR(personReach(part, 0.1, p), 0.3, 1e-12);
 }
 
@@ -168,11 +169,7 @@ struct Arm {
 TEST(Ssm, JustOutsideSpGoesJustInsideSlowsFarInsideStops) {
   const Arm arm;
   const SsmParams p = iso();
-  PartState hand;
-  hand.tracked = true;
-  hand.speed = 1.0;
-  hand.age = 0.03;
-  hand.radius = 0.06;
+  const PartState hand = tracked(1.0, 0.03, 0.06);
   const StopBound full = failsafeStop(arm.q, arm.v, arm.limits);
   const double sp = protectiveSeparation(hand, full, arm.radius, p);
   // S_p's terms: the hand over T_r + T_s (+ its age), the robot's travel, the uncertainties.
@@ -190,9 +187,7 @@ TEST(Ssm, JustOutsideSpGoesJustInsideSlowsFarInsideStops) {
 TEST(Ssm, TheSameDistanceStopsForAnUnmonitoredPartThatATrackedOneAllows) {
   const Arm arm;
   const SsmParams p = iso();
-  PartState hand;
-  hand.tracked = true;
-  hand.speed = 0.2;
+  PartState hand = tracked(0.2);
   const double sp = protectiveSeparation(hand, failsafeStop(arm.q, arm.v, arm.limits), arm.radius, p);
   EXPECT_EQ(speedScale(sp, hand, arm.q, arm.v, arm.limits, arm.radius, p), 1.0);
   hand.tracked = false;  // the tracker lost it: ISO's 2.0 m/s

@@ -12,7 +12,7 @@
 // With T_r = 0 the braking trajectory is exact: brakingTrajectory() is what the shield sends, and a controller that
 // follows it ends at q + v t_b / 2. A real (or the dynamic simulator's) controller lags: how far any robot point may
 // leave the model is the shield's tracking_budget, measured against the dynamic simulator in
-// moverl_sim/test/test_failsafe_stop.py.
+// src/moverl_shield/test/test_failsafe_stop.py.
 #pragma once
 
 #include <vector>

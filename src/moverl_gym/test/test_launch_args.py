@@ -28,7 +28,7 @@ import moverl_gym  # noqa: F401  (registers the env ids)
 import moverl_gym.env  # noqa: F401  (imported here, so that the refusals below are not timed with the import)
 from moverl_gym import launch_args, reaper
 from moverl_gym.graph import LaunchedGraph
-from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, LaunchArgError, check, launch_value
+from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, SENSED_OBSTACLES, LaunchArgError, check, launch_value
 from moverl_gym.paths import launch_file, repo_root
 from moverl_gym.proctree import TreeWatch
 from moverl_sim import node_config
@@ -66,6 +66,7 @@ WRONG = {
     "motion_time_scale": ("0", ("positive number",)),
     "camera_rate": ("-30", ("positive number",)),
     "obstacle_poses": ("vicon", ()),
+    "safety": ("iso", ()),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")
@@ -348,19 +349,27 @@ def cpp_function(path: Path, signature: str) -> str:
     raise AssertionError(f"unbalanced braces after {signature} in {path}")
 
 
-def shield_strategies() -> set[str]:
-    """The names parseStrategy (moverl_shield/src/shield_core.cpp) accepts: its enumerators, named by strategyName;
-    and strategyNames(), the list its error message gives, says the same."""
-    src = REPO / "src/moverl_shield/src/shield_core.cpp"
+def cpp_enum_names(src: Path, enum: str, name: str) -> set[str]:
+    """The names parse<name> (in `src`) accepts: its enumerators of `enum`, named by <name>Name; and <name>Names(),
+    the list its error message gives, says the same."""
+    cap = name[0].upper() + name[1:]
     names = dict(
-        re.findall(r"case Strategy::(k\w+):\s*return \"(\w+)\";", cpp_function(src, "std::string strategyName("))
+        re.findall(rf"case {enum}::(k\w+):\s*return \"(\w+)\";", cpp_function(src, f"std::string {name}Name("))
     )
-    parsed = re.findall(r"Strategy::(k\w+)", cpp_function(src, "bool parseStrategy("))
+    parsed = re.findall(rf"{enum}::(k\w+)", cpp_function(src, f"bool parse{cap}("))
     assert parsed and set(parsed) <= set(names), (parsed, names)
-    listed = re.search(r'strategyNames\(\) \{ return "([^"]*)"; \}', src.read_text()).group(1).split(", ")
+    listed = re.search(rf'{name}Names\(\) \{{ return "([^"]*)"; \}}', src.read_text()).group(1).split(", ")
     accepted = {names[k] for k in parsed}
-    assert set(listed) == accepted, f"strategyNames() lists {listed}, parseStrategy accepts {accepted}"
+    assert set(listed) == accepted, f"{name}Names() lists {listed}, parse{cap} accepts {accepted}"
     return accepted
+
+
+def shield_strategies() -> set[str]:
+    return cpp_enum_names(REPO / "src/moverl_shield/src/shield_core.cpp", "Strategy", "strategy")
+
+
+def scene_safeties() -> set[str]:
+    return cpp_enum_names(REPO / "src/moverl_planning_scene/src/sensed_margin.cpp", "Safety", "safety")
 
 
 def shield_profiles() -> set[str]:
@@ -387,6 +396,7 @@ def scene_obstacles() -> set[str]:
 #: list, and no data file is read by both sides; so a reformat of those functions breaks these readers.
 NODE_LISTS = {
     "strategy": shield_strategies,
+    "safety": scene_safeties,
     "profile": shield_profiles,
     "driver": shield_drivers,
     "obstacles": scene_obstacles,
@@ -450,3 +460,15 @@ def test_the_default_strategy_backs_away_only_where_a_person_is_sensed(obstacles
     assert re.search(rf"^/shield/strategy: {strategy}$", proc.stdout, re.M), proc.stdout
     _, proc = roslaunch(f"obstacles:={obstacles}", "strategy:=discard")
     assert re.search(r"^/shield/strategy: discard$", proc.stdout, re.M), proc.stdout
+
+
+def test_a_safety_definition_needs_the_cameras_map():
+    """safety:= is what the checks against the cameras' map promise: refused with the world file's shapes only, at
+    once and naming the obstacle modes that have a map; accepted with each of them."""
+    with pytest.raises(LaunchArgError, match="needs obstacles:= one of octomap, both, sensed"):
+        check({"safety": "ssm", "obstacles": "objects"})
+    with pytest.raises(LaunchArgError, match="obstacles='objects'"):
+        check({"safety": "separation"}, whole=True)  # moverl.launch's default obstacles
+    for mode in SENSED_OBSTACLES:
+        check({"safety": "ssm", "obstacles": mode})
+    check({"safety": "", "obstacles": "objects"}, whole=True)  # empty: the YAML's, and no map to promise anything of

@@ -330,10 +330,7 @@ int main(int argc, char** argv) {
     io.static_filter_padding = tunables->require<double>("octomap/static_filter_padding");
     io.threads = threads > 0 ? threads : tunables->require<int>("octomap/integration_threads");
     if (resolution > 0.0) mo.resolution = resolution;
-    rule.speed_bound = tunables->require<double>("octomap/speed_bound");
-    rule.latency = tunables->require<double>("octomap/latency");
-    rule.plan_horizon = tunables->require<double>("octomap/plan_horizon");
-    rule.max_age = tunables->require<double>("octomap/max_age");
+    mps::readSensedMarginTunables(*tunables, &rule);
     mo.hidden_space = true;  // as the scene node: the clouds of one instant are one batch
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s\n", e.what());
@@ -346,7 +343,7 @@ int main(int argc, char** argv) {
     const YAML::Node sensing = YAML::LoadFile(world)["sensing"];
     mo.unknown_occupied = !(sensing && sensing["unknown_occupied"]) || sensing["unknown_occupied"].as<bool>();
     if (sensing && sensing["speed_bound"]) rule.speed_bound = sensing["speed_bound"].as<double>();
-    mo.speed_bound = rule.speed_bound;
+    mo.speed_bound = rule.speed();
   } catch (const std::exception& e) {
     std::fprintf(stderr, "error: %s: %s\n", world.c_str(), e.what());
     return 1;

@@ -7,6 +7,7 @@
 #include <pthread.h>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <map>
 
@@ -81,7 +82,7 @@ void OctomapMonitor::setWorldSensing(double speed_bound, bool unknown_occupied,
     for (OccupancyMap* m : {map_.get(), checked_map_.get()}) {
       if (m == nullptr) continue;
       if (switched) m->setUnknownOccupied(unknown_occupied);
-      m->setSpeedBound(speed_bound_);  // how fast what the cameras miss may come (hidden space)
+      m->setSpeedBound(marginRule().speed());  // how fast what the cameras miss may come (hidden space)
     }
   }
   publishStatus(last_cloud_stamp_, last_cloud_frame_);  // the unobserved count changed
@@ -116,16 +117,14 @@ bool OctomapMonitor::init(std::string* error) {
   transform_timeout_ = o.transform_timeout;
   joint_state_wait_ = o.joint_state_wait;
   queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
-  yaml_speed_bound_ = o.speed_bound;
-  latency_ = o.latency;
-  plan_horizon_ = o.plan_horizon;
-  max_age_ = o.max_age;
+  rule_ = o.margin;
+  max_age_ = o.margin.max_age;
   stale_wait_ = o.stale_wait;
   lockstep_ = o.lockstep;
   lag_ = o.lockstep && o.lockstep_lag;
   lag_max_margin_ = o.lockstep_lag_max_margin;
   integration_ = o.integration;
-  if (speed_bound_ < 0.0) speed_bound_ = yaml_speed_bound_;  // the world did not give one
+  if (speed_bound_ < 0.0) speed_bound_ = rule_.speed_bound;  // the world did not give one
   // Map only what the robot can reach (padded), plus the largest predictive margin a query may use: something
   // farther away cannot touch the robot within the margin's time. Beams are clipped there, which keeps integration
   // fast. A margin beyond this slack is refused (margins()): the map cannot see that far.
@@ -136,7 +135,7 @@ bool OctomapMonitor::init(std::string* error) {
   // Free space no camera sees turns possibly occupied once something at the speed bound may have come there (under
   // unknown_occupied; the clouds of one instant are one batch: intoMaps).
   mo.hidden_space = true;
-  mo.speed_bound = speed_bound_;
+  mo.speed_bound = marginRule().speed();
   map_ = OccupancyMap::create(mo, error);
   if (!map_) return false;
   if (lag_) {
@@ -188,15 +187,24 @@ bool OctomapMonitor::init(std::string* error) {
     std::lock_guard<std::mutex> lock(stamps_mutex_);
     for (const auto& c : cameras_) cameras += (cameras.empty() ? "" : ", ") + c;
   }
+  char approach[256];
+  if (rule_.safety == Safety::kSsm) {
+    std::snprintf(approach, sizeof(approach),
+                  "safety ssm: ISO 13855's %.1f m/s within %.2f m, %.1f m/s beyond, intrusion %.3f m, sensor "
+                  "uncertainty %.3f m; the speed bound %.2f m/s is not used",
+                  rule_.iso.hand_speed, rule_.iso.reach_distance, rule_.iso.body_speed, rule_.iso.intrusion,
+                  rule_.uncertainty, speed_bound_.load());
+  } else {
+    std::snprintf(approach, sizeof(approach), "safety separation: speed bound %.2f m/s (%s)", speed_bound_.load(),
+                  world_speed_bound_ ? "the world file's sensing: speed_bound"
+                                     : "octomap/speed_bound of config/planning_scene.yaml: the world file gives none");
+  }
   ROS_INFO(
       "planning_scene: sensing obstacles from %s (cameras %s; resolution %.3f m, max range %.2f m, self filter %.3f m, "
-      "static filter %.3f m, mapped within +-%.2f m of the base; speed bound %.2f m/s (%s), max age %.2f s; unknown "
-      "cells count as %s)",
+      "static filter %.3f m, mapped within +-%.2f m of the base; %s; max age %.2f s; unknown cells count as %s)",
       cloud_sub_.getTopic().c_str(), cameras.empty() ? "(none listed by the world)" : cameras.c_str(), mo.resolution,
-      mo.max_range, self_filter_padding_, static_filter_padding_, reach, speed_bound_.load(),
-      world_speed_bound_ ? "the world file's sensing: speed_bound"
-                         : "octomap/speed_bound of config/planning_scene.yaml: the world file gives none",
-      max_age_, mo.unknown_occupied ? "occupied" : "free");
+      mo.max_range, self_filter_padding_, static_filter_padding_, reach, approach, max_age_,
+      mo.unknown_occupied ? "occupied" : "free");
   // Fail closed: no query is answered before the map has seen the world (an empty map calls everything free). A cloud
   // of every camera the world lists (as many as it lists: one in a cell with one camera), or one cloud when it lists
   // none; once one is in, the others get camera_wait more.
@@ -584,7 +592,7 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   if (lag_) {
     std::lock_guard<std::mutex> lock(pending_mutex_);
     cutoff = ros::Time(
-        lockstepMapCutoff(previous_check_, stamp.toSec(), epoch.toSec(), speed_bound_.load(), lag_max_margin_));
+        lockstepMapCutoff(previous_check_, stamp.toSec(), epoch.toSec(), marginRule().speed(), lag_max_margin_));
     previous_check_ = std::isnan(previous_check_) ? stamp.toSec() : std::max(previous_check_, stamp.toSec());
   }
   awaitPending(lag_ ? &cutoff : nullptr, deadline);
@@ -617,7 +625,7 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
   // Under unknown_occupied, what the cameras missed since the checks' map's last batch is in it as possibly occupied
   // (hidden space): the margin counts from that batch. The oldest camera still fails the check closed when too old.
   double margin_age = map_age;
-  if (std::isfinite(map_age) && map_age <= max_age_ && unknown_occupied_ && speed_bound_ > 0.0) {
+  if (std::isfinite(map_age) && map_age <= max_age_ && unknown_occupied_ && marginRule().speed() > 0.0) {
     double map_time = 0.0;
     {
       std::lock_guard<std::mutex> scene_lock(*scene_mutex_);
@@ -638,11 +646,8 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
 }
 
 SensedMarginRule OctomapMonitor::marginRule() const {
-  SensedMarginRule rule;
+  SensedMarginRule rule = rule_;
   rule.speed_bound = speed_bound_;
-  rule.latency = latency_;
-  rule.plan_horizon = plan_horizon_;
-  rule.max_age = max_age_;
   rule.max_margin = std::min(FclCollisionChecker::kMaxMargin, max_margin_);
   return rule;
 }

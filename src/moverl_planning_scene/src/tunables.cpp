@@ -149,6 +149,31 @@ void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
   o->watch_time = t.require<double>("octomap/watch_time");
 }
 
+void readSensedMarginTunables(const Tunables& t, SensedMarginRule* rule) {
+  const std::string safety = t.require<std::string>("octomap/safety");
+  if (!parseSafety(safety, &rule->safety)) {
+    throw std::runtime_error("octomap/safety: unknown safety definition '" + safety + "' (valid: " + safetyNames() +
+                             ")");
+  }
+  rule->speed_bound = t.require<double>("octomap/speed_bound");
+  rule->latency = t.require<double>("octomap/latency");
+  rule->plan_horizon = t.require<double>("octomap/plan_horizon");
+  rule->max_age = t.require<double>("octomap/max_age");
+  rule->iso.intrusion = t.require<double>("octomap/ssm/intrusion");  // read (and checked) under either safety
+  rule->uncertainty = t.require<double>("octomap/ssm/sensor_uncertainty");
+  for (const auto& p :
+       {std::make_pair("speed_bound", rule->speed_bound), std::make_pair("latency", rule->latency),
+        std::make_pair("plan_horizon", rule->plan_horizon), std::make_pair("ssm/intrusion", rule->iso.intrusion),
+        std::make_pair("ssm/sensor_uncertainty", rule->uncertainty)}) {
+    if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
+      throw std::runtime_error(std::string("octomap/") + p.first + " must be finite and >= 0");
+    }
+  }
+  if (!(rule->max_age > 0.0)) throw std::runtime_error("octomap/max_age must be > 0 (.inf: no limit)");
+  const std::string bad = rule->problem();
+  if (!bad.empty()) throw std::runtime_error(bad);
+}
+
 bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std::string* error) {
   std::string integration;
   try {
@@ -164,10 +189,7 @@ bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std:
     o->joint_states_topic = t.require<std::string>("octomap/joint_states_topic");
     o->queue_size = t.require<int>("octomap/queue_size");
     o->startup_timeout = t.require<double>("octomap/startup_timeout");
-    o->speed_bound = t.require<double>("octomap/speed_bound");
-    o->latency = t.require<double>("octomap/latency");
-    o->plan_horizon = t.require<double>("octomap/plan_horizon");
-    o->max_age = t.require<double>("octomap/max_age");
+    readSensedMarginTunables(t, &o->margin);
     o->stale_wait = t.require<double>("octomap/stale_wait");
     o->lockstep = t.require<bool>("octomap/lockstep");
     o->lockstep_lag = o->lockstep && t.require<bool>("octomap/lockstep_lag");
@@ -178,13 +200,12 @@ bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std:
     if (error != nullptr) *error = e.what();
     return false;
   }
-  for (const auto& p : {std::make_pair("speed_bound", o->speed_bound), std::make_pair("latency", o->latency),
-                        std::make_pair("plan_horizon", o->plan_horizon), std::make_pair("stale_wait", o->stale_wait),
-                        std::make_pair("self_filter_padding", o->self_filter_padding),
-                        std::make_pair("static_filter_padding", o->static_filter_padding),
-                        std::make_pair("future_tolerance", o->future_tolerance),
-                        std::make_pair("camera_wait", o->camera_wait), std::make_pair("batch_wait", o->batch_wait),
-                        std::make_pair("lockstep_lag_max_margin", o->lockstep_lag_max_margin)}) {
+  for (const auto& p :
+       {std::make_pair("stale_wait", o->stale_wait), std::make_pair("self_filter_padding", o->self_filter_padding),
+        std::make_pair("static_filter_padding", o->static_filter_padding),
+        std::make_pair("future_tolerance", o->future_tolerance), std::make_pair("camera_wait", o->camera_wait),
+        std::make_pair("batch_wait", o->batch_wait),
+        std::make_pair("lockstep_lag_max_margin", o->lockstep_lag_max_margin)}) {
     if (!(p.second >= 0.0) || !std::isfinite(p.second)) {
       if (error != nullptr) *error = std::string("octomap/") + p.first + " must be finite and >= 0";
       return false;
@@ -195,10 +216,6 @@ bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std:
     if (error != nullptr) {
       *error = "octomap/integration_threads must be >= 1, not " + std::to_string(o->integration_threads);
     }
-    return false;
-  }
-  if (!(o->max_age > 0.0)) {  // inf: no age limit
-    if (error != nullptr) *error = "octomap/max_age must be > 0 (.inf: no limit)";
     return false;
   }
   return true;

@@ -1158,6 +1158,55 @@ TEST(SensedMargin, TheMapReachesTheLargestMarginAnyCheckUses) {
   EXPECT_TRUE(box.max().isApprox(Eigen::Vector3d::Constant(1.5648)));
 }
 
+TEST(SensedMargin, SsmUsesIso13855WhateverTheSpeedBound) {
+  // safety ssm: the margin is ISO 13855's K t + C plus Z_d, K = 2.0 m/s up to 0.5 m, then 1.6 m/s (at least 0.5 m);
+  // the world's speed bound (0.16 m/s, worlds/human.yaml's) plays no part, and hidden space grows at the hand's speed.
+  const double inf = std::numeric_limits<double>::infinity();
+  mps::SensedMarginRule rule;
+  rule.safety = mps::Safety::kSsm;
+  rule.speed_bound = 0.16;
+  rule.iso.intrusion = 0.048;
+  rule.uncertainty = 0.01;
+  rule.latency = 0.03;
+  rule.plan_horizon = 1.0;
+  rule.max_age = 1.0;
+  rule.max_margin = 1.0;
+  EXPECT_DOUBLE_EQ(rule.speed(), 2.0);
+  mps::SensedMargins m;
+  std::string why;
+  ASSERT_TRUE(rule.compute(0.033, 0.05, &m, &why)) << why;
+  EXPECT_NEAR(m.start, 2.0 * 0.063 + 0.048 + 0.01, 1e-12);
+  EXPECT_NEAR(m.end, 2.0 * 0.113 + 0.048 + 0.01, 1e-12);  // 0.284 m: within reach, the hand's speed
+  EXPECT_EQ(m.plan, inf);                                 // 1.6 x 1.063 + C: beyond max_margin, no plan
+  ASSERT_TRUE(rule.compute(0.2, 0.05, &m, &why)) << why;  // 2.0 x 0.28 + C = 0.608 > 0.5: the body's speed,
+  EXPECT_NEAR(m.end, 0.5 + 0.01, 1e-12);                  // 1.6 x 0.28 + C = 0.496: at least 0.5
+  ASSERT_TRUE(rule.compute(0.3, 0.05, &m, &why)) << why;
+  EXPECT_NEAR(m.end, 1.6 * 0.38 + 0.048 + 0.01, 1e-12);
+  EXPECT_FALSE(rule.compute(0.6, 0.05, &m, &why));  // 1.6 x 0.68 + C > 1 m
+  EXPECT_NE(why.find("ISO 13855"), std::string::npos) << why;
+  // Margins never shrink with time (the path is checked at the end's margin: a monotone rule suffices).
+  double last = 0.0;
+  for (double t = 0.0; t < 0.6; t += 0.001) {
+    EXPECT_GE(rule.reach(t), last - 1e-12) << t;
+    last = rule.reach(t);
+  }
+  // The map reaches as far as the widest check: the checker's largest margin (a plan at the oldest map).
+  EXPECT_DOUBLE_EQ(rule.largestMargin(0.02), mps::FclCollisionChecker::kMaxMargin + 0.04);
+  rule.max_age = inf;
+  EXPECT_DOUBLE_EQ(rule.largestMargin(0.02), mps::FclCollisionChecker::kMaxMargin + 0.04);
+  EXPECT_EQ(rule.problem(), "");
+  rule.uncertainty = -0.01;
+  EXPECT_NE(rule.problem(), "");
+  rule.safety = mps::Safety::kSeparation;  // (the ssm terms do not matter then)
+  EXPECT_EQ(rule.problem(), "");
+  EXPECT_DOUBLE_EQ(rule.speed(), 0.16);
+  mps::Safety safety = mps::Safety::kSeparation;
+  EXPECT_TRUE(mps::parseSafety("ssm", &safety));
+  EXPECT_EQ(safety, mps::Safety::kSsm);
+  EXPECT_FALSE(mps::parseSafety("SSM", &safety));
+  EXPECT_EQ(mps::safetyNames(), "separation, ssm");
+}
+
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();

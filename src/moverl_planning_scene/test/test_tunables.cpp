@@ -99,10 +99,13 @@ TEST(OctomapMonitorOptions, ShippedValues) {
   EXPECT_EQ(o.lockstep, shipped<bool>("octomap/lockstep"));
   EXPECT_EQ(o.lockstep_lag, o.lockstep && shipped<bool>("octomap/lockstep_lag"));
   EXPECT_EQ(o.lockstep_lag_max_margin, shipped<double>("octomap/lockstep_lag_max_margin"));
-  EXPECT_EQ(o.speed_bound, shipped<double>("octomap/speed_bound"));
-  EXPECT_EQ(o.latency, shipped<double>("octomap/latency"));
-  EXPECT_EQ(o.plan_horizon, shipped<double>("octomap/plan_horizon"));
-  EXPECT_EQ(o.max_age, shipped<double>("octomap/max_age"));
+  mps::Safety safety = mps::Safety::kSsm;
+  ASSERT_TRUE(mps::parseSafety(shipped<std::string>("octomap/safety"), &safety));
+  EXPECT_EQ(o.margin.safety, safety);
+  EXPECT_EQ(o.margin.speed_bound, shipped<double>("octomap/speed_bound"));
+  EXPECT_EQ(o.margin.latency, shipped<double>("octomap/latency"));
+  EXPECT_EQ(o.margin.plan_horizon, shipped<double>("octomap/plan_horizon"));
+  EXPECT_EQ(o.margin.max_age, shipped<double>("octomap/max_age"));
   EXPECT_EQ(o.stale_wait, shipped<double>("octomap/stale_wait"));
   // The file's own values, where the margin and the map's size depend on them.
   EXPECT_EQ(o.integration, mps::Integration::kProjective);
@@ -135,15 +138,22 @@ TEST(OctomapMonitorOptions, ReadsEveryKeyOfTheFile) {
                                       "octomap/watch_time",
                                       "octomap/batch_wait",
                                       "octomap/future_tolerance",
+                                      "octomap/safety",
                                       "octomap/speed_bound",
+                                      "octomap/ssm/intrusion",
+                                      "octomap/ssm/sensor_uncertainty",
                                       "octomap/latency",
                                       "octomap/plan_horizon",
                                       "octomap/max_age",
                                       "octomap/stale_wait"};
-  ASSERT_EQ(keys.size(), 29u);
-  std::set<std::string> in_file;
+  ASSERT_EQ(keys.size(), 32u);
+  std::set<std::string> in_file;  // (a mapping's keys: octomap/ssm/...)
   for (const auto& entry : YAML::LoadFile(MOVERL_CONFIG_DIR "/planning_scene.yaml")["octomap"]) {
-    in_file.insert("octomap/" + entry.first.as<std::string>());
+    const std::string key = "octomap/" + entry.first.as<std::string>();
+    if (!entry.second.IsMap()) in_file.insert(key);
+    for (const auto& sub : entry.second.IsMap() ? entry.second : YAML::Node()) {
+      in_file.insert(key + "/" + sub.first.as<std::string>());
+    }
   }
   EXPECT_EQ(in_file, keys) << "a key of the octomap: section that the monitor does not read, or the other way round";
   for (const auto& key : keys) {
@@ -208,9 +218,9 @@ TEST(OctomapMonitorOptions, RefusesAMissingKey) {
 
 // The durations and paddings must be finite and >= 0.
 TEST(OctomapMonitorOptions, RefusesANegativeOrInfiniteValue) {
-  for (const char* name :
-       {"speed_bound", "latency", "plan_horizon", "stale_wait", "self_filter_padding", "static_filter_padding",
-        "future_tolerance", "camera_wait", "batch_wait", "lockstep_lag_max_margin"}) {
+  for (const char* name : {"speed_bound", "latency", "plan_horizon", "ssm/intrusion", "ssm/sensor_uncertainty",
+                           "stale_wait", "self_filter_padding", "static_filter_padding", "future_tolerance",
+                           "camera_wait", "batch_wait", "lockstep_lag_max_margin"}) {
     const std::string key = std::string("octomap/") + name;
     const std::string message = key + " must be finite and >= 0";
     EXPECT_EQ(refusal(EditedTunables({{key, -0.001}})), message);
@@ -248,19 +258,33 @@ TEST(OctomapMonitorOptions, RefusesNoMaxAge) {
   EXPECT_EQ(refusal(EditedTunables({{"octomap/max_age", kInf}})), "");
 }
 
-// The checks come in a fixed order: the ranges of the durations, then the integration, its threads, max_age.
+// The checks come in a fixed order: the margin's keys as they are read, then the ranges of the durations, the
+// integration, its threads.
 TEST(OctomapMonitorOptions, NamesTheFirstBadValue) {
   EXPECT_EQ(refusal(EditedTunables({{"octomap/max_age", 0.0},
                                     {"octomap/integration_threads", 0},
                                     {"octomap/integration", std::string("x")},
                                     {"octomap/batch_wait", -1.0}})),
+            "octomap/max_age must be > 0 (.inf: no limit)");
+  EXPECT_EQ(refusal(EditedTunables({{"octomap/integration_threads", 0},
+                                    {"octomap/integration", std::string("x")},
+                                    {"octomap/batch_wait", -1.0}})),
             "octomap/batch_wait must be finite and >= 0");
-  EXPECT_EQ(
-      refusal(EditedTunables(
-          {{"octomap/max_age", 0.0}, {"octomap/integration_threads", 0}, {"octomap/integration", std::string("x")}})),
-      "octomap/integration 'x' unknown: one of projective, ray_casting");
-  EXPECT_EQ(refusal(EditedTunables({{"octomap/max_age", 0.0}, {"octomap/integration_threads", 0}})),
-            "octomap/integration_threads must be >= 1, not 0");
+  EXPECT_EQ(refusal(EditedTunables({{"octomap/integration_threads", 0}, {"octomap/integration", std::string("x")}})),
+            "octomap/integration 'x' unknown: one of projective, ray_casting");
+}
+
+// octomap/safety: separation or ssm; another name is refused naming both.
+TEST(OctomapMonitorOptions, RefusesAnUnknownSafety) {
+  EXPECT_EQ(refusal(EditedTunables({{"octomap/safety", std::string("iso")}})),
+            "octomap/safety: unknown safety definition 'iso' (valid: separation, ssm)");
+  mps::OctomapMonitorOptions o;
+  std::string error;
+  ASSERT_TRUE(mps::readOctomapMonitorOptions(EditedTunables({{"octomap/safety", std::string("ssm")}}), &o, &error))
+      << error;
+  EXPECT_EQ(o.margin.safety, mps::Safety::kSsm);
+  EXPECT_EQ(o.margin.iso.intrusion, shipped<double>("octomap/ssm/intrusion"));
+  EXPECT_EQ(o.margin.uncertainty, shipped<double>("octomap/ssm/sensor_uncertainty"));
 }
 
 // With a YAML file as its source (a tool's, a test's): a bad value in the file is refused as from the parameters.

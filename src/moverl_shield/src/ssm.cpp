@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace moverl_shield {
 
@@ -11,15 +12,12 @@ namespace {
 bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
 
 void checkParams(const SsmParams& p) {
-  if (!(p.hand_speed > 0.0) || !(p.body_speed > 0.0) || !std::isfinite(p.hand_speed) || !std::isfinite(p.body_speed)) {
-    throw std::invalid_argument("ssm: hand_speed and body_speed must be positive");
-  }
-  for (double x : {p.reach_distance, p.intrusion, p.max_acceleration, p.max_speed, p.max_track_age,
-                   p.sensor_uncertainty, p.robot_uncertainty}) {
+  const std::string bad = p.iso.problem();
+  if (!bad.empty()) throw std::invalid_argument("ssm: " + bad);
+  for (double x : {p.max_acceleration, p.max_speed, p.max_track_age, p.sensor_uncertainty, p.robot_uncertainty}) {
     if (!finiteNonNegative(x)) {
       throw std::invalid_argument(
-          "ssm: reach_distance, intrusion, max_acceleration, max_speed, max_track_age and "
-          "the uncertainties must be finite and >= 0");
+          "ssm: max_acceleration, max_speed, max_track_age and the uncertainties must be finite and >= 0");
     }
   }
 }
@@ -36,20 +34,12 @@ bool monitored(const PartState& part, const SsmParams& params) {
   return part.tracked && part.age <= params.max_track_age;
 }
 
-double iso13855Distance(double t, const SsmParams& params) {
-  checkParams(params);
-  if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
-  const double near = params.hand_speed * t + params.intrusion;
-  if (near <= params.reach_distance) return near;
-  return std::max(params.reach_distance, params.body_speed * t + params.intrusion);
-}
-
 double personReach(const PartState& part, double t, const SsmParams& params) {
   checkParams(params);
   checkPart(part);
   if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
   const double horizon = part.age + t;
-  if (!monitored(part, params)) return iso13855Distance(horizon, params);
+  if (!monitored(part, params)) return params.iso.distance(horizon);
   // Accelerating at max_acceleration from the measured speed up to the cap (a part measured faster than max_speed
   // keeps its speed: the cap never lowers what was seen).
   const double cap = std::max(params.max_speed, part.speed);

@@ -128,11 +128,11 @@ PartState tracked(double speed, double age = 0.0, double radius = 0.0) {
 
 TEST(Ssm, Iso13855SwitchesToTheBodySpeedBeyondReach) {
   SsmParams p = iso();
-  EXPECT_NEAR(iso13855Distance(0.2, p), 0.4, 1e-12);   // 2.0 m/s: 0.4 m <= 0.5 m
-  EXPECT_NEAR(iso13855Distance(0.4, p), 0.64, 1e-12);  // 2.0 would give 0.8 > 0.5: 1.6 m/s
-  EXPECT_NEAR(iso13855Distance(0.26, p), 0.5, 1e-12);  // 1.6 m/s gives 0.416: at least 0.5
-  p.intrusion = 0.1;
-  EXPECT_NEAR(iso13855Distance(0.1, p), 0.3, 1e-12);
+  EXPECT_NEAR(p.iso.distance(0.2), 0.4, 1e-12);   // 2.0 m/s: 0.4 m <= 0.5 m
+  EXPECT_NEAR(p.iso.distance(0.4), 0.64, 1e-12);  // 2.0 would give 0.8 > 0.5: 1.6 m/s
+  EXPECT_NEAR(p.iso.distance(0.26), 0.5, 1e-12);  // 1.6 m/s gives 0.416: at least 0.5
+  p.iso.intrusion = 0.1;
+  EXPECT_NEAR(p.iso.distance(0.1), 0.3, 1e-12);
 }
 
 TEST(Ssm, ATrackedPartAcceleratesUpToItsCap) {
@@ -142,17 +142,17 @@ TEST(Ssm, ATrackedPartAcceleratesUpToItsCap) {
   const double t_cap = 1.5 / 20.0;
   const double expect = 0.5 * t_cap + 10.0 * t_cap * t_cap + 2.0 * (0.1 - t_cap) + 0.1;
   EXPECT_NEAR(personReach(part, 0.05, p), expect, 1e-12);
-  EXPECT_LT(personReach(part, 0.05, p), iso13855Distance(0.1, p) + 0.1);
+  EXPECT_LT(personReach(part, 0.05, p), p.iso.distance(0.1) + 0.1);
 }
 
 TEST(Ssm, ALostOrStaleTrackFallsBackToIsoSpeeds) {
   const SsmParams p = iso();
   PartState part = tracked(0.0, 0.25);  // older than max_track_age (0.2)
   EXPECT_FALSE(monitored(part, p));
-  EXPECT_NEAR(personReach(part, 0.1, p), iso13855Distance(0.35, p), 1e-12);
+  EXPECT_NEAR(personReach(part, 0.1, p), p.iso.distance(0.35), 1e-12);
   part.tracked = false;
   part.age = 0.0;
-  EXPECT_NEAR(personReach(part, 0.3, p), iso13855Distance(0.3, p), 1e-12);
+  EXPECT_NEAR(personReach(part, 0.3, p), p.iso.distance(0.3), 1e-12);
 }
 
 TEST(Ssm, ATrackFasterThanTheCapKeepsItsSpeed) {
@@ -196,15 +196,15 @@ TEST(Ssm, TheSameDistanceStopsForAnUnmonitoredPartThatATrackedOneAllows) {
 
 TEST(Ssm, BadParametersAreRefused) {
   SsmParams p = iso();
-  p.hand_speed = 0.0;
-  EXPECT_THROW(iso13855Distance(0.1, p), std::invalid_argument);
+  p.iso.hand_speed = 0.0;
+  EXPECT_THROW(p.iso.distance(0.1), std::invalid_argument);
   p = iso();
   p.max_track_age = -1.0;
   EXPECT_THROW(personReach(PartState{}, 0.1, p), std::invalid_argument);
   PartState bad;
   bad.speed = NAN;
   EXPECT_THROW(personReach(bad, 0.1, iso()), std::invalid_argument);
-  EXPECT_THROW(iso13855Distance(-0.1, iso()), std::invalid_argument);
+  EXPECT_THROW(iso().iso.distance(-0.1), std::invalid_argument);
 }
 
 }  // namespace

@@ -79,6 +79,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "scene_process": ("shield", "own"),  # launch files only: moverl.launch maps it onto shield.launch's scene
     "mode": ("lockstep", "realtime"),  # moverl_sim.node_config.MODES (moverl.launch derives the sim's mode from it)
     "control": ("", "kinematic", "dynamic"),  # moverl_sim.core.CONTROLS (node_config's); "": config/sim.yaml's
+    "safety": ("", "separation", "ssm"),  # moverl_planning_scene/src/sensed_margin.cpp: safetyName, parseSafety
+    # ("": config/planning_scene.yaml's octomap/safety)
     "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).
@@ -216,6 +218,7 @@ def _check(args: Mapping[str, object], whole: bool, base: CheckedLaunch | None) 
     values = {**before, **new}
     robots = dict(base._robots) if base is not None else {}
     problems += _open_values(values, new, whole, before, base is not None and base.whole, robots)
+    problems.append(_safety_without_map(values, new, whole))
     problems = [p for p in problems if p]
     if len(problems) == 1:
         raise LaunchArgError(f"launch/moverl.launch: {problems[0]}")
@@ -241,6 +244,19 @@ def _choice(name: str, text: str) -> str:
         return ""
     shown = ", ".join(c if c else '"" (empty: the config default)' for c in choices)
     return f"{name}={text!r} is not one of: {shown}{_closest(text, [c for c in choices if c])}"
+
+
+def _safety_without_map(values: Mapping[str, str], new: Mapping[str, str], whole: bool) -> str:
+    """A safety definition is a promise of the checks against the cameras' map: refused without one."""
+    if not values.get("safety") or not ({"safety", "obstacles"} & set(new)):
+        return ""
+    obstacles = values.get("obstacles", "objects" if whole else None)  # moverl.launch's default
+    if obstacles is None or obstacles in SENSED_OBSTACLES:
+        return ""
+    return (
+        f"safety={values['safety']!r} applies to the cameras' map only: it needs obstacles:= one of "
+        f"{', '.join(SENSED_OBSTACLES)} (obstacles={obstacles!r}: the world file's shapes, known exactly)"
+    )
 
 
 #: The arguments each check of a combination reads (besides the world or the robot they need).

@@ -161,11 +161,13 @@ class OctomapMonitor {
   std::atomic<uint32_t> clouds_{0}, dropped_{0};
   ros::Time last_cloud_stamp_;  // the last integrated cloud's stamp and frame (reported with drops too)
   std::string last_cloud_frame_;
-  // The sensed margin: octomap/speed_bound, latency, plan_horizon, max_age, stale_wait (config/planning_scene.yaml).
+  // The sensed margin: octomap/safety, speed_bound, latency, plan_horizon, max_age, ssm/ (config/planning_scene.yaml;
+  // rule_.speed_bound is the YAML's) and stale_wait; speed_bound_ is the one in force (the world's, else the YAML's).
+  SensedMarginRule rule_;
   std::atomic<double> speed_bound_{0.0};
   std::atomic<bool> unknown_occupied_{false};   // the world's sensing: unknown_occupied
   std::atomic<bool> static_known_free_{false};  // the static objects changed: tell the integrator (next cloud)
-  double yaml_speed_bound_ = 0.0, latency_ = 0.0, plan_horizon_ = 0.0, max_age_ = 0.0, stale_wait_ = 0.0;
+  double max_age_ = 0.0, stale_wait_ = 0.0;
   double max_margin_ = 0.0;  // the largest margin the mapped box covers (beyond the robot's padded reach)
   /// The margin rule of these tunables and speed bound (max_margin: max_margin_, within the checker's largest).
   SensedMarginRule marginRule() const;

@@ -10,6 +10,7 @@
 
 #include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
+#include "moverl_planning_scene/sensed_margin.h"
 #include "moverl_planning_scene/unset.h"
 
 namespace moverl_planning_scene {
@@ -35,13 +36,10 @@ struct OctomapMonitorOptions {
   /// octomap/lockstep_lag, read in lockstep only (real time: false, and the key need not be set).
   bool lockstep_lag = false;
   double lockstep_lag_max_margin = kUnset;  ///< octomap/lockstep_lag_max_margin (m; >= 0)
-  /// The sensed margin (sensed_margin.h): octomap/speed_bound (m/s; a world's sensing: speed_bound replaces it),
-  /// latency (s), plan_horizon (s), max_age (s; > 0, .inf: no limit), stale_wait (s, wall); all but max_age >= 0.
-  double speed_bound = kUnset;
-  double latency = kUnset;
-  double plan_horizon = kUnset;
-  double max_age = kUnset;
-  double stale_wait = kUnset;
+  /// The sensed margin (readSensedMarginTunables): octomap/safety, speed_bound (a world's sensing: speed_bound
+  /// replaces it), latency, plan_horizon, max_age, ssm/intrusion, ssm/sensor_uncertainty; max_margin is the monitor's.
+  SensedMarginRule margin;
+  double stale_wait = kUnset;  ///< octomap/stale_wait (s, wall; >= 0)
 };
 
 }  // namespace moverl_planning_scene

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
@@ -37,14 +38,57 @@ double sensedMapAge(const std::vector<CameraSeen>& cameras, double stamp, double
 /// \brief sensedMapAge of cameras known only by their stamps (unnamed).
 double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, double epoch);
 
-/// \brief The margin rule: an obstacle moving at up to speed_bound (m/s) may have come speed_bound x (map age + the
-///        move's duration + latency) closer than where the map shows it.
+/// \brief What a check against the sensed map promises (octomap/safety; docs/sensing.md, "Two safety definitions").
+enum class Safety : std::uint8_t {
+  /// "separation": nothing sensed ever touches the robot, moving or at rest, provided nothing moves faster than the
+  /// speed bound (the world's sensing: speed_bound, else octomap/speed_bound): the world's promise, not the standard's.
+  kSeparation = 0,
+  /// "ssm": ISO/TS 15066's speed and separation monitoring: the robot stands still before anything sensed can reach
+  /// it, whatever the world promises: everything the cameras see or miss approaches at ISO 13855's speeds (Iso13855).
+  /// A person may touch a robot at rest (ISO/TS 15066: a robot at standstill is not a moving hazard).
+  kSsm = 1,
+};
+/// \brief "separation" or "ssm".
+std::string safetyName(Safety safety);
+/// \brief Parse a safety name (exact). False for an unknown name (*safety unchanged).
+bool parseSafety(const std::string& name, Safety* safety);
+/// \brief The names parseSafety accepts, for messages ("separation, ssm").
+std::string safetyNames();
+
+/// \brief ISO 13855's approach distance S = K t + C of a person not monitored: K = hand_speed while S is at most
+///        reach_distance (a hand or an arm reaching), else K = body_speed (a walking body) and S at least
+///        reach_distance. The speeds are the standard's; C is the sensors' (their detection capability).
+struct Iso13855 {
+  double hand_speed = 2.0;      ///< m/s
+  double body_speed = 1.6;      ///< m/s
+  double reach_distance = 0.5;  ///< m
+  double intrusion = 0.0;       ///< m, C: how far a part may intrude before the sensors detect it
+  /// \brief "" when valid (speeds > 0, distances >= 0, all finite), else what is wrong.
+  std::string problem() const;
+  /// \brief S (m) for t >= 0 s. \throws std::invalid_argument for a negative or non-finite t, or a problem().
+  double distance(double t) const;
+};
+
+/// \brief The margin rule: what the map shows may have come closer by the time the robot is at a state, over the map's
+///        age + the move's duration + latency: speed_bound times that (separation), or ISO 13855's distance for it
+///        plus the position uncertainties (ssm).
 struct SensedMarginRule {
-  double speed_bound = 0.0;   ///< m/s
+  Safety safety = Safety::kSeparation;
+  double speed_bound = 0.0;   ///< m/s (separation)
+  Iso13855 iso;               ///< ssm: how a person approaches
+  double uncertainty = 0.0;   ///< m (ssm): Z_d, the sensors' position error beyond the map's cells
   double latency = 0.0;       ///< s
   double plan_horizon = 0.0;  ///< s: the longest a plan may last (the shield refuses slower ones)
   double max_age = 0.0;       ///< s: an older map knows nothing free (fail closed)
   double max_margin = 0.0;    ///< m: the largest margin the checker builds
+
+  /// \brief m/s: the fastest anything the cameras miss may come (hidden space, the lockstep lag's cost): speed_bound
+  ///        (separation) or ISO's hand speed (ssm).
+  double speed() const;
+  /// \brief m: how far a sensed obstacle may have come in `seconds` (>= 0): the margin before the padding.
+  double reach(double seconds) const;
+  /// \brief "" when the rule's ssm terms are valid (always under separation), else what is wrong.
+  std::string problem() const;
 
   /// \brief The margins of a move of `duration` s (infinite: a plan, plan_horizon) from a state whose map is
   ///        `map_age` s old: the start with no move, the end with the move, a plan with plan_horizon. False with
@@ -53,8 +97,8 @@ struct SensedMarginRule {
   bool compute(double map_age, double duration, SensedMargins* out, std::string* why) const;
 
   /// \brief The largest margin a check may use: how far an obstacle may come within the oldest map a check accepts
-  ///        and the longest plan, speed_bound x (max_age + plan_horizon + latency) (at most
-  ///        FclCollisionChecker::kMaxMargin; 0 without a speed bound), plus two cells of `resolution` (m). max_margin
+  ///        and the longest plan, reach(max_age + plan_horizon + latency) (at most FclCollisionChecker::kMaxMargin; 0
+  ///        under separation without a speed bound), plus two cells of `resolution` (m). max_margin
   ///        is set from it; the sensed map reaches that far beyond the robot (sensedMapBounds).
   double largestMargin(double resolution) const;
 };

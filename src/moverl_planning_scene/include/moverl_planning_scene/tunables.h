@@ -63,11 +63,16 @@ void readSceneTunables(const Tunables& t, PlanningSceneOptions* o);
 ///        occupancy_threshold, watch_time). Throws std::runtime_error naming a missing key.
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
 
+/// \brief Fill the sensed margin's rule (octomap/safety, speed_bound, latency, plan_horizon, max_age, ssm/intrusion,
+///        ssm/sensor_uncertainty; not max_margin) and check it. Throws std::runtime_error naming a
+///        missing key or a value out of its range (an unknown safety names the valid ones).
+void readSensedMarginTunables(const Tunables& t, SensedMarginRule* rule);
+
 /// \brief Fill the sensed-obstacle monitor's tunables (every key of the octomap: section: the map's by
 ///        readOccupancyMapTunables, octomap/lockstep_lag in lockstep only) and check them. False with *error naming the
-///        first missing key, or the first value out of its range (the nine durations and paddings of the monitor and
-///        octomap/lockstep_lag_max_margin finite and >= 0, integration projective or ray_casting, integration_threads
-///        >= 1, max_age > 0); *o may then be partly filled.
+///        first missing key, or the first value out of its range (readSensedMarginTunables's; stale_wait, the filters'
+///        paddings, future_tolerance, camera_wait, batch_wait and lockstep_lag_max_margin finite and >= 0; integration
+///        projective or ray_casting; integration_threads >= 1); *o may then be partly filled.
 bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std::string* error);
 
 /// \brief The robot's options from a robot config (config/robots/<robot>.yaml: robot/joints, base_link, ee_link,

@@ -5,7 +5,7 @@
 //   S_h      how far the person's part can come while the robot reacts and stops (T_r + T_s), plus the age of what is
 //            known of it: a tracked part (its speed monitored) |v| t + a t^2 / 2, capped at max_speed; an unmonitored
 //            one (a lost or stale track, or anything the tracker does not explain) ISO 13855's K t + C with K = 2.0 m/s
-//            while that is at most 0.5 m, else K = 1.6 m/s (and at least 0.5 m)
+//            while that is at most 0.5 m, else K = 1.6 m/s (and at least 0.5 m): the scene's Iso13855
 //   S_r+S_s  how far any robot point moves until standstill (failsafe.h: pointTravelBound of the stop's bound)
 //   C        intrusion distance (ISO 13855's C of the sensor, for an unmonitored part; a tracked part's own radius)
 //   Z_d, Z_r the sensor's and the robot's position uncertainty
@@ -16,21 +16,19 @@
 
 #include <vector>
 
+#include "moverl_planning_scene/sensed_margin.h"
 #include "moverl_shield/failsafe.h"
 
 namespace moverl_shield {
 
 /// \brief The person model: ISO 13855's speeds and what a tracked part can do.
 struct SsmParams {
-  double hand_speed = 2.0;          ///< m/s, ISO 13855's K within reach (approach distances up to reach_distance)
-  double body_speed = 1.6;          ///< m/s, ISO 13855's K beyond it
-  double reach_distance = 0.5;      ///< m, where ISO 13855 switches from hand_speed to body_speed
-  double intrusion = 0.0;           ///< m, C for an unmonitored part (ISO 13855: 8 (d - 14) mm for resolution d mm)
-  double max_acceleration = 0.0;    ///< m/s^2 of a tracked part (SaRA's model: 20-50)
-  double max_speed = 0.0;           ///< m/s no tracked part exceeds (the speed the reach is capped at)
-  double max_track_age = 0.0;       ///< s: an older track is lost (ISO's speeds)
-  double sensor_uncertainty = 0.0;  ///< m, Z_d
-  double robot_uncertainty = 0.0;   ///< m, Z_r (the shield's tracking_budget)
+  moverl_planning_scene::Iso13855 iso;  ///< an unmonitored part (the scene's rule: its speeds, C of the sensors)
+  double max_acceleration = 0.0;        ///< m/s^2 of a tracked part (SaRA's model: 20-50)
+  double max_speed = 0.0;               ///< m/s no tracked part exceeds (the speed the reach is capped at)
+  double max_track_age = 0.0;           ///< s: an older track is lost (ISO's speeds)
+  double sensor_uncertainty = 0.0;      ///< m, Z_d
+  double robot_uncertainty = 0.0;       ///< m, Z_r (the shield's tracking_budget)
 };
 
 /// \brief What is known of one part of a person.
@@ -43,9 +41,6 @@ struct PartState {
 
 /// \brief Whether a part counts as monitored: tracked, with a track no older than max_track_age.
 bool monitored(const PartState& part, const SsmParams& params);
-
-/// \brief ISO 13855's approach distance S = K t + C for time t (unmonitored parts).
-double iso13855Distance(double t, const SsmParams& params);
 
 /// \brief S_h + C of a part over horizon t (s, after the measurement's age): how far it may be from where it was known.
 double personReach(const PartState& part, double t, const SsmParams& params);

@@ -11,6 +11,9 @@ does not teleport the robot where a moving obstacle will walk into it within res
   all with the robot at rest;
 * strategy retreat: the shield backs the hand away while the visitor comes (verdict RETREATED) and no contact
   happens at all;
+* safety ssm (ISO/TS 15066's speed and separation monitoring: the margin is ISO 13855's approach distance, not the
+  world's bound), the walk five times faster, and an agent that keeps pushing the hand into the visitor's path: the
+  visitor may touch the robot at rest (ssm allows it), never while it moves;
 * strategy retreat with the walk played five times faster than the world's bound says (motion_time_scale 5, up to
   1.57 m/s against 0.32): the margin no longer covers where the visitor may be between two views, and the robot is
   hit. The bound is the cell's promise; a person faster than it is not covered. (Three times faster, 0.94 m/s, the
@@ -63,11 +66,12 @@ def parked():
         tool.close()
 
 
-def _park(tmp_path, parked, strategy, motion_time_scale=1.0):
+def _park(tmp_path, parked, strategy, motion_time_scale=1.0, safety=""):
     """One walk of the visitor (STEPS env steps) with the robot told to stay: (verdict counts, contacts moving,
     contacts at rest, largest joint motion from the parked state). motion_time_scale > 1 plays the walk that many
-    times faster than the world declares."""
+    times faster than the world declares; safety: the launch argument (empty: config/planning_scene.yaml's)."""
     extra = {"motion_time_scale": motion_time_scale} if motion_time_scale != 1.0 else {}
+    extra.update({"safety": safety} if safety else {})
     env = MoveRLReachEnv(
         world=str(_world(tmp_path)),
         graph="launch",
@@ -116,3 +120,45 @@ def test_a_visitor_faster_than_the_declared_bound_is_not_covered(tmp_path, parke
     verdicts, moving, resting, moved = _park(tmp_path, parked, "retreat", motion_time_scale=5.0)
     print(f"retreat, 5x faster: verdicts {verdicts}, contacts {moving} moving / {resting} at rest, moved {moved:.4f}")
     assert moving + resting > 0, f"the visitor faster than the bound never reached the robot: {verdicts}"
+
+
+INTO = [0.62, 0.0, 0.25]  # the hand 20 cm further out, inside the visitor's walk (its near face reaches x = 0.40)
+
+
+def test_ssm_never_moves_into_a_visitor_faster_than_declared(tmp_path, parked):
+    # safety:=ssm: the sensed cells approach at ISO 13855's speeds (2.0 m/s within 0.5 m), whatever the world says;
+    # the walk at 5x (up to 1.57 m/s) is within them. The agent pushes at full speed towards INTO for two periods.
+    tool = Tool(ROBOT)
+    try:
+        into = tool.ik(INTO, parked)
+        assert np.linalg.norm(tool.ee_xyz(into) - INTO) < 0.01, "no configuration with the hand at INTO"
+    finally:
+        tool.close()
+    env = MoveRLReachEnv(
+        world=str(_world(tmp_path)),
+        graph="launch",
+        goal=GOAL,
+        task={"max_episode_steps": 2 * STEPS + 1},
+        launch_args={"obstacles": "sensed", "strategy": "retreat", "safety": "ssm", "motion_time_scale": 5.0},
+    )
+    try:
+        env.reset(options={"start": parked})
+        inner = env.unwrapped
+        verdicts, moving, resting, closest = {}, 0, 0, np.inf
+        for _ in range(2 * STEPS):
+            action = np.clip((into - inner.q) / inner.scaler.max_delta, -1.0, 1.0).astype(np.float32)
+            _, _, term, trunc, info = env.step(action)
+            verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+            moving += max(info["contacts_moving"], 0)
+            resting += max(info["contacts_resting"], 0)
+            closest = min(closest, float(np.max(np.abs(inner.q - into))))
+            assert not (term or trunc), f"the episode ended: {info}"
+    finally:
+        env.close()
+    start = float(np.max(np.abs(parked - into)))
+    print(
+        f"ssm, 5x faster, pushing: verdicts {verdicts}, contacts {moving} moving / {resting} at rest; nearest INTO "
+        f"{closest:.3f} rad (from {start:.3f})"
+    )
+    assert moving == 0, f"{moving} contacts while the robot moved: {verdicts}"
+    assert verdicts.get("safe", 0) + verdicts.get("retreated", 0) > 0, f"the robot never moved: {verdicts}"

@@ -118,6 +118,7 @@ def worker(
     motion_time_scale: float | None = None,
     strategy: str | None = None,
     camera_rate: float | None = None,
+    safety: str | None = None,
 ) -> dict:
     from gymnasium.wrappers import TimeLimit
 
@@ -153,6 +154,7 @@ def worker(
                 **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
                 **({"camera_rate": camera_rate} if camera_rate else {}),
                 **({"strategy": strategy} if strategy else {}),
+                **({"safety": safety} if safety else {}),
             },
         ),
         max_episode_steps=max_steps,
@@ -198,6 +200,7 @@ def worker(
         **({"motion_time_scale": motion_time_scale} if motion_time_scale else {}),
         **({"camera_rate": camera_rate} if camera_rate else {}),
         "strategy": used if shield else "",
+        "safety": (safety or "") if shield else "",
         "shield": shield,
         "steps": steps,
         "episodes": episodes,
@@ -265,6 +268,13 @@ def main(argv=None) -> int:
         help="the shield's strategies to compare, each in runs of their own with the same seed (default: the launch "
         "file's)",
     )
+    p.add_argument(
+        "--safety",
+        choices=[c for c in CHOICES["safety"] if c],
+        default=None,
+        help="what the checks against the cameras' map promise, with sensed obstacles (default: "
+        "config/planning_scene.yaml's octomap/safety)",
+    )
     p.add_argument("--out", type=Path, default=None, help="output folder (default: <repo>/docs/pushing_policy)")
     p.add_argument("--worker", nargs=3, metavar=("CONFIG", "WORLD", "on|off"), help=argparse.SUPPRESS)
     p.add_argument("--worker-strategy", default=None, help=argparse.SUPPRESS)
@@ -288,6 +298,7 @@ def main(argv=None) -> int:
                     args.motion_time_scale,
                     args.worker_strategy,
                     args.camera_rate,
+                    args.safety,
                 )
             )
         )
@@ -329,6 +340,7 @@ def main(argv=None) -> int:
                         *(["--mode", args.mode] if args.mode else []),
                         *(["--motion-time-scale", args.motion_time_scale] if args.motion_time_scale else []),
                         *(["--camera-rate", args.camera_rate] if args.camera_rate else []),
+                        *(["--safety", args.safety] if args.safety else []),
                         *(["--worker-strategy", strategy] if strategy else []),
                     ],
                     f"worker {config.name} {world} {what}",
@@ -362,6 +374,7 @@ def main(argv=None) -> int:
         "mode",
         "motion_time_scale",
         "camera_rate",
+        "safety",
     ):
         if getattr(args, name) != p.get_default(name):
             cmd += f" --{name.replace('_', '-')} {getattr(args, name)}"
@@ -398,7 +411,7 @@ def main(argv=None) -> int:
         lines.append(
             f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | "
             f"{'%g Hz' % r['camera_rate'] if r.get('camera_rate') else 'world file'} | {r['mode']} | "
-            f"{('on (' + r['strategy'] + ')') if r['shield'] else 'off'} | "
+            f"{('on (' + r['strategy'] + (', ' + r['safety'] if r.get('safety') else '') + ')') if r['shield'] else 'off'} | "
             f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['contacts_moving']} | "
             f"{r['contacts_resting']} | {r['steps_with_contact']} | "
             f"{r['unsensed_moves']} | {r['steps_at_limit']} | {v} | {t} | {r['steps_per_s']} |"

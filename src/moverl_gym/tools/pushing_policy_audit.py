@@ -217,6 +217,13 @@ def worker(
     }
 
 
+def shield_cell(r: dict) -> str:
+    """The table's shield column: off, or on with its strategy (and safety definition when one was given)."""
+    if not r["shield"]:
+        return "off"
+    return f"on ({r['strategy']}" + (f", {r['safety']}" if r.get("safety") else "") + ")"
+
+
 def main(argv=None) -> int:
     from moverl_gym.launch_args import CHOICES
     from moverl_gym.paths import config_file, repo_root
@@ -411,7 +418,7 @@ def main(argv=None) -> int:
         lines.append(
             f"| {r['robot']} | {r['world']} | {r['control'] or 'sim.yaml'} | {r['obstacles']} | "
             f"{'%g Hz' % r['camera_rate'] if r.get('camera_rate') else 'world file'} | {r['mode']} | "
-            f"{('on (' + r['strategy'] + (', ' + r['safety'] if r.get('safety') else '') + ')') if r['shield'] else 'off'} | "
+            f"{shield_cell(r)} | "
             f"{r['steps']} | {r['episodes']} | **{r['contacts']}** | {r['contacts_moving']} | "
             f"{r['contacts_resting']} | {r['steps_with_contact']} | "
             f"{r['unsensed_moves']} | {r['steps_at_limit']} | {v} | {t} | {r['steps_per_s']} |"

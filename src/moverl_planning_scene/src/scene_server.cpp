@@ -91,12 +91,18 @@ bool toWorld(const moverl_msgs::World& msg, std::vector<WorldObject>* out, std::
     w.pose = Eigen::Isometry3d::Identity();
     w.pose.linear() = rot.toRotationMatrix();
     w.pose.translation() = Eigen::Vector3d(o.pose.position.x, o.pose.position.y, o.pose.position.z);
-    if (o.motion.type == moverl_msgs::ObstacleMotion::OSCILLATE) {
-      w.motion.type = ObstacleMotion::Type::kOscillate;
+    if (o.motion.type == moverl_msgs::ObstacleMotion::OSCILLATE ||
+        o.motion.type == moverl_msgs::ObstacleMotion::REACH) {
+      w.motion.type = o.motion.type == moverl_msgs::ObstacleMotion::REACH ? ObstacleMotion::Type::kReach
+                                                                          : ObstacleMotion::Type::kOscillate;
       w.motion.axis = Eigen::Vector3d(o.motion.axis[0], o.motion.axis[1], o.motion.axis[2]);
       w.motion.amplitude = o.motion.amplitude;
       w.motion.period = o.motion.period;
       w.motion.phase = o.motion.phase;
+      w.motion.move = o.motion.move;
+      w.motion.hold = o.motion.hold;
+      w.motion.chance = o.motion.chance;
+      w.motion.seed = o.motion.seed;
     } else if (o.motion.type != moverl_msgs::ObstacleMotion::NONE) {
       *error = "world object '" + o.id + "': unknown motion type " + std::to_string(o.motion.type);
       return false;

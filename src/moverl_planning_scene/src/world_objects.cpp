@@ -151,13 +151,21 @@ bool FclCollisionChecker::setWorld(const std::vector<WorldObject>& objects, std:
     if (o.pose.translation().norm() > kMaxExtent) return bad("pose is more than 1e4 m away");
     const ObstacleMotion& m = o.motion;
     if (m.type != ObstacleMotion::Type::kNone) {
-      if (m.type != ObstacleMotion::Type::kOscillate) return bad("unknown motion type");
+      if (m.type != ObstacleMotion::Type::kOscillate && m.type != ObstacleMotion::Type::kReach) {
+        return bad("unknown motion type");
+      }
       if (!m.axis.allFinite() || std::fabs(m.axis.norm() - 1.0) > 1e-6) return bad("motion axis must be a unit vector");
       if (!std::isfinite(m.amplitude) || m.amplitude < 0.0 || m.amplitude > kMaxExtent) {
         return bad("motion amplitude must be finite, >= 0 and <= 1e4 m");
       }
       if (!std::isfinite(m.period) || m.period <= 0.0) return bad("motion period must be finite and > 0");
       if (!std::isfinite(m.phase)) return bad("motion phase must be finite");
+      if (m.type == ObstacleMotion::Type::kReach) {
+        if (!std::isfinite(m.move) || m.move <= 0.0) return bad("reach motion's move must be finite and > 0");
+        if (!std::isfinite(m.hold) || m.hold < 0.0) return bad("reach motion's hold must be finite and >= 0");
+        if (!(2.0 * m.move + m.hold <= m.period)) return bad("reach motion's period must be >= 2 move + hold");
+        if (!(m.chance >= 0.0 && m.chance <= 1.0)) return bad("reach motion's chance must be in [0, 1]");
+      }
     }
     Obstacle ob;
     ob.id = o.id;

@@ -824,6 +824,82 @@ TEST(ObstacleMotion, DisplacementMatchesTheSharedCases) {
   EXPECT_EQ(cases, 40);
 }
 
+namespace {
+
+mps::ObstacleMotion reach(double amplitude, double period, double phase, double move, double hold, double chance,
+                          std::uint32_t seed) {
+  mps::ObstacleMotion m;
+  m.type = mps::ObstacleMotion::Type::kReach;
+  m.axis = Eigen::Vector3d::UnitZ();
+  m.amplitude = amplitude;
+  m.period = period;
+  m.phase = phase;
+  m.move = move;
+  m.hold = hold;
+  m.chance = chance;
+  m.seed = seed;
+  return m;
+}
+
+}  // namespace
+
+// The reach motion's C++ twin gives the Python one's cases (moverl_sim/test/fixtures/reach_motion_cases.txt; the
+// first ones follow by hand, the seeded ones test the cycles' draw as well).
+TEST(ObstacleMotion, ReachMatchesTheSharedCases) {
+  std::ifstream in(MOVERL_REACH_CASES);
+  ASSERT_TRUE(in.good()) << "cannot read " << MOVERL_REACH_CASES;
+  std::string line;
+  int cases = 0, reached = 0;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream row(line);
+    double amplitude, period, phase, move, hold, chance, t, expected;
+    std::uint32_t seed;
+    ASSERT_TRUE(row >> amplitude >> period >> phase >> move >> hold >> chance >> seed >> t >> expected) << line;
+    EXPECT_NEAR(reach(amplitude, period, phase, move, hold, chance, seed).displacement(t), expected, 1e-12) << line;
+    ++cases;
+    reached += chance > 0.0 && chance < 1.0 && expected > 0.0;
+  }
+  EXPECT_EQ(cases, 33);
+  EXPECT_GT(reached, 0);  // some seeded cycles reach, and (below 16) not all
+  EXPECT_LT(reached, 16);
+}
+
+// The reach's range over a window is exact: it holds every sampled displacement, and is as tight as sampling shows;
+// over an unbounded window it is the envelope [0, amplitude] (less the offset at t = 0).
+TEST(ObstacleMotion, ReachRangeIsExact) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (int trial = 0; trial < 2000; ++trial) {
+    const double period = 1.0 + 3 * u(rng), move = 0.05 + 0.3 * u(rng), hold = (period - 2 * move) * u(rng);
+    const auto m = reach(0.05 + u(rng), period, 6.28 * u(rng), move, hold, 0.6, trial);
+    const double t0 = 20 * u(rng), t1 = t0 + (trial % 10 == 0 ? 5 * period : 1.5 * u(rng) * period);
+    double lo, hi;
+    m.range(t0, t1, &lo, &hi);
+    double mn = 1e9, mx = -1e9;
+    for (int k = 0; k <= 4000; ++k) {
+      const double d = m.displacement(t0 + (t1 - t0) * k / 4000.0);
+      mn = std::min(mn, d);
+      mx = std::max(mx, d);
+    }
+    ASSERT_LE(lo, mn + 1e-12) << trial;
+    ASSERT_GE(hi, mx - 1e-12) << trial;
+    ASSERT_NEAR(lo, mn, 2e-3 * m.amplitude) << trial;  // tight (sampling error only)
+    ASSERT_NEAR(hi, mx, 2e-3 * m.amplitude) << trial;
+  }
+  const auto m = reach(0.3, 4.0, M_PI, 0.25, 0.5, 1.0, 0);  // half a cycle gone at t = 0: resting, offset 0
+  double lo, hi;
+  m.range(1.0, std::numeric_limits<double>::infinity(), &lo, &hi);
+  EXPECT_DOUBLE_EQ(lo, 0.0);
+  EXPECT_DOUBLE_EQ(hi, 0.3);
+  m.range(0.0, 0.9, &lo, &hi);  // still resting
+  EXPECT_DOUBLE_EQ(lo, 0.0);
+  EXPECT_DOUBLE_EQ(hi, 0.0);
+  m.range(1.0, 1.125, &lo, &hi);  // the first half of the way out
+  EXPECT_DOUBLE_EQ(lo, 0.0);
+  EXPECT_NEAR(hi, 0.15, 1e-12);
+}
+
 TEST(WorldFile, ABoxIsReadAsTheWorldServerPlacesItAndAnythingElseIsRefusedNamingIt) {
   // The tools' table: worlds/table.yaml's (scene_benchmark places it so), and a rotated box of a file written here
   // (rpy fixed-axis roll, pitch, yaw, as the world files and URDF).

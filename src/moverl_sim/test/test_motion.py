@@ -37,6 +37,55 @@ def test_oscillation_model():
     assert o.position_at(0.0) == pytest.approx(o.xyz)
 
 
+#: A reach motion: 0.3 m along x in 0.25 s each way, held 0.5 s, in half of the 4 s cycles.
+REACH = {"type": "reach", "axis": [1, 0, 0], "amplitude": 0.3, "period": 4.0, "move": 0.25, "hold": 0.5, "chance": 0.5}
+
+
+def test_reach_model():
+    """Every cycle rests, reaches out along the axis in `move` s (top speed pi A / (2 move)), holds, comes back;
+    cycles reach by a seeded draw. xyz is where the object rests; the envelope is [0, amplitude]."""
+    m = _world({**REACH, "chance": 1.0}).objects[0].motion
+    assert m.max_speed == pytest.approx(math.pi * 0.3 / 0.5)
+    assert [m.displacement(t) for t in (0.0, 2.9, 3.25, 3.6, 4.0)] == pytest.approx([0, 0, 0.3, 0.3, 0])
+    assert m.displacement(3.125) == pytest.approx(0.15)  # half way out, at the top speed
+    assert m.envelope() == (0.0, 0.3)
+    dt = 1e-4
+    fastest = max(abs(m.displacement(t + dt) - m.displacement(t)) / dt for t in [3.0 + k * 1e-3 for k in range(1000)])
+    assert fastest == pytest.approx(m.max_speed, rel=1e-3)
+    seeded = _world({**REACH, "seed": 7}).objects[0].motion
+    reached = [seeded.offset(k * 4.0 + 3.4) > 0 for k in range(200)]
+    assert 70 < sum(reached) < 130, sum(reached)  # about half of the cycles
+    assert reached == [_world({**REACH, "seed": 7}).objects[0].motion.offset(k * 4.0 + 3.4) > 0 for k in range(200)]
+    assert reached != [_world({**REACH, "seed": 8}).objects[0].motion.offset(k * 4.0 + 3.4) > 0 for k in range(200)]
+    mid = _world({**REACH, "chance": 1.0, "phase": 2 * math.pi * 3.5 / 4.0}).objects[0]  # t = 0 during the hold
+    assert mid.start == pytest.approx((0.307 + 0.3, 0.5, 0.59))
+    assert mid.motion.envelope() == pytest.approx((-0.3, 0.0))
+
+
+def test_reach_matches_the_shared_cases():
+    """The cases the C++ twin (ObstacleMotion, kReach) is checked on."""
+    import os
+
+    import numpy as np
+
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fixtures", "reach_motion_cases.txt")
+    cases = np.loadtxt(path)
+    assert cases.shape == (33, 9)
+    for amplitude, period, phase, move, hold, chance, seed, t, expected in cases:
+        m = ObjectMotion(
+            type="reach",
+            axis=(0.0, 0.0, 1.0),
+            amplitude=amplitude,
+            period=period,
+            phase=phase,
+            move=move,
+            hold=hold,
+            chance=chance,
+            seed=int(seed),
+        )
+        assert m.displacement(t) == pytest.approx(expected, abs=1e-12), (amplitude, period, phase, t)
+
+
 @pytest.mark.parametrize(
     "motion, key, words",
     [
@@ -63,6 +112,13 @@ def test_oscillation_model():
             "motion.speed",
             "unknown key",
         ),
+        ({**REACH, "move": 0.0}, "motion.move", "> 0"),
+        ({**REACH, "hold": -1.0}, "motion.hold", ">= 0"),
+        ({**REACH, "period": 0.9}, "motion.period", "at least 2 move + hold = 1 s"),
+        ({**REACH, "chance": 1.5}, "motion.chance", "in [0, 1]"),
+        ({**REACH, "seed": -1}, "motion.seed", "integer in [0, 2^32)"),
+        ({k: v for k, v in REACH.items() if k != "chance"}, "motion.chance", "missing required key"),
+        ({"type": "oscillate", "axis": [0, 1, 0], "amplitude": 0.1, "period": 1, "move": 2}, "motion.move", "unknown"),
     ],
 )
 def test_malformed_motions_name_the_key(motion, key, words):
@@ -137,6 +193,15 @@ def test_world_message_carries_the_motion():
     assert o.pose.position.y == pytest.approx(1.0)  # the pose at t = 0: centre + amplitude * sin(phase)
     static = world_to_msg(_world(None)).objects[0]
     assert static.motion.type == ObstacleMotion.NONE and static.pose.position.y == pytest.approx(0.5)
+
+
+def test_world_message_carries_a_reach():
+    from moverl_msgs.msg import ObstacleMotion
+    from moverl_sim.ros_conversions import world_to_msg
+
+    o = world_to_msg(_world({**REACH, "seed": 3})).objects[0]
+    assert o.motion.type == ObstacleMotion.REACH
+    assert (o.motion.move, o.motion.hold, o.motion.chance, o.motion.seed) == (0.25, 0.5, 0.5, 3)
 
 
 def test_displacement_matches_the_shared_cases():

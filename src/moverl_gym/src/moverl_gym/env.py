@@ -686,8 +686,8 @@ def obs_type_has_joints(obs_type: str) -> bool:
 
 
 def _obstacle_bounds(observed, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of the observed obstacles' poses (7 numbers each): the positions over their whole motion (oscillate:
-    displacement in [-A (1 + sin phase), A (1 - sin phase)] along the axis from the pose at motion time 0), `margin`
+    """Bounds of the observed obstacles' poses (7 numbers each): the positions over their whole motion (its envelope()
+    along the axis from the pose at motion time 0), `margin`
     (config/env.yaml observation_margin: what a tracker may report beyond) and 1 mm (float32 rounding) wider;
     quaternions in [-1, 1]."""
     if not (np.isfinite(margin) and margin >= 0.0):
@@ -698,7 +698,7 @@ def _obstacle_bounds(observed, margin: float) -> tuple[np.ndarray, np.ndarray]:
         lo = hi = p
         if o.motion is not None:
             m, axis = o.motion, np.asarray(o.motion.axis, dtype=np.float64)
-            ends = [p + axis * m.amplitude * (s - np.sin(m.phase)) for s in (-1.0, 1.0)]
+            ends = [p + axis * s for s in m.envelope()]
             lo, hi = np.minimum(*ends), np.maximum(*ends)
         low += [lo - margin - 1e-3, -np.ones(4)]
         high += [hi + margin + 1e-3, np.ones(4)]

@@ -132,6 +132,21 @@ def worlds(valid):
             ),
         )
 
+    def reach(period=4.0, move=0.25, hold=0.5, chance=0.5):
+        return set_(
+            "motion",
+            ObstacleMotion(
+                type=ObstacleMotion.REACH,
+                axis=[1.0, 0.0, 0.0],
+                amplitude=0.3,
+                period=period,
+                move=move,
+                hold=hold,
+                chance=chance,
+                seed=1,
+            ),
+        )
+
     out = [
         ("unknown shape type", variant(set_("shape.type", 99))),
         (
@@ -151,6 +166,9 @@ def worlds(valid):
         ("nan axis", variant(oscillate(axis=(math.nan, 0.0, 0.0)))),
         ("zero axis", variant(oscillate(axis=(0.0, 0.0, 0.0)))),
         ("inf phase", variant(oscillate(phase=math.inf))),
+        ("reach longer than its period", variant(reach(period=0.9))),
+        ("reach with no move time", variant(reach(move=0.0))),
+        ("reach with a nan chance", variant(reach(chance=math.nan))),
         ("duplicated ids", variant(lambda w: w.objects.append(copy.deepcopy(w.objects[0])))),
         (
             "10000 objects",

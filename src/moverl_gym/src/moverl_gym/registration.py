@@ -17,7 +17,7 @@ from moverl_sim.robot_config import RobotConfigError, load_robot_config
 from .paths import config_file
 
 #: Scenario name -> world file name in worlds/.
-SCENARIOS = {"Table": "table", "Human": "human", "Case": "case"}
+SCENARIOS = {"Table": "table", "Human": "human", "Case": "case", "SharedBench": "shared_bench"}
 #: Observation kind suffix -> obs_type.
 OBSERVATIONS = {"": "joints", "EE": "ee"}
 #: Goal-conditioned suffix -> reward_type.

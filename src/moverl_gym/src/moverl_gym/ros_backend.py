@@ -534,8 +534,18 @@ def _world_info(w) -> WorldInfo:
     for o in w.objects:
         m = o.motion
         motion = (
-            ObjectMotion(axis=tuple(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase)
-            if m.type != 0 and m.amplitude > 0.0
+            ObjectMotion(
+                type="reach" if m.type == m.REACH else "oscillate",
+                axis=tuple(m.axis),
+                amplitude=m.amplitude,
+                period=m.period,
+                phase=m.phase,
+                move=m.move,
+                hold=m.hold,
+                chance=m.chance,
+                seed=m.seed,
+            )
+            if m.type != m.NONE and m.amplitude > 0.0
             else None
         )
         obstacles.append(Obstacle(id=o.id, pose=_pose_array(o.pose), observed=bool(o.observed), motion=motion))

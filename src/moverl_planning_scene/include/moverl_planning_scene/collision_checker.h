@@ -19,6 +19,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <string>
 #include <vector>
@@ -27,49 +28,34 @@
 
 namespace moverl_planning_scene {
 
-/// \brief How an obstacle moves over motion time t (moverl_msgs/ObstacleMotion): a translation along a unit axis,
-///        offset(t) = axis * amplitude * (sin(2 pi t / period + phase) - sin(phase)) from its pose at t = 0.
+/// \brief How an obstacle moves over motion time t (moverl_msgs/ObstacleMotion, where the formulas are): a translation
+///        along a unit axis, pose(t) = pose(0) + axis * displacement(t), displacement(t) = offset(t) - offset(0).
+///        kOscillate: offset = amplitude sin(2 pi t / period + phase). kReach: seeded cycles of rest, a reach out to
+///        amplitude in `move` s, a hold, the way back (moverl_sim.world.ObjectMotion is the Python twin).
 struct ObstacleMotion {
-  enum class Type { kNone = 0, kOscillate = 1 };
+  enum class Type { kNone = 0, kOscillate = 1, kReach = 2 };
   Type type = Type::kNone;
   Eigen::Vector3d axis = Eigen::Vector3d::UnitX();  ///< unit vector, world frame
   double amplitude = 0.0;                           ///< m
   double period = 1.0;                              ///< s
   double phase = 0.0;                               ///< rad
+  double move = 0.0;                                ///< s (kReach): each way
+  double hold = 0.0;                                ///< s (kReach): at the far end
+  double chance = 0.0;                              ///< kReach: the fraction of cycles that reach
+  std::uint32_t seed = 0;                           ///< kReach
 
   bool moving() const { return type != Type::kNone && amplitude > 0.0; }
+  /// \brief Offset along the axis from the object's reference position (oscillate: its swing's centre; reach: where
+  ///        it rests) at motion time t.
+  double offset(double t) const;
   /// \brief Scalar displacement along axis from the pose at t = 0.
-  double displacement(double t) const {
-    if (!moving()) return 0.0;
-    return amplitude * (std::sin(2.0 * M_PI * t / period + phase) - std::sin(phase));
-  }
+  double displacement(double t) const { return moving() ? offset(t) - offset(0.0) : 0.0; }
   /// \brief Exact range [*lo, *hi] of displacement(t) over t in [t0, t1]; t1 = +inf (or a window of a period or
-  ///        more): the whole motion envelope.
-  void range(double t0, double t1, double* lo, double* hi) const {
-    if (!moving()) {
-      *lo = *hi = 0.0;
-      return;
-    }
-    const double s0 = std::sin(phase);
-    if (!(t1 - t0 < period)) {  // a full period or more (or inf/NaN: be conservative)
-      *lo = amplitude * (-1.0 - s0);
-      *hi = amplitude * (1.0 - s0);
-      return;
-    }
-    const double w = 2.0 * M_PI / period;
-    const double a0 = w * t0 + phase, a1 = w * t1 + phase;
-    double mn = std::min(std::sin(a0), std::sin(a1)), mx = std::max(std::sin(a0), std::sin(a1));
-    // Extrema of sin at pi/2 + k pi inside [a0, a1].
-    for (double k = std::ceil((a0 - M_PI / 2) / M_PI); M_PI / 2 + k * M_PI <= a1; k += 1.0) {
-      if (std::fmod(std::fabs(k), 2.0) == 0.0) {
-        mx = 1.0;
-      } else {
-        mn = -1.0;
-      }
-    }
-    *lo = amplitude * (mn - s0);
-    *hi = amplitude * (mx - s0);
-  }
+  ///        more for oscillate, of more than kMaxRangeCycles cycles for reach): the whole motion envelope.
+  void range(double t0, double t1, double* lo, double* hi) const;
+  /// \brief kReach: the uniform number in [0, 1) that decides whether cycle k reaches (splitmix64, ObstacleMotion.msg).
+  static double cycleDraw(std::uint32_t seed, std::uint64_t k);
+  static constexpr double kMaxRangeCycles = 10000.0;
 };
 
 /// \brief One obstacle of the world (shape_msgs/SolidPrimitive conventions).

@@ -55,7 +55,15 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
                 raise ValueError("object %r has a motion but moverl_msgs has no ObstacleMotion: rebuild" % obj.id)
             m = obj.motion
             o.motion = ObstacleMotion(
-                type=ObstacleMotion.OSCILLATE, axis=list(m.axis), amplitude=m.amplitude, period=m.period, phase=m.phase
+                type=ObstacleMotion.REACH if m.type == "reach" else ObstacleMotion.OSCILLATE,
+                axis=list(m.axis),
+                amplitude=m.amplitude,
+                period=m.period,
+                phase=m.phase,
+                move=m.move,
+                hold=m.hold,
+                chance=m.chance,
+                seed=m.seed,
             )
         msg.objects.append(o)
     return msg

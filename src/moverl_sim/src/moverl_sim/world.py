@@ -35,8 +35,11 @@ _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, rad
 _TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing"}
 _SENSING_KEYS = {"speed_bound", "unknown_occupied"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
-MOTION_TYPES = ("oscillate",)
-_MOTION_KEYS = {"oscillate": {"type", "axis", "amplitude", "period", "phase"}}
+MOTION_TYPES = ("oscillate", "reach")
+_MOTION_KEYS = {
+    "oscillate": {"type", "axis", "amplitude", "period", "phase"},
+    "reach": {"type", "axis", "amplitude", "period", "phase", "move", "hold", "chance", "seed"},
+}
 _CAMERA_KEYS = {"id", "xyz", "target", "up", "width", "height", "fov", "near", "far", "rate"}
 _CAMERA_REQUIRED = ("id", "xyz", "target", "width", "height", "fov", "near", "far", "rate")
 _CAMERA_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")  # becomes part of a TF frame name
@@ -60,35 +63,87 @@ def rpy_to_quaternion(rpy):
     )
 
 
+_MASK64 = (1 << 64) - 1
+
+
+def reach_cycle_draw(seed, k):
+    """Uniform number in [0, 1) of a reach motion's cycle k >= 0 (splitmix64 of (seed << 32) ^ k): whether that cycle
+    reaches. The planning scene's twin is ObstacleMotion::cycleDraw (collision_checker.h)."""
+    z = ((((int(seed) & 0xFFFFFFFF) << 32) ^ (int(k) & _MASK64)) + 0x9E3779B97F4A7C15) & _MASK64
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    z ^= z >> 31
+    return (z >> 11) * (1.0 / (1 << 53))
+
+
 @dataclass(frozen=True)
 class ObjectMotion:
-    """A translation of an obstacle over motion time t (s since the motions (re)started).
+    """A translation of an obstacle over motion time t (s since the motions (re)started); its orientation does not
+    change. The object is at xyz + axis * offset(t) (the world file's ``xyz``):
 
-    oscillate: the object moves along the unit axis by amplitude * sin(2 pi t / period + phase) about the centre of
-    its swing (the world file's ``xyz``); its orientation does not change. displacement() is THE motion formula of the
-    Python code (the simulator, the messages, the env); the planning scene's C++ twin is ObstacleMotion::displacement
-    (collision_checker.h), and both are checked on the same cases (moverl_sim/test/fixtures/obstacle_motion_cases.txt).
+    * oscillate: offset(t) = amplitude * sin(2 pi t / period + phase), a swing about xyz.
+    * reach: cycles of `period` s, cycle k = floor(t / period + phase / (2 pi)); a cycle whose draw
+      (reach_cycle_draw(seed, k)) is below `chance` first rests at xyz for period - 2 move - hold s, moves out to
+      amplitude along the axis in `move` s (offset amplitude (1 - cos(pi u)) / 2 over u in [0, 1]: top speed
+      pi amplitude / (2 move)), holds there for `hold` s and comes back the same way; any other cycle rests at xyz.
+      A person at a bench who reaches into the shared space from time to time, seeded.
+
+    displacement() (offset(t) - offset(0)) is THE motion formula of the Python code (the simulator, the messages, the
+    env); the planning scene's C++ twin is ObstacleMotion::displacement (collision_checker.h), and both are checked on
+    the same cases (moverl_sim/test/fixtures/obstacle_motion_cases.txt, reach_motion_cases.txt).
     """
 
     type: str = "oscillate"
     axis: Tuple[float, float, float] = (1.0, 0.0, 0.0)  # unit vector (normalised by the parser)
     amplitude: float = 0.0  # m
     period: float = 1.0  # s
-    phase: float = 0.0  # rad
+    phase: float = 0.0  # rad (reach: the fraction phase / (2 pi) of a cycle gone at t = 0)
+    move: float = 0.0  # s (reach): each way out and back
+    hold: float = 0.0  # s (reach): at the far end
+    chance: float = 0.0  # (reach): the fraction of cycles that reach, in [0, 1]
+    seed: int = 0  # (reach): of the cycles that reach
+
+    def offset(self, t):
+        """Scalar offset along the axis from the world file's xyz at motion time t."""
+        if self.type == "reach":
+            return self._reach_offset(t)
+        return self.amplitude * math.sin(2.0 * math.pi * t / self.period + self.phase)
+
+    def _reach_offset(self, t):
+        c = t / self.period + self.phase / (2.0 * math.pi)
+        k = math.floor(c)
+        if k < 0 or reach_cycle_draw(self.seed, k) >= self.chance:
+            return 0.0
+        tau = (c - k) * self.period - (self.period - 2.0 * self.move - self.hold)  # time since the reach began
+        if tau <= 0.0:
+            return 0.0
+        if tau < self.move:
+            return 0.5 * self.amplitude * (1.0 - math.cos(math.pi * tau / self.move))
+        if tau <= self.move + self.hold:
+            return self.amplitude
+        back = min(1.0, (tau - self.move - self.hold) / self.move)
+        return 0.5 * self.amplitude * (1.0 + math.cos(math.pi * back))
 
     def displacement(self, t):
         """Scalar displacement along the axis at motion time t from the pose at t = 0 (moverl_msgs/ObstacleMotion
-        convention): amplitude * (sin(2 pi t / period + phase) - sin(phase))."""
-        return self.amplitude * (math.sin(2.0 * math.pi * t / self.period + self.phase) - math.sin(self.phase))
+        convention): offset(t) - offset(0)."""
+        return self.offset(t) - self.offset(0.0)
 
     def start_offset(self):
-        """The pose at t = 0 minus the centre of the swing: axis * amplitude * sin(phase)."""
-        s = self.amplitude * math.sin(self.phase)
+        """The pose at t = 0 minus xyz: axis * offset(0)."""
+        s = self.offset(0.0)
         return (self.axis[0] * s, self.axis[1] * s, self.axis[2] * s)
+
+    def envelope(self):
+        """(lo, hi): the range of displacement(t) over all t."""
+        lo, hi = (-self.amplitude, self.amplitude) if self.type == "oscillate" else (0.0, self.amplitude)
+        return lo - self.offset(0.0), hi - self.offset(0.0)
 
     @property
     def max_speed(self):
         """Largest speed (m/s) of any point of the object."""
+        if self.type == "reach":
+            return math.pi * self.amplitude / (2.0 * self.move)
         return 2.0 * math.pi * self.amplitude / self.period
 
 
@@ -290,7 +345,41 @@ def _parse_motion(raw, source, where):
     if period <= 0.0:
         _fail(source, where + ".period", "must be > 0 (seconds), got %r" % (period,))
     phase = _number(raw.get("phase", 0.0), source, where + ".phase")
-    return ObjectMotion(type=mtype, axis=axis, amplitude=amplitude, period=period, phase=phase)
+    if mtype == "oscillate":
+        return ObjectMotion(type=mtype, axis=axis, amplitude=amplitude, period=period, phase=phase)
+    for key in ("move", "chance"):
+        if key not in raw:
+            _fail(source, "%s.%s" % (where, key), "missing required key (a reach motion)")
+    move = _number(raw["move"], source, where + ".move")
+    if move <= 0.0:
+        _fail(source, where + ".move", "must be > 0 (seconds each way), got %r" % (move,))
+    hold = _number(raw.get("hold", 0.0), source, where + ".hold")
+    if hold < 0.0:
+        _fail(source, where + ".hold", "must be >= 0 (seconds), got %r" % (hold,))
+    if 2.0 * move + hold > period:
+        _fail(
+            source,
+            where + ".period",
+            "must be at least 2 move + hold = %g s (a reach out, its hold and back fit in a cycle), got %r"
+            % (2.0 * move + hold, period),
+        )
+    chance = _number(raw["chance"], source, where + ".chance")
+    if not 0.0 <= chance <= 1.0:
+        _fail(source, where + ".chance", "must be in [0, 1] (the fraction of cycles that reach), got %r" % (chance,))
+    seed = raw.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**32:
+        _fail(source, where + ".seed", "must be an integer in [0, 2^32), got %r" % (seed,))
+    return ObjectMotion(
+        type=mtype,
+        axis=axis,
+        amplitude=amplitude,
+        period=period,
+        phase=phase,
+        move=move,
+        hold=hold,
+        chance=chance,
+        seed=int(seed),
+    )
 
 
 def _positive_int(value, source, key):

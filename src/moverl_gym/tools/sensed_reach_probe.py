@@ -1,9 +1,12 @@
 #!/usr/bin/env python3
 """Can the goal be reached at all in the sensed mode? A scripted policy drives the joints straight at a goal
-configuration and keeps pushing while the shield holds the arm; per camera rate in simulated time.
+configuration and keeps pushing while the shield holds the arm; per camera rate in simulated time and per safety
+definition (launch argument safety), against the same policy with the shield off.
 
     python src/moverl_gym/tools/sensed_reach_probe.py --world human --camera-rates 2 5 10 \
         --goal-q -0.022 0.052 0.023 -2.379 -0.002 2.431 0.003 --out docs/sensed_person/reach_probe
+    python src/moverl_gym/tools/sensed_reach_probe.py --world shared_bench --camera-rates 30 --mode realtime \
+        --safety separation ssm --shield-off --goal-q 0.024 -0.539 -0.416 -2.944 -0.319 2.418 -0.096
 
 The goal configuration is the one a world file's header gives as evidence for its goal (worlds/human.yaml). The
 shield inflates the robot against the sensed cells by speed_bound x (map age + step + latency): the map age grows up
@@ -35,14 +38,18 @@ def worker(args) -> dict:
     from moverl_gym.registration import env_id
 
     goal_q = np.asarray(args.goal_q, dtype=float)
+    safety = args.worker_safety
     env = gym.make(
         env_id(args.robot, "Human"),
         world=args.world,
         graph="launch",
+        shield=safety != "off",
         launch_args={
-            "obstacles": args.obstacles,
+            "obstacles": args.obstacles if safety != "off" else "objects",
             "camera_rate": args.worker_rate,
-            **({"strategy": args.strategy} if args.strategy else {}),
+            **({"strategy": args.strategy} if args.strategy and safety != "off" else {}),
+            **({"safety": safety} if safety not in ("", "off") else {}),
+            **({"mode": args.mode} if args.mode else {}),
         },
         task={"max_episode_steps": args.max_steps},
     )
@@ -51,7 +58,7 @@ def worker(args) -> dict:
     try:
         for ep in range(args.episodes):
             env.reset(seed=args.seed + ep)
-            verdicts, contacts, closest, reached_at = {}, 0, float("inf"), None
+            verdicts, contacts, moving, closest, reached_at = {}, 0, 0, float("inf"), None
             done = False
             while not done:
                 d = goal_q - u.q[: len(goal_q)]
@@ -61,6 +68,7 @@ def worker(args) -> dict:
                 done = terminated or truncated
                 verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
                 contacts += max(info.get("contacts", 0), 0)
+                moving += max(info.get("contacts_moving", 0), 0)
                 closest = min(closest, float(info["distance"]))
                 if info.get("is_success") and reached_at is None:
                     reached_at = sum(verdicts.values())
@@ -72,6 +80,7 @@ def worker(args) -> dict:
                     "closest": closest,
                     "verdicts": verdicts,
                     "contacts": contacts,
+                    "contacts_moving": moving,
                 }
             )
     finally:
@@ -87,20 +96,34 @@ def main(argv=None) -> int:
     p.add_argument("--camera-rates", type=float, nargs="+", default=[2.0], help="renders per simulated second")
     p.add_argument("--obstacles", choices=SENSED_OBSTACLES, default="sensed")
     p.add_argument("--strategy", choices=CHOICES["strategy"], default=None, help="default: the launch file's")
+    p.add_argument(
+        "--safety",
+        nargs="+",
+        choices=[c for c in CHOICES["safety"] if c],
+        default=[""],
+        help="safety definitions to compare, each in its own graph (default: config/planning_scene.yaml's)",
+    )
+    p.add_argument("--shield-off", action="store_true", help="add the same policy with the shield off (a baseline)")
+    p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock (default: lockstep)")
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--max-steps", type=int, default=100, help="steps per episode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=None, help="write probe.md and probe.json here")
     p.add_argument("--worker-rate", type=float, help=argparse.SUPPRESS)
+    p.add_argument("--worker-safety", default="", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker_rate is not None:
         print(json.dumps(worker(args)))
         return 0
     rows = []
-    for rate in args.camera_rates:
-        print(f"camera rate {rate:g} Hz: {args.episodes} episodes ...", flush=True)
+    runs = [(rate, safety) for rate in args.camera_rates for safety in args.safety]
+    runs += [(args.camera_rates[0], "off")] if args.shield_off else []
+    for rate, safety in runs:
+        what = f"camera rate {rate:g} Hz" + (f", safety {safety}" if safety else "")
+        print(f"{what}: {args.episodes} episodes ...", flush=True)
         worker_args = [*(argv if argv is not None else sys.argv[1:]), "--worker-rate", str(rate)]
-        r = run_json_worker(__file__, worker_args, f"camera rate {rate:g}", timeout=600 + 120 * args.episodes)
+        worker_args += ["--worker-safety", safety]
+        r = run_json_worker(__file__, worker_args, what, timeout=600 + 120 * args.episodes)
         eps = r["episodes"]
         verdicts = {}
         for e in eps:
@@ -110,11 +133,13 @@ def main(argv=None) -> int:
         rows.append(
             {
                 "camera_rate": rate,
+                "safety": safety or "(yaml)",
                 "episodes": len(eps),
                 "reached": len(reached),
                 "steps_to_goal_mean": float(np.mean(reached)) if reached else None,
                 "closest_mean": float(np.mean([e["closest"] for e in eps])),
                 "contacts": int(sum(e["contacts"] for e in eps)),
+                "contacts_moving": int(sum(e["contacts_moving"] for e in eps)),
                 "verdicts": dict(sorted(verdicts.items())),
                 "steps_per_s": r["steps_per_s"],
                 "per_episode": eps,
@@ -125,7 +150,7 @@ def main(argv=None) -> int:
         argv if argv is not None else sys.argv[1:]
     )
     lines = [
-        "# Reaching the goal in the sensed mode, per camera rate",
+        "# Reaching the goal in the sensed mode, per camera rate and safety definition",
         "",
         "Command:",
         "",
@@ -134,18 +159,19 @@ def main(argv=None) -> int:
         "A scripted policy drives the joints straight at the goal configuration (max-norm action 1 toward it) and "
         "keeps pushing while the shield holds the arm. reached: episodes whose end effector came within the task's "
         "goal tolerance; steps to goal: mean over those; closest: the smallest distance to the goal, mean over "
-        "episodes.",
+        "episodes. contacts: ground truth, of them moving: while the robot moved (safety ssm allows the others). "
+        "safety off: the shield off (the world file's objects unchecked).",
         "",
-        "| camera rate (per simulated s) | episodes | reached | steps to goal | closest (m) | contacts | verdicts "
-        "| steps/s |",
-        "|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| camera rate (per simulated s) | safety | episodes | reached | steps to goal | closest (m) | contacts "
+        "| moving | verdicts | steps/s |",
+        "|---:|---|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
         steps = "-" if r["steps_to_goal_mean"] is None else f"{r['steps_to_goal_mean']:.1f}"
         verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
         lines.append(
-            f"| {r['camera_rate']:g} | {r['episodes']} | **{r['reached']}** | {steps} | {r['closest_mean']:.3f} | "
-            f"{r['contacts']} | {verdicts} | {r['steps_per_s']:.1f} |"
+            f"| {r['camera_rate']:g} | {r['safety']} | {r['episodes']} | **{r['reached']}** | {steps} | "
+            f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | {r['steps_per_s']:.1f} |"
         )
     text = "\n".join(lines) + "\n"
     print(text)
@@ -153,7 +179,8 @@ def main(argv=None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "probe.md").write_text(text)
         (args.out / "probe.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
-    return 1 if any(r["contacts"] for r in rows) else 0
+    shielded = [r for r in rows if r["safety"] != "off"]
+    return 1 if any(r["contacts_moving"] if r["safety"] == "ssm" else r["contacts"] for r in shielded) else 0
 
 
 if __name__ == "__main__":

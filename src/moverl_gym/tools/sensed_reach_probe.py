@@ -171,7 +171,8 @@ def main(argv=None) -> int:
         verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
         lines.append(
             f"| {r['camera_rate']:g} | {r['safety']} | {r['episodes']} | **{r['reached']}** | {steps} | "
-            f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | {r['steps_per_s']:.1f} |"
+            f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | "
+            f"{r['steps_per_s']:.1f} |"
         )
     text = "\n".join(lines) + "\n"
     print(text)

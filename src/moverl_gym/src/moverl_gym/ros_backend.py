@@ -23,7 +23,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from moverl_sim.robot_config import parse_robot
-from moverl_sim.world import ObjectMotion
+from moverl_sim.ros_conversions import motion_from_msg
 
 from .backend import Backend, Obstacle, ResetResult, StepResult, WorldInfo
 from .errors import MoveRLError
@@ -533,21 +533,7 @@ def _world_info(w) -> WorldInfo:
     obstacles = []
     for o in w.objects:
         m = o.motion
-        motion = (
-            ObjectMotion(
-                type="reach" if m.type == m.REACH else "oscillate",
-                axis=tuple(m.axis),
-                amplitude=m.amplitude,
-                period=m.period,
-                phase=m.phase,
-                move=m.move,
-                hold=m.hold,
-                chance=m.chance,
-                seed=m.seed,
-            )
-            if m.type != m.NONE and m.amplitude > 0.0
-            else None
-        )
+        motion = motion_from_msg(m)
         obstacles.append(Obstacle(id=o.id, pose=_pose_array(o.pose), observed=bool(o.observed), motion=motion))
     return WorldInfo(
         name=w.name,

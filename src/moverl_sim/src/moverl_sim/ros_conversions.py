@@ -21,6 +21,23 @@ _XYZ_FIELDS = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, cou
 _SHAPE_TYPES = {"box": SolidPrimitive.BOX, "sphere": SolidPrimitive.SPHERE, "cylinder": SolidPrimitive.CYLINDER}
 
 
+#: The scalar fields moverl_msgs/ObstacleMotion and moverl_sim.world.ObjectMotion share (same names, same units).
+MOTION_FIELDS = ("amplitude", "period", "phase", "move", "hold", "chance", "seed")
+
+
+def motion_from_msg(m):
+    """moverl_msgs/ObstacleMotion -> moverl_sim.world.ObjectMotion; None for a static one (NONE, or amplitude 0)."""
+    from .world import ObjectMotion
+
+    if m.type == m.NONE or not m.amplitude > 0.0:
+        return None
+    return ObjectMotion(
+        type="reach" if m.type == m.REACH else "oscillate",
+        axis=tuple(m.axis),
+        **{f: getattr(m, f) for f in MOTION_FIELDS},
+    )
+
+
 def sim_stamp(seconds):
     return rospy.Time.from_sec(max(0.0, seconds))
 
@@ -57,13 +74,7 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
             o.motion = ObstacleMotion(
                 type=ObstacleMotion.REACH if m.type == "reach" else ObstacleMotion.OSCILLATE,
                 axis=list(m.axis),
-                amplitude=m.amplitude,
-                period=m.period,
-                phase=m.phase,
-                move=m.move,
-                hold=m.hold,
-                chance=m.chance,
-                seed=m.seed,
+                **{f: getattr(m, f) for f in MOTION_FIELDS},
             )
         msg.objects.append(o)
     return msg

@@ -228,13 +228,19 @@ void FclCollisionChecker::checkStateImpl(const double* q, const CollisionRequest
     }
   }
   if (occupancy_ == nullptr || !request.check_occupancy) return;
+  const bool tracked = parts_ != nullptr && !parts_->empty();
   int last_link = -1;
   for (std::size_t w = 0; w < world_geoms_.size(); ++w) {
-    if (occupancy_culled && occupancy_active_[w] == 0) continue;
     const int gi = world_geoms_[w];
     const Geom& g = geoms_[gi];
     if (g.link == last_link) continue;
-    if (!meetsOccupied(octoGeom(geoms_[gi]), g.world_tf)) continue;
+    // The tracked parts' balls are not culled with the map (few, each one sphere test first).
+    const bool part = tracked && meetsTrackedPart(g);
+    if (!part) {
+      if (occupancy_culled && occupancy_active_[w] == 0) continue;
+      const auto& shape = octoGeom(geoms_[gi]);
+      if (!(tracked ? meetsUnexplained(shape, g.world_tf) : meetsOccupied(shape, g.world_tf))) continue;
+    }
     result->status = CollisionStatus::kWorld;
     if (request.max_pairs == 0) return;
     result->pairs.push_back(ContactPair{names[g.link], kOctomapId, 0.0});
@@ -425,8 +431,44 @@ const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octo
   return level;
 }
 
+bool FclCollisionChecker::meetsUnexplained(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
+                                           const Eigen::Isometry3d& tf) const {
+  // Only a cell a camera saw occupied may be a part's: unseen and stale cells may hold anything.
+  if (meetsOccupied(shape, tf, CellClass::kUnseen)) return true;
+  const OccupancyMap::ExcludeTest explained = [this](const Eigen::AlignedBox3d& box) {
+    OccupancyMap::Excluded out = OccupancyMap::Excluded::kNone;
+    for (const ExplainedPart& p : *parts_) {
+      if (box.exteriorDistance(p.centre) >= p.explains) continue;
+      // The box's corner farthest from the centre.
+      const Eigen::Vector3d far = (box.min() - p.centre).cwiseAbs().cwiseMax((box.max() - p.centre).cwiseAbs());
+      if (far.norm() <= p.explains) return OccupancyMap::Excluded::kWholly;
+      out = OccupancyMap::Excluded::kPartly;
+    }
+    return out;
+  };
+  return meetsOccupied(shape, tf, CellClass::kSeen, 0.0, &explained);
+}
+
+bool FclCollisionChecker::meetsTrackedPart(const Geom& g) const {
+  const auto& shape = g.octo;  // padded, no margin: the ball holds the part's whole reach
+  const Eigen::Vector3d centre = g.world_tf * shape->aabb_center;
+  for (const ExplainedPart& p : *parts_) {
+    const double r = shape->aabb_radius + p.keep_out;
+    if ((centre - p.centre).squaredNorm() > r * r) continue;
+    const fcl::Sphered ball(p.keep_out);
+    fcl::Transform3d at = fcl::Transform3d::Identity();
+    at.translation() = p.centre;
+    fcl::CollisionRequestd req(1, false);
+    fcl::CollisionResultd res;
+    fcl::collide(&ball, at, shape.get(), g.world_tf, req, res);
+    if (res.isCollision()) return true;
+  }
+  return false;
+}
+
 bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
-                                        const Eigen::Isometry3d& tf, CellClass which, double grow) const {
+                                        const Eigen::Isometry3d& tf, CellClass which, double grow,
+                                        const OccupancyMap::ExcludeTest* exclude) const {
   // The shape's world box (its local box's corners, transformed; grown) bounds the cells to look at; its bounding
   // sphere rejects boxes cheaply before GJK.
   const fcl::AABBd& local = shape->aabb_local;
@@ -460,7 +502,7 @@ bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeom
         fcl::collide(&cell, at, shape.get(), tf, req, res);
         return res.isCollision();
       },
-      [](const Eigen::AlignedBox3d&) { return true; }, which, /*whole_blocks=*/grow > 0.0);
+      [](const Eigen::AlignedBox3d&) { return true; }, which, /*whole_blocks=*/grow > 0.0, exclude);
 }
 
 void FclCollisionChecker::robotPointMask(const double* q, const std::vector<Eigen::Vector3d>& points, double padding,

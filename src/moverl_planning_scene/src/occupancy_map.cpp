@@ -1511,7 +1511,7 @@ bool OccupancyMap::anyOccupied(const Eigen::AlignedBox3d& region, const BoxTest&
 }
 
 bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
-                                 CellClass which, bool whole_blocks) const {
+                                 CellClass which, bool whole_blocks, const ExcludeTest* exclude) const {
   std::int64_t lo[3], hi[3];
   for (int i = 0; i < 3; ++i) {
     lo[i] = std::max<std::int64_t>(0, indexOf(region.min()[i], i));
@@ -1575,8 +1575,9 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
         if (sc == 0) continue;
         const std::int64_t cells = span(s, kSuperShift, sa, sb);
         const Eigen::AlignedBox3d super_box = box(sa, sb);
-        if (!near(super_box)) continue;
-        if (sc == cells) {  // full
+        const Excluded super_out = exclude != nullptr ? (*exclude)(super_box) : Excluded::kNone;
+        if (super_out == Excluded::kWholly || !near(super_box)) continue;
+        if (sc == cells && super_out == Excluded::kNone) {  // full
           if (visit(super_box)) return true;
           continue;
         }
@@ -1588,8 +1589,9 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
               if (bc == 0) continue;
               const std::int64_t bcells = span(bl, kBlockShift, ba, bb);
               const Eigen::AlignedBox3d block_box = box(ba, bb);
-              if (!near(block_box)) continue;
-              if (bc == bcells || whole_blocks) {  // full, or not to be looked into
+              const Excluded block_out = exclude != nullptr ? (*exclude)(block_box) : Excluded::kNone;
+              if (block_out == Excluded::kWholly || !near(block_box)) continue;
+              if ((bc == bcells && block_out == Excluded::kNone) || whole_blocks) {  // full, or not to be looked into
                 if (visit(block_box)) return true;
                 continue;
               }
@@ -1599,6 +1601,7 @@ bool OccupancyMap::visitOccupied(const Eigen::AlignedBox3d& region, const BoxTes
                     if (!cell_counts(cellId(i, j, k))) continue;
                     const std::int64_t c[3] = {i, j, k};
                     const Eigen::AlignedBox3d cell_box = box(c, c);
+                    if (block_out != Excluded::kNone && (*exclude)(cell_box) == Excluded::kWholly) continue;
                     if (near(cell_box) && visit(cell_box)) return true;
                   }
                 }

@@ -14,10 +14,11 @@ bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
 void checkParams(const SsmParams& p) {
   const std::string bad = p.iso.problem();
   if (!bad.empty()) throw std::invalid_argument("ssm: " + bad);
-  for (double x : {p.max_acceleration, p.max_speed, p.max_track_age, p.sensor_uncertainty, p.robot_uncertainty}) {
+  const std::string motion = p.motion.problem();
+  if (!motion.empty()) throw std::invalid_argument("ssm: " + motion);
+  for (double x : {p.max_track_age, p.sensor_uncertainty, p.robot_uncertainty}) {
     if (!finiteNonNegative(x)) {
-      throw std::invalid_argument(
-          "ssm: max_acceleration, max_speed, max_track_age and the uncertainties must be finite and >= 0");
+      throw std::invalid_argument("ssm: max_track_age and the uncertainties must be finite and >= 0");
     }
   }
 }
@@ -40,18 +41,7 @@ double personReach(const PartState& part, double t, const SsmParams& params) {
   if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
   const double horizon = part.age + t;
   if (!monitored(part, params)) return params.iso.distance(horizon);
-  // Accelerating at max_acceleration from the measured speed up to the cap (a part measured faster than max_speed
-  // keeps its speed: the cap never lowers what was seen).
-  const double cap = std::max(params.max_speed, part.speed);
-  const double a = params.max_acceleration;
-  double travel;
-  const double t_cap = a > 0.0 ? (cap - part.speed) / a : 0.0;
-  if (horizon <= t_cap) {
-    travel = part.speed * horizon + 0.5 * a * horizon * horizon;
-  } else {
-    travel = part.speed * t_cap + 0.5 * a * t_cap * t_cap + cap * (horizon - t_cap);
-  }
-  return travel + part.radius;
+  return params.motion.travel(part.speed, horizon) + part.radius;
 }
 
 double protectiveSeparation(const PartState& part, const StopBound& stop, const std::vector<double>& radius_bounds,

@@ -108,8 +108,8 @@ TEST(FailsafeStop, PointTravelIsTheRadiusWeightedSum) {
 
 SsmParams iso() {
   SsmParams p;
-  p.max_acceleration = 20.0;
-  p.max_speed = 2.0;
+  p.motion.max_acceleration = 20.0;
+  p.motion.max_speed = 2.0;
   p.max_track_age = 0.2;
   p.sensor_uncertainty = 0.02;
   p.robot_uncertainty = 0.005;

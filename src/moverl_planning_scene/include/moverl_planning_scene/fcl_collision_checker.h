@@ -15,6 +15,7 @@
 #include "moverl_planning_scene/collision_checker.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/robot_model.h"
+#include "moverl_planning_scene/tracked_parts.h"
 #include "moverl_planning_scene/unset.h"
 
 namespace fcl {
@@ -101,6 +102,12 @@ class FclCollisionChecker : public CollisionChecker {
   ///        callers must not modify it while a check runs; it must outlive its use here.
   void setOccupancy(const OccupancyMap* map) { occupancy_ = map; }
   bool hasOccupancy() const { return occupancy_ != nullptr; }
+  /// \brief safety:=ssm with a tracker (tracked_parts.h): the checks that follow leave the seen cells each part
+  ///        explains out of the map's check and keep the padded links out of its ball instead (a contact with it is
+  ///        reported as the map's, kOctomapId). Cells not seen occupied keep the map's check. nullptr or empty: none.
+  ///        Only the state and path checks use them (occupancyFree and occupancyDistance do not: the retreat's
+  ///        questions stay ISO's). The parts must outlive their use here.
+  void setTrackedParts(const std::vector<ExplainedPart>* parts) { parts_ = parts; }
   /// \brief The sensed obstacles' predictive margin (m, >= 0): robot links are inflated by padding + margin against
   ///        the occupancy map in the checks that follow (where a sensed obstacle may have moved since it was seen).
   ///        Rounded up to a multiple of kMarginStep; each link's inflated shapes are built the first time a level is
@@ -230,13 +237,21 @@ class FclCollisionChecker : public CollisionChecker {
   std::vector<std::pair<int, int>> self_pairs_;  // enabled link pairs
   std::vector<int> world_geoms_;                 // geoms of moving links
   std::vector<Obstacle> world_;
-  const OccupancyMap* occupancy_ = nullptr;  // sensed obstacles (may be null)
-  int octo_level_ = 0;                       // sensed margin: octoGeom's level (kMarginStep each)
+  const OccupancyMap* occupancy_ = nullptr;            // sensed obstacles (may be null)
+  const std::vector<ExplainedPart>* parts_ = nullptr;  // tracked parts (may be null)
+  int octo_level_ = 0;                                 // sensed margin: octoGeom's level (kMarginStep each)
   /// True when the shape at tf meets an occupied cell (of class `which`) of the occupancy map; with `grow` > 0, a cell
   /// grown by `grow` (m) on every side, or a block of cells grown so (true for any cell within `grow` of the shape,
   /// and for some a little farther: checkPath's culling).
   bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf,
-                     CellClass which = CellClass::kAll, double grow = 0.0) const;
+                     CellClass which = CellClass::kAll, double grow = 0.0,
+                     const OccupancyMap::ExcludeTest* exclude = nullptr) const;
+  /// With tracked parts: meetsOccupied of the cells no part explains (every cell not seen occupied, and the seen ones
+  /// outside the parts' `explains` balls).
+  bool meetsUnexplained(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
+                        const Eigen::Isometry3d& tf) const;
+  /// With tracked parts: g's padded shape (at the current transforms) meets a part's keep_out ball.
+  bool meetsTrackedPart(const Geom& g) const;
   /// checkPath's culling against the occupancy map, for the states of the segment cullPairs last culled: makes
   /// occupancy_active_ hold, for this map (its revision) and margin, when it does not yet (at the segment's
   /// midpoint: world shapes' transforms are left there) and returns true; false when it was made at another margin,

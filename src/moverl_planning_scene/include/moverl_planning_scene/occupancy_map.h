@@ -315,6 +315,9 @@ class OccupancyMap {
 
   /// \brief What anyOccupied asks of a box (map frame) that holds occupied cells: does the box meet the caller's shape?
   using BoxTest = std::function<bool(const Eigen::AlignedBox3d& box)>;
+  /// \brief How much of a box a query leaves out (visitOccupied's `exclude`: the cells a tracked part explains).
+  enum class Excluded : std::uint8_t { kNone, kPartly, kWholly };
+  using ExcludeTest = std::function<Excluded(const Eigen::AlignedBox3d& box)>;
   /// \brief True when the caller's shape meets an occupied cell within `region` (map frame): superblocks and blocks
   ///        without occupied cells are skipped, a full one that meets the shape answers at once (one of its cells
   ///        meets it), a partial one is looked into, down to the occupied cells themselves. `meets` is asked about
@@ -327,8 +330,11 @@ class OccupancyMap {
   ///        to `visit`. True as soon as `visit` returns true (stop), false when the traversal ends. `whole_blocks`: a
   ///        block (4^3 cells) `near` accepts is handed to `visit` whole, full or not (a coarser traversal, for callers
   ///        that may answer for a block as for any of its cells).
+  ///        `exclude` (optional): a box it says is wholly excluded is skipped, one it says is partly excluded is looked
+  ///        into even when full (a cell partly excluded counts).
   bool visitOccupied(const Eigen::AlignedBox3d& region, const BoxTest& near, const BoxTest& visit,
-                     CellClass which = CellClass::kAll, bool whole_blocks = false) const;
+                     CellClass which = CellClass::kAll, bool whole_blocks = false,
+                     const ExcludeTest* exclude = nullptr) const;
   /// \brief The centre of the cell with id `key` (MapUpdate's ids), map frame.
   Eigen::Vector3d cellCentre(std::uint64_t key) const {
     std::int64_t at[3];

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "moverl_planning_scene/sensed_margin.h"
+#include "moverl_planning_scene/tracked_parts.h"
 #include "moverl_shield/failsafe.h"
 
 namespace moverl_shield {
@@ -24,11 +25,11 @@ namespace moverl_shield {
 /// \brief The person model: ISO 13855's speeds and what a tracked part can do.
 struct SsmParams {
   moverl_planning_scene::Iso13855 iso;  ///< an unmonitored part (the scene's rule: its speeds, C of the sensors)
-  double max_acceleration = 0.0;        ///< m/s^2 of a tracked part (SaRA's model: 20-50)
-  double max_speed = 0.0;               ///< m/s no tracked part exceeds (the speed the reach is capped at)
-  double max_track_age = 0.0;           ///< s: an older track is lost (ISO's speeds)
-  double sensor_uncertainty = 0.0;      ///< m, Z_d
-  double robot_uncertainty = 0.0;       ///< m, Z_r (the shield's tracking_budget)
+  /// how far a tracked part may travel (the scene's tracked_parts.h, the one copy of the formula)
+  moverl_planning_scene::PartMotionBound motion;
+  double max_track_age = 0.0;       ///< s: an older track is lost (ISO's speeds)
+  double sensor_uncertainty = 0.0;  ///< m, Z_d
+  double robot_uncertainty = 0.0;   ///< m, Z_r (the shield's tracking_budget)
 };
 
 /// \brief What is known of one part of a person.

@@ -67,6 +67,7 @@ WRONG = {
     "camera_rate": ("-30", ("positive number",)),
     "obstacle_poses": ("vicon", ()),
     "safety": ("iso", ()),
+    "people": ("monitored", ()),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")
@@ -472,3 +473,22 @@ def test_a_safety_definition_needs_the_cameras_map():
     for mode in SENSED_OBSTACLES:
         check({"safety": "ssm", "obstacles": mode})
     check({"safety": "", "obstacles": "objects"}, whole=True)  # empty: the YAML's, and no map to promise anything of
+
+
+def test_tracked_people_need_ssm_and_the_simulators_tracker():
+    """people:=tracked is ssm's, and with the simulator only its tracker (obstacle_poses:=tracker) reports them:
+    refused at once otherwise, naming what is missing; roslaunch sets the scene's octomap/ssm/tracking/use."""
+    tracked = {"people": "tracked", "obstacles": "sensed", "obstacle_poses": "tracker"}
+    with pytest.raises(LaunchArgError, match="needs safety:=ssm"):
+        check(tracked, whole=True)
+    with pytest.raises(LaunchArgError, match="needs obstacle_poses:=tracker"):
+        check({**tracked, "safety": "ssm", "obstacle_poses": "world_file"}, whole=True)
+    check({**tracked, "safety": "ssm"}, whole=True)
+    check({**tracked, "safety": "ssm", "simulator": "false", "obstacle_poses": "world_file"}, whole=True)
+    check({"people": "unmonitored", "obstacles": "sensed"}, whole=True)
+    _, r = roslaunch("obstacles:=sensed", "safety:=ssm", "people:=tracked", "obstacle_poses:=tracker")
+    assert r.returncode == 0, r.stderr
+    params = yaml.safe_load(r.stdout)
+    assert params["/planning_scene/octomap/ssm/tracking/use"] is True, r.stdout[-3000:]
+    _, r = roslaunch("obstacles:=sensed")
+    assert yaml.safe_load(r.stdout)["/planning_scene/octomap/ssm/tracking/use"] is False  # the YAML's

@@ -49,6 +49,8 @@ def worker(args) -> dict:
             "camera_rate": args.worker_rate,
             **({"strategy": args.strategy} if args.strategy and safety != "off" else {}),
             **({"safety": safety} if safety not in ("", "off") else {}),
+            **({"people": args.worker_people} if args.worker_people else {}),
+            **({"obstacle_poses": "tracker"} if args.worker_people == "tracked" else {}),
             **({"mode": args.mode} if args.mode else {}),
         },
         task={"max_episode_steps": args.max_steps},
@@ -103,6 +105,14 @@ def main(argv=None) -> int:
         default=[""],
         help="safety definitions to compare, each in its own graph (default: config/planning_scene.yaml's)",
     )
+    p.add_argument(
+        "--people",
+        nargs="+",
+        choices=[c for c in CHOICES["people"] if c],
+        default=[""],
+        help="with ssm: the people unmonitored or tracked (launch argument people; tracked runs the simulator's "
+        "tracker, obstacle_poses:=tracker), each in its own graph (default: config/planning_scene.yaml's)",
+    )
     p.add_argument("--shield-off", action="store_true", help="add the same policy with the shield off (a baseline)")
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock (default: lockstep)")
     p.add_argument("--episodes", type=int, default=6)
@@ -111,18 +121,24 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=None, help="write probe.md and probe.json here")
     p.add_argument("--worker-rate", type=float, help=argparse.SUPPRESS)
     p.add_argument("--worker-safety", default="", help=argparse.SUPPRESS)
+    p.add_argument("--worker-people", default="", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker_rate is not None:
         print(json.dumps(worker(args)))
         return 0
     rows = []
-    runs = [(rate, safety) for rate in args.camera_rates for safety in args.safety]
-    runs += [(args.camera_rates[0], "off")] if args.shield_off else []
-    for rate, safety in runs:
-        what = f"camera rate {rate:g} Hz" + (f", safety {safety}" if safety else "")
+    runs = [
+        (rate, safety, people if safety == "ssm" else "")
+        for rate in args.camera_rates
+        for safety in args.safety
+        for people in (args.people if safety == "ssm" else [""])
+    ]
+    runs += [(args.camera_rates[0], "off", "")] if args.shield_off else []
+    for rate, safety, people in runs:
+        what = f"camera rate {rate:g} Hz" + (f", safety {safety}" if safety else "") + (f", {people}" if people else "")
         print(f"{what}: {args.episodes} episodes ...", flush=True)
         worker_args = [*(argv if argv is not None else sys.argv[1:]), "--worker-rate", str(rate)]
-        worker_args += ["--worker-safety", safety]
+        worker_args += ["--worker-safety", safety, "--worker-people", people]
         r = run_json_worker(__file__, worker_args, what, timeout=600 + 120 * args.episodes)
         eps = r["episodes"]
         verdicts = {}
@@ -134,6 +150,7 @@ def main(argv=None) -> int:
             {
                 "camera_rate": rate,
                 "safety": safety or "(yaml)",
+                "people": people or ("-" if safety != "ssm" else "(yaml)"),
                 "episodes": len(eps),
                 "reached": len(reached),
                 "steps_to_goal_mean": float(np.mean(reached)) if reached else None,
@@ -162,15 +179,16 @@ def main(argv=None) -> int:
         "episodes. contacts: ground truth, of them moving: while the robot moved (safety ssm allows the others). "
         "safety off: the shield off (the world file's objects unchecked).",
         "",
-        "| camera rate (per simulated s) | safety | episodes | reached | steps to goal | closest (m) | contacts "
-        "| moving | verdicts | steps/s |",
-        "|---:|---|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| camera rate (per simulated s) | safety | people | episodes | reached | steps to goal | closest (m) | "
+        "contacts | moving | verdicts | steps/s |",
+        "|---:|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in rows:
         steps = "-" if r["steps_to_goal_mean"] is None else f"{r['steps_to_goal_mean']:.1f}"
         verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
         lines.append(
-            f"| {r['camera_rate']:g} | {r['safety']} | {r['episodes']} | **{r['reached']}** | {steps} | "
+            f"| {r['camera_rate']:g} | {r['safety']} | {r['people']} | {r['episodes']} | **{r['reached']}** | "
+            f"{steps} | "
             f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | "
             f"{r['steps_per_s']:.1f} |"
         )

@@ -234,13 +234,9 @@ void FclCollisionChecker::checkStateImpl(const double* q, const CollisionRequest
     const int gi = world_geoms_[w];
     const Geom& g = geoms_[gi];
     if (g.link == last_link) continue;
-    // The tracked parts' balls are not culled with the map (few, each one sphere test first).
-    const bool part = tracked && meetsTrackedPart(g);
-    if (!part) {
-      if (occupancy_culled && occupancy_active_[w] == 0) continue;
-      const auto& shape = octoGeom(geoms_[gi]);
-      if (!(tracked ? meetsUnexplained(shape, g.world_tf) : meetsOccupied(shape, g.world_tf))) continue;
-    }
+    if (occupancy_culled && occupancy_active_[w] == 0) continue;
+    const auto& shape = octoGeom(geoms_[gi]);
+    if (!(tracked ? meetsTracked(shape, g) : meetsOccupied(shape, g.world_tf))) continue;
     result->status = CollisionStatus::kWorld;
     if (request.max_pairs == 0) return;
     result->pairs.push_back(ContactPair{names[g.link], kOctomapId, 0.0});
@@ -431,39 +427,52 @@ const std::shared_ptr<fcl::CollisionGeometry<double>>& FclCollisionChecker::octo
   return level;
 }
 
-bool FclCollisionChecker::meetsUnexplained(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
-                                           const Eigen::Isometry3d& tf) const {
+bool FclCollisionChecker::meetsTracked(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
+                                       const Geom& g) const {
   // Only a cell a camera saw occupied may be a part's: unseen and stale cells may hold anything.
-  if (meetsOccupied(shape, tf, CellClass::kUnseen)) return true;
+  if (meetsOccupied(shape, g.world_tf, CellClass::kUnseen)) return true;
+  // The seen cells no part explains (not wholly within any part's `explains`).
   const OccupancyMap::ExcludeTest explained = [this](const Eigen::AlignedBox3d& box) {
     OccupancyMap::Excluded out = OccupancyMap::Excluded::kNone;
     for (const ExplainedPart& p : *parts_) {
-      if (box.exteriorDistance(p.centre) >= p.explains) continue;
-      // The box's corner farthest from the centre.
-      const Eigen::Vector3d far = (box.min() - p.centre).cwiseAbs().cwiseMax((box.max() - p.centre).cwiseAbs());
-      if (far.norm() <= p.explains) return OccupancyMap::Excluded::kWholly;
-      out = OccupancyMap::Excluded::kPartly;
+      const OccupancyMap::Excluded in = within(box, p);
+      if (in == OccupancyMap::Excluded::kWholly) return in;
+      if (in == OccupancyMap::Excluded::kPartly) out = in;
     }
     return out;
   };
-  return meetsOccupied(shape, tf, CellClass::kSeen, 0.0, &explained);
-}
-
-bool FclCollisionChecker::meetsTrackedPart(const Geom& g) const {
-  const auto& shape = g.octo;  // padded, no margin: the ball holds the part's whole reach
-  const Eigen::Vector3d centre = g.world_tf * shape->aabb_center;
+  if (meetsOccupied(shape, g.world_tf, CellClass::kSeen, 0.0, &explained)) return true;
+  // A part's cells: where the map saw them (ISO's margin from then) and where its newer track puts it (its ball) must
+  // both reach the link: the part is in the intersection of the two.
   for (const ExplainedPart& p : *parts_) {
-    const double r = shape->aabb_radius + p.keep_out;
-    if ((centre - p.centre).squaredNorm() > r * r) continue;
-    const fcl::Sphered ball(p.keep_out);
-    fcl::Transform3d at = fcl::Transform3d::Identity();
-    at.translation() = p.centre;
-    fcl::CollisionRequestd req(1, false);
-    fcl::CollisionResultd res;
-    fcl::collide(&ball, at, shape.get(), g.world_tf, req, res);
-    if (res.isCollision()) return true;
+    if (!meetsBall(g, p)) continue;
+    const OccupancyMap::ExcludeTest outside = [&p](const Eigen::AlignedBox3d& box) {
+      const OccupancyMap::Excluded in = within(box, p);
+      return in == OccupancyMap::Excluded::kNone ? OccupancyMap::Excluded::kWholly : OccupancyMap::Excluded::kNone;
+    };
+    if (meetsOccupied(shape, g.world_tf, CellClass::kSeen, 0.0, &outside)) return true;
   }
   return false;
+}
+
+OccupancyMap::Excluded FclCollisionChecker::within(const Eigen::AlignedBox3d& box, const ExplainedPart& p) {
+  if (box.exteriorDistance(p.centre) >= p.explains) return OccupancyMap::Excluded::kNone;
+  // The box's corner farthest from the centre.
+  const Eigen::Vector3d far = (box.min() - p.centre).cwiseAbs().cwiseMax((box.max() - p.centre).cwiseAbs());
+  return far.norm() <= p.explains ? OccupancyMap::Excluded::kWholly : OccupancyMap::Excluded::kPartly;
+}
+
+bool FclCollisionChecker::meetsBall(const Geom& g, const ExplainedPart& p) const {
+  const auto& shape = g.octo;  // padded, no margin: the ball holds the part's whole reach
+  const double r = shape->aabb_radius + p.keep_out;
+  if ((g.world_tf * shape->aabb_center - p.centre).squaredNorm() > r * r) return false;
+  const fcl::Sphered ball(p.keep_out);
+  fcl::Transform3d at = fcl::Transform3d::Identity();
+  at.translation() = p.centre;
+  fcl::CollisionRequestd req(1, false);
+  fcl::CollisionResultd res;
+  fcl::collide(&ball, at, shape.get(), g.world_tf, req, res);
+  return res.isCollision();
 }
 
 bool FclCollisionChecker::meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,

@@ -4,6 +4,8 @@
  */
 #include "moverl_planning_scene/octomap_monitor.h"
 
+#include <hri_msgs/IdsList.h>
+
 #include <pthread.h>
 #include <algorithm>
 #include <cmath>
@@ -119,6 +121,9 @@ bool OctomapMonitor::init(std::string* error) {
   queue_depth_ = static_cast<std::size_t>(std::max(1, queue));
   rule_ = o.margin;
   max_age_ = o.margin.max_age;
+  track_people_ = o.track_people;
+  tracking_ = o.tracking;
+  part_radii_ = o.part_radii;
   stale_wait_ = o.stale_wait;
   lockstep_ = o.lockstep;
   lag_ = o.lockstep && o.lockstep_lag;
@@ -176,6 +181,16 @@ bool OctomapMonitor::init(std::string* error) {
       [this](const sensor_msgs::PointCloud2::ConstPtr& m) { onCloud(m); }, ros::VoidPtr(), &sensor_queue_);
   joint_sub_ = nh_.subscribe(js);
   cloud_sub_ = nh_.subscribe(pc);
+  if (track_people_) {
+    ros::SubscribeOptions bodies = ros::SubscribeOptions::create<hri_msgs::IdsList>(
+        "/humans/bodies/tracked", 10,
+        [this](const hri_msgs::IdsList::ConstPtr& m) {
+          std::lock_guard<std::mutex> lock(bodies_mutex_);
+          bodies_ = m->ids;
+        },
+        ros::VoidPtr(), &sensor_queue_);
+    bodies_sub_ = nh_.subscribe(bodies);
+  }
   integrator_ = std::thread([this] { integrateLoop(); });
   sensor_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &sensor_queue_);
   sensor_spinner_->start();
@@ -633,7 +648,18 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     }
     margin_age = std::max(0.0, stamp.toSec() - map_time);
   }
-  if (marginRule().compute(margin_age, duration, out, why)) return true;
+  if (marginRule().compute(margin_age, duration, out, why)) {
+    out->parts.clear();
+    if (track_people_ && std::isfinite(duration)) {
+      const double now = stamp.toSec();
+      const std::vector<TrackedPart> parts = trackedParts();
+      out->parts = explainParts(parts, tracking_, now, now - margin_age, now + duration + rule_.latency, out->end,
+                                rule_.uncertainty);
+      ROS_INFO_THROTTLE(10.0, "planning_scene: tracked people: %zu of %zu parts in TF used (map age %.3f s)",
+                        out->parts.size(), parts.size(), margin_age);
+    }
+    return true;
+  }
   if (!std::isfinite(map_age)) {
     *why = none ? "no camera has been heard from: nothing is known to be free"
                 : "camera " + deciding +
@@ -643,6 +669,34 @@ bool OctomapMonitor::margins(const ros::Time& stamp, double duration, SensedMarg
     *why += " (the oldest view: camera " + deciding + ")";
   }
   return false;
+}
+
+std::vector<TrackedPart> OctomapMonitor::trackedParts() {
+  std::vector<std::string> bodies;
+  {
+    std::lock_guard<std::mutex> lock(bodies_mutex_);
+    bodies = bodies_;
+  }
+  std::vector<TrackedPart> parts;
+  const std::string& base = scene_->model().baseLink();
+  for (const std::string& body : bodies) {
+    for (const auto& [frame, radius] : part_radii_) {
+      TrackedPart p;
+      p.id = frame + "_" + body;
+      try {
+        const geometry_msgs::TransformStamped tf = tf_buffer_->lookupTransform(base, p.id, ros::Time(0));
+        p.position =
+            Eigen::Vector3d(tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z);
+        p.stamp = tf.header.stamp.toSec();
+      } catch (const tf2::TransformException&) {
+        continue;  // not (yet) there: its cells are unexplained
+      }
+      p.speed = tracking_.motion.max_speed;  // REP 155 reports no velocity
+      p.radius = radius;
+      parts.push_back(p);
+    }
+  }
+  return parts;
 }
 
 SensedMarginRule OctomapMonitor::marginRule() const {

@@ -255,6 +255,7 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
   const SensedMargins none;
   const SensedMargins& margin = sensed != nullptr ? *sensed : none;
   const OctreeMarginScope scope(checker_.get(), margin.end);
+  const TrackedPartsScope tracked(checker_.get(), &margin.parts);
   const bool moving = checker_->hasMovingObstacles();
   out->moving_obstacles = moving;
   out->replanned = false;
@@ -390,6 +391,7 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
   } else if (plan_on_path_collision) {
     t0 = Clock::now();
     checker_->setOctreeMargin(margin.plan);
+    checker_->setTrackedParts(nullptr);  // the parts' balls are for the move's window, not a plan's
     planner_->plan(start_, goal_, "", 0.0, &plan_result_, /*try_straight=*/false);
     out->planning_time = since(t0);
     out->replanned = plan_result_.status == PlanStatus::kSuccess;

@@ -1,7 +1,9 @@
 #include "moverl_planning_scene/tracked_parts.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <sstream>
 #include <stdexcept>
 
 namespace moverl_planning_scene {
@@ -53,11 +55,35 @@ std::vector<ExplainedPart> explainParts(const std::vector<TrackedPart>& parts, c
     // where it may be by the window's end.
     const double keep_out = around + uncertainty + rule.motion.travel(speed, std::max(0.0, end - p.stamp));
     const double explains = std::min(keep_out, around + rule.motion.travel(speed, std::fabs(map_time - p.stamp)));
-    // Its cells' own margin would keep the robot nearer: ISO's is the better bound here.
+    // Its ball holds every explained cell grown by ISO's margin: the intersection is ISO's margin alone.
     if (!(keep_out < explains + iso_margin)) continue;
     out.push_back(ExplainedPart{p.id, p.position, explains, keep_out});
   }
   return out;
+}
+
+bool parsePartRadii(const std::string& text, std::vector<std::pair<std::string, double>>* out, std::string* error) {
+  out->clear();
+  std::stringstream entries(text);
+  std::string entry;
+  while (std::getline(entries, entry, ',')) {
+    std::istringstream in(entry);
+    std::string frame, rest;
+    double radius = 0.0;
+    const bool named = static_cast<bool>(in >> frame);
+    const bool sized = named && static_cast<bool>(in >> radius);
+    if (!named && out->empty() && entries.eof()) break;  // "" lists nothing
+    bool good = sized && !(in >> rest) && std::isfinite(radius) && radius >= 0.0;
+    for (char c : frame) good = good && (std::isalnum(static_cast<unsigned char>(c)) || c == '_');
+    for (const auto& p : *out) good = good && p.first != frame;
+    if (!good) {
+      *error =
+          "'" + entry + "': expected \"<frame> <radius>\" (a frame of letters, digits and _, once; a radius >= 0 m)";
+      return false;
+    }
+    out->emplace_back(frame, radius);
+  }
+  return true;
 }
 
 }  // namespace moverl_planning_scene

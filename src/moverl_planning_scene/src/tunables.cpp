@@ -194,6 +194,20 @@ bool readOctomapMonitorOptions(const Tunables& t, OctomapMonitorOptions* o, std:
     o->lockstep = t.require<bool>("octomap/lockstep");
     o->lockstep_lag = o->lockstep && t.require<bool>("octomap/lockstep_lag");
     o->lockstep_lag_max_margin = t.require<double>("octomap/lockstep_lag_max_margin");
+    o->track_people = t.require<bool>("octomap/ssm/tracking/use");
+    o->tracking.motion.max_speed = t.require<double>("octomap/ssm/tracking/max_speed");
+    o->tracking.position_error = t.require<double>("octomap/ssm/tracking/position_error");
+    o->tracking.max_age = t.require<double>("octomap/ssm/tracking/max_age");
+    const std::string bad = o->tracking.problem();
+    if (!bad.empty()) throw std::runtime_error("octomap/ssm/tracking: " + bad);
+    std::string parts_error;
+    if (!parsePartRadii(t.require<std::string>("octomap/ssm/tracking/parts"), &o->part_radii, &parts_error)) {
+      throw std::runtime_error("octomap/ssm/tracking/parts: " + parts_error);
+    }
+    if (o->track_people && o->margin.safety != Safety::kSsm) {
+      throw std::runtime_error("octomap/ssm/tracking/use: the tracked people are ssm's (octomap/safety is " +
+                               safetyName(o->margin.safety) + ")");
+    }
     integration = t.require<std::string>("octomap/integration");
     o->integration_threads = t.require<int>("octomap/integration_threads");
   } catch (const std::exception& e) {

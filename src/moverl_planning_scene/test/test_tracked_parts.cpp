@@ -78,9 +78,9 @@ TEST(TrackedParts, ALostStaleFutureOrBrokenTrackExplainsNothing) {
   EXPECT_TRUE(mps::explainParts({broken}, r, 1.0, 1.0, 1.1, 1.0, 0.0).empty());
 }
 
-TEST(TrackedParts, APartThatWouldKeepTheRobotFartherThanIsoIsNotUsed) {
+TEST(TrackedParts, APartWhoseBallHoldsIsosMarginIsNotUsed) {
   const mps::TrackingRule r = rule();
-  // Fresh map, old track: ISO's margin of the cells (0.05 m) is tighter than the part's reach.
+  // Fresh map, old track: the part's reach holds ISO's margin (0.05 m) of every cell it explains.
   EXPECT_TRUE(mps::explainParts({part(1.0)}, r, 1.15, 1.15, 1.2, 0.05, 0.0).empty());
   EXPECT_EQ(mps::explainParts({part(1.0)}, r, 1.15, 1.15, 1.2, 0.5, 0.0).size(), 1u);
 }
@@ -207,12 +207,12 @@ TEST_F(PandaTracked, ATrackedPartReplacesTheSeenCellsItExplains) {
   ASSERT_EQ(check(0.0), mps::CheckOutcome::kValid);
   const double iso = 0.3;  // the margin an unmonitored hand gets
   ASSERT_EQ(check(iso), mps::CheckOutcome::kWorldCollision);
-  // A track where the hand is: its seen cells (2 cm cells around a 6 cm patch) lie within 0.08 m, its ball is 0.09 m:
-  // the robot may stay.
+  // A track where the hand is: its seen cells (2 cm cells around a 6 cm patch) lie within 0.08 m, its ball (0.09 m)
+  // does not reach the robot: the hand is in neither's intersection with the robot, which may stay.
   std::vector<mps::ExplainedPart> parts = {{"r_wrist_1", hand_, 0.08, 0.09}};
   scene_->checker().setTrackedParts(&parts);
   EXPECT_EQ(check(iso), mps::CheckOutcome::kValid);
-  // The part's own reach to the robot: its ball decides (as large as ISO's margin around its cells, it collides too).
+  // A ball as large as ISO's margin around its cells: the intersection is ISO's margin, which collides.
   parts[0].keep_out = iso + parts[0].explains;
   EXPECT_EQ(check(iso), mps::CheckOutcome::kWorldCollision);
   parts[0].keep_out = 0.09;
@@ -222,16 +222,20 @@ TEST_F(PandaTracked, ATrackedPartReplacesTheSeenCellsItExplains) {
   parts[0].centre = hand_;
   parts[0].explains = 0.02;
   EXPECT_EQ(check(iso), mps::CheckOutcome::kWorldCollision);
-  // A path is checked the same way.
-  parts[0].explains = 0.08;
+  // A move's checks take the parts from its margins, and leave none behind.
+  scene_->checker().setTrackedParts(nullptr);
   std::vector<double> goal = kHome;
   goal[0] = 0.1;
   mps::MotionCheck mc;
   mps::SensedMargins sm;
   sm.start = sm.end = sm.plan = iso;
   scene_->validateMotion(kHome, goal, false, &mc, false, 0.0, 0.05, &sm);
+  EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << "no part: ISO's margin";
+  sm.parts = {{"r_wrist_1", hand_, 0.08, 0.09}};
+  scene_->validateMotion(kHome, goal, false, &mc, false, 0.0, 0.05, &sm);
   EXPECT_EQ(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
-  parts[0].keep_out = iso + parts[0].explains;
+  EXPECT_EQ(check(iso), mps::CheckOutcome::kWorldCollision) << "validateMotion leaves no parts behind";
+  sm.parts[0].keep_out = iso + sm.parts[0].explains;
   scene_->validateMotion(kHome, goal, false, &mc, false, 0.0, 0.05, &sm);
   EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
 }

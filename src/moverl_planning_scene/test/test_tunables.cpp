@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <set>
@@ -142,19 +143,25 @@ TEST(OctomapMonitorOptions, ReadsEveryKeyOfTheFile) {
                                       "octomap/speed_bound",
                                       "octomap/ssm/intrusion",
                                       "octomap/ssm/sensor_uncertainty",
+                                      "octomap/ssm/tracking/use",
+                                      "octomap/ssm/tracking/max_speed",
+                                      "octomap/ssm/tracking/position_error",
+                                      "octomap/ssm/tracking/max_age",
+                                      "octomap/ssm/tracking/parts",
                                       "octomap/latency",
                                       "octomap/plan_horizon",
                                       "octomap/max_age",
                                       "octomap/stale_wait"};
-  ASSERT_EQ(keys.size(), 32u);
-  std::set<std::string> in_file;  // (a mapping's keys: octomap/ssm/...)
-  for (const auto& entry : YAML::LoadFile(MOVERL_CONFIG_DIR "/planning_scene.yaml")["octomap"]) {
-    const std::string key = "octomap/" + entry.first.as<std::string>();
-    if (!entry.second.IsMap()) in_file.insert(key);
-    for (const auto& sub : entry.second.IsMap() ? entry.second : YAML::Node()) {
-      in_file.insert(key + "/" + sub.first.as<std::string>());
+  ASSERT_EQ(keys.size(), 37u);
+  std::set<std::string> in_file;  // (a mapping's keys, at any depth: octomap/ssm/tracking/...)
+  std::function<void(const std::string&, const YAML::Node&)> leaves = [&](const std::string& key, const YAML::Node& n) {
+    if (!n.IsMap()) {
+      in_file.insert(key);
+      return;
     }
-  }
+    for (const auto& sub : n) leaves(key + "/" + sub.first.as<std::string>(), sub.second);
+  };
+  leaves("octomap", YAML::LoadFile(MOVERL_CONFIG_DIR "/planning_scene.yaml")["octomap"]);
   EXPECT_EQ(in_file, keys) << "a key of the octomap: section that the monitor does not read, or the other way round";
   for (const auto& key : keys) {
     bool b = false;
@@ -310,4 +317,29 @@ TEST(OctomapMonitorOptions, RefusesABadValueInAFile) {
 int main(int argc, char** argv) {
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
+}
+
+// octomap/ssm/tracking: ssm's only; the parts' list parsed, a bad entry named.
+TEST(OctomapMonitorOptions, TrackedPeopleAreSsmsAndTheirPartsParsed) {
+  EXPECT_EQ(refusal(EditedTunables({{"octomap/ssm/tracking/use", true}})),
+            "octomap/ssm/tracking/use: the tracked people are ssm's (octomap/safety is separation)");
+  mps::OctomapMonitorOptions o;
+  std::string error;
+  ASSERT_TRUE(mps::readOctomapMonitorOptions(
+      EditedTunables({{"octomap/safety", std::string("ssm")}, {"octomap/ssm/tracking/use", true}}), &o, &error))
+      << error;
+  EXPECT_TRUE(o.track_people);
+  EXPECT_EQ(o.tracking.motion.max_speed, shipped<double>("octomap/ssm/tracking/max_speed"));
+  EXPECT_EQ(o.tracking.motion.max_acceleration, 0.0) << "REP 155 reports no velocity";
+  ASSERT_FALSE(o.part_radii.empty());
+  EXPECT_EQ(refusal(EditedTunables({{"octomap/ssm/tracking/parts", std::string("head 0.1, r_wrist")}})),
+            "octomap/ssm/tracking/parts: ' r_wrist': expected \"<frame> <radius>\" (a frame of letters, digits and _, "
+            "once; a radius >= 0 m)");
+  EXPECT_NE(refusal(EditedTunables({{"octomap/ssm/tracking/parts", std::string("head 0.1, head 0.2")}})), "");
+  EXPECT_NE(refusal(EditedTunables({{"octomap/ssm/tracking/parts", std::string("head -0.1")}})), "");
+  EXPECT_NE(refusal(EditedTunables({{"octomap/ssm/tracking/max_speed", 0.0}})), "");
+  ASSERT_TRUE(
+      mps::readOctomapMonitorOptions(EditedTunables({{"octomap/ssm/tracking/parts", std::string("")}}), &o, &error))
+      << error;
+  EXPECT_TRUE(o.part_radii.empty());
 }

@@ -81,6 +81,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "control": ("", "kinematic", "dynamic"),  # moverl_sim.core.CONTROLS (node_config's); "": config/sim.yaml's
     "safety": ("", "separation", "ssm"),  # moverl_planning_scene/src/sensed_margin.cpp: safetyName, parseSafety
     # ("": config/planning_scene.yaml's octomap/safety)
+    "people": ("", "unmonitored", "tracked"),  # launch/planning_scene.launch: octomap/ssm/tracking/use
     "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).
@@ -219,6 +220,7 @@ def _check(args: Mapping[str, object], whole: bool, base: CheckedLaunch | None) 
     robots = dict(base._robots) if base is not None else {}
     problems += _open_values(values, new, whole, before, base is not None and base.whole, robots)
     problems.append(_safety_without_map(values, new, whole))
+    problems.append(_tracked_people_need_ssm(values, new, whole))
     problems = [p for p in problems if p]
     if len(problems) == 1:
         raise LaunchArgError(f"launch/moverl.launch: {problems[0]}")
@@ -257,6 +259,24 @@ def _safety_without_map(values: Mapping[str, str], new: Mapping[str, str], whole
         f"safety={values['safety']!r} applies to the cameras' map only: it needs obstacles:= one of "
         f"{', '.join(SENSED_OBSTACLES)} (obstacles={obstacles!r}: the world file's shapes, known exactly)"
     )
+
+
+def _tracked_people_need_ssm(values: Mapping[str, str], new: Mapping[str, str], whole: bool) -> str:
+    """people:=tracked is ssm's (the tracked parts' reach replaces ISO 13855's), and with the simulator only its
+    tracker (obstacle_poses:=tracker) reports them."""
+    if values.get("people") != "tracked" or not ({"people", "safety", "obstacle_poses", "simulator"} & set(new)):
+        return ""
+    if values.get("safety") != "ssm" and (whole or "safety" in values):
+        safety = values.get("safety", "")
+        return f"people='tracked' monitors the people's speed for ssm: it needs safety:=ssm (safety={safety!r})"
+    simulated = values.get("simulator", "true" if whole else None)
+    poses = values.get("obstacle_poses", "world_file" if whole else None)
+    if simulated == "true" and poses is not None and poses != "tracker":
+        return (
+            "people='tracked' with the simulator needs obstacle_poses:=tracker (the simulator's tracker reports the "
+            f"world file's people; obstacle_poses={poses!r})"
+        )
+    return ""
 
 
 #: The arguments each check of a combination reads (besides the world or the robot they need).

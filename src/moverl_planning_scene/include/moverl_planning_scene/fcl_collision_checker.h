@@ -102,9 +102,10 @@ class FclCollisionChecker : public CollisionChecker {
   ///        callers must not modify it while a check runs; it must outlive its use here.
   void setOccupancy(const OccupancyMap* map) { occupancy_ = map; }
   bool hasOccupancy() const { return occupancy_ != nullptr; }
-  /// \brief safety:=ssm with a tracker (tracked_parts.h): the checks that follow leave the seen cells each part
-  ///        explains out of the map's check and keep the padded links out of its ball instead (a contact with it is
-  ///        reported as the map's, kOctomapId). Cells not seen occupied keep the map's check. nullptr or empty: none.
+  /// \brief safety:=ssm with a tracker (tracked_parts.h): in the checks that follow, a seen cell a part explains
+  ///        stops a link only when the link, padded, also meets the part's keep_out ball (the part lies in both where
+  ///        the map saw it, grown by the margin, and where its newer track puts it). Cells not seen occupied, and seen
+  ///        ones no part explains, keep the map's check. nullptr or empty: none.
   ///        Only the state and path checks use them (occupancyFree and occupancyDistance do not: the retreat's
   ///        questions stay ISO's). The parts must outlive their use here.
   void setTrackedParts(const std::vector<ExplainedPart>* parts) { parts_ = parts; }
@@ -246,12 +247,13 @@ class FclCollisionChecker : public CollisionChecker {
   bool meetsOccupied(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Eigen::Isometry3d& tf,
                      CellClass which = CellClass::kAll, double grow = 0.0,
                      const OccupancyMap::ExcludeTest* exclude = nullptr) const;
-  /// With tracked parts: meetsOccupied of the cells no part explains (every cell not seen occupied, and the seen ones
-  /// outside the parts' `explains` balls).
-  bool meetsUnexplained(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape,
-                        const Eigen::Isometry3d& tf) const;
-  /// With tracked parts: g's padded shape (at the current transforms) meets a part's keep_out ball.
-  bool meetsTrackedPart(const Geom& g) const;
+  /// With tracked parts: g's shape `shape` (inflated by the current margin) meets an unseen cell, a seen cell no part
+  /// explains, or a part's explained cell while g's padded shape meets that part's keep_out ball.
+  bool meetsTracked(const std::shared_ptr<fcl::CollisionGeometry<double>>& shape, const Geom& g) const;
+  /// How much of `box` lies within p.explains of p.centre.
+  static OccupancyMap::Excluded within(const Eigen::AlignedBox3d& box, const ExplainedPart& p);
+  /// g's padded shape (at the current transforms) meets p's keep_out ball.
+  bool meetsBall(const Geom& g, const ExplainedPart& p) const;
   /// checkPath's culling against the occupancy map, for the states of the segment cullPairs last culled: makes
   /// occupancy_active_ hold, for this map (its revision) and margin, when it does not yet (at the segment's
   /// midpoint: world shapes' transforms are left there) and returns true; false when it was made at another margin,
@@ -297,6 +299,20 @@ class FclCollisionChecker : public CollisionChecker {
   CollisionResult state_scratch_;
   AcmStats acm_stats_;
   std::size_t degenerate_hulls_ = 0;
+};
+
+/// \brief Sets a checker's tracked parts for a scope and back to none at its end.
+class TrackedPartsScope {
+ public:
+  TrackedPartsScope(FclCollisionChecker* checker, const std::vector<ExplainedPart>* parts) : checker_(checker) {
+    checker_->setTrackedParts(parts);
+  }
+  ~TrackedPartsScope() { checker_->setTrackedParts(nullptr); }
+  TrackedPartsScope(const TrackedPartsScope&) = delete;
+  TrackedPartsScope& operator=(const TrackedPartsScope&) = delete;
+
+ private:
+  FclCollisionChecker* checker_;
 };
 
 /// \brief Sets a checker's sensed margin for a scope and back to none at its end (every query leaves none behind).

@@ -138,7 +138,16 @@ class OctomapMonitor {
   std::unique_ptr<ros::AsyncSpinner> sensor_spinner_, joint_spinner_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  ros::Subscriber joint_sub_, cloud_sub_;
+  ros::Subscriber joint_sub_, cloud_sub_, bodies_sub_;
+  // octomap/ssm/tracking (safety ssm, use): the tracked bodies (REP 155's /humans/bodies/tracked) and what a check
+  // trusts of their parts' TF frames.
+  bool track_people_ = false;
+  TrackingRule tracking_;
+  std::vector<std::pair<std::string, double>> part_radii_;
+  std::mutex bodies_mutex_;          // guards bodies_
+  std::vector<std::string> bodies_;  // the last list's ids
+  /// The parts of the tracked bodies as their TF frames give them now (base frame; a frame not there is skipped).
+  std::vector<TrackedPart> trackedParts();
   ros::Publisher status_pub_, marker_pub_;
   ros::ServiceServer clear_srv_, census_srv_;
   std::vector<std::string> joints_;

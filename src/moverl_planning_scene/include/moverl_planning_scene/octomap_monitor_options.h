@@ -7,15 +7,24 @@
 #pragma once
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
 #include "moverl_planning_scene/sensed_margin.h"
+#include "moverl_planning_scene/tracked_parts.h"
 #include "moverl_planning_scene/unset.h"
 
 namespace moverl_planning_scene {
 
 struct OctomapMonitorOptions {
+  /// octomap/ssm/tracking/use (safety ssm only): the checks use the tracked people's parts (tracked_parts.h)
+  bool track_people = false;
+  /// octomap/ssm/tracking/max_speed, position_error, max_age (motion.max_acceleration 0: no velocity is reported)
+  TrackingRule tracking;
+  /// octomap/ssm/tracking/parts: the frames looked up per tracked body, each with its radius (m)
+  std::vector<std::pair<std::string, double>> part_radii;
   /// octomap/resolution, max_range, prob_hit, prob_miss, clamp_min, clamp_max, occupancy_threshold, watch_time
   /// (readOccupancyMapTunables); the monitor sets the rest (bounds, unknown_occupied, hidden_space, speed_bound).
   OccupancyMapOptions map;

@@ -52,6 +52,9 @@ struct SensedMargins {
   double start = 0.0, end = 0.0, plan = 0.0;
   double map_age = -1.0;      ///< s (reported)
   double plan_horizon = 0.0;  ///< s (reported: a plan executed slower is not covered)
+  /// safety:=ssm with a tracker: the tracked parts the start's and the end's checks use, for the move's window's end
+  /// (tracked_parts.h; a plan's checks use none: ISO's margin)
+  std::vector<ExplainedPart> parts;
 };
 
 /// \brief One validateMotion question (moverl_msgs/ValidateMotion's request, whose comments say more).

@@ -149,3 +149,29 @@ def tracked_pose_msg(measurement, frame_id):
     p, o = msg.pose.position, msg.pose.orientation
     p.x, p.y, p.z, o.x, o.y, o.z, o.w = measurement.pose
     return msg
+
+
+def part_frame_msgs(frames, parent):
+    """moverl_sim.people.part_frames' (frame, stamp, pose) -> geometry_msgs/TransformStamped (stamp: when measured)."""
+    from geometry_msgs.msg import TransformStamped
+
+    out = []
+    for frame, stamp, pose in frames:
+        t = TransformStamped()
+        t.header.stamp = sim_stamp(stamp)
+        t.header.frame_id = parent
+        t.child_frame_id = frame
+        tr, r = t.transform.translation, t.transform.rotation
+        tr.x, tr.y, tr.z, r.x, r.y, r.z, r.w = pose
+        out.append(t)
+    return out
+
+
+def tracked_bodies_msg(bodies, stamp, frame_id):
+    """The tracked bodies' ids -> hri_msgs/IdsList (REP 155's /humans/bodies/tracked)."""
+    from hri_msgs.msg import IdsList
+
+    msg = IdsList(ids=list(bodies))
+    msg.header.stamp = sim_stamp(stamp)
+    msg.header.frame_id = frame_id
+    return msg

@@ -32,7 +32,7 @@ __all__ = [
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
-_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing"}
+_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing", "people"}
 _SENSING_KEYS = {"speed_bound", "unknown_occupied"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
 MOTION_TYPES = ("oscillate", "reach")
@@ -219,6 +219,8 @@ class World:
     #: ``sensing: unknown_occupied:``: in the sensed mode, map cells no camera has seen count as occupied (except
     #: inside the robot and the static objects), the default; False (the file says so): they count as free.
     sensed_unknown_occupied: bool = True
+    #: ``people:`` the tracked people as a REP 155 tracker reports them (moverl_sim.people.Person)
+    people: tuple = ()
 
     @property
     def moving_objects(self):
@@ -481,6 +483,8 @@ def _parse_cameras(raw_cameras, source):
 
 def parse_world(data, source="<memory>"):
     """Validate an already-loaded YAML document (a dict) and build a World."""
+    from .people import parse_people  # (it raises this module's WorldFileError)
+
     if not isinstance(data, dict):
         raise WorldFileError(
             "%s: expected a mapping with keys %s at the top level, got %s"
@@ -569,6 +573,7 @@ def parse_world(data, source="<memory>"):
         cameras=cameras,
         sensed_speed_bound=speed_bound,
         sensed_unknown_occupied=unknown_occupied,
+        people=parse_people(data.get("people"), objects, source),
     )
 
 

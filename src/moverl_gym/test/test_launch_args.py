@@ -31,7 +31,7 @@ from moverl_gym.graph import LaunchedGraph
 from moverl_gym.launch_args import ARGS, BOOL, CHOICES, OPEN, SENSED_OBSTACLES, LaunchArgError, check, launch_value
 from moverl_gym.paths import launch_file, repo_root
 from moverl_gym.proctree import TreeWatch
-from moverl_sim import node_config
+from moverl_sim import node_config, tracker
 
 pytestmark = pytest.mark.core
 
@@ -68,6 +68,7 @@ WRONG = {
     "obstacle_poses": ("vicon", ()),
     "safety": ("iso", ()),
     "people": ("monitored", ()),
+    "tracker_fault": ("lying", ()),
 }
 #: The env's own arguments (not in launch_args).
 ENV_KWARGS = ("world", "robot", "shield")
@@ -403,6 +404,7 @@ NODE_LISTS = {
     "obstacles": scene_obstacles,
     "mode": lambda: set(node_config.MODES),
     "control": lambda: set(node_config.CONTROLS),
+    "tracker_fault": lambda: set(tracker.FAULTS),
 }
 
 

@@ -9,7 +9,9 @@ from moverl_sim.tracker import MAX_BACKLOG, Tracker, TrackerOptions, TrackerOpti
 
 pytestmark = pytest.mark.core
 
-OPTIONS = dict(rate=30.0, latency=0.05, noise=0.01, dropout=0.2, dropout_burst=4.0, seed=3)
+OPTIONS = dict(
+    rate=30.0, latency=0.05, noise=0.01, dropout=0.2, dropout_burst=4.0, seed=3, fault="none", fault_offset=0.0
+)
 
 
 def walk(t):
@@ -134,3 +136,19 @@ def test_config_sim_yaml_has_valid_options():
     cfg = yaml.safe_load((Path(__file__).resolve().parents[3] / "config" / "sim.yaml").read_text())
     opts = TrackerOptions.from_dict(cfg["tracker"], "config/sim.yaml tracker")
     assert opts.latency > 0 and opts.noise > 0 and opts.dropout > 0  # a tracker, not the script
+
+
+def test_a_lying_tracker_freezes_or_offsets_what_it_reports():
+    """tracker/fault (a test of what a lie can do): frozen repeats each object's first pose with fresh stamps, offset
+    moves every position by fault_offset along y; a fault it does not know is refused naming the valid ones."""
+    exact = dict(OPTIONS, dropout=0.0, noise=0.0)
+    _, frozen = run(dict(exact, fault="frozen"), 3.0)
+    a = [m for _, m in frozen if m.id == "a"]
+    assert len(a) > 60 and {m.pose for m in a} == {walk(0.0)["a"]}, "the walk at 0.1 m/s reported still"
+    assert a[-1].stamp > 2.8, "freshly stamped"
+    _, offset = run(dict(exact, fault="offset", fault_offset=0.5), 1.0)
+    for _, m in offset:
+        truth = walk(m.stamp)[m.id]
+        assert m.pose[1] == pytest.approx(truth[1] + 0.5) and m.pose[0] == truth[0]
+    with pytest.raises(TrackerOptionsError, match="fault must be one of none, frozen, offset"):
+        TrackerOptions(**dict(OPTIONS, fault="lying")).check()

@@ -32,6 +32,11 @@ from dataclasses import dataclass, fields
 #: The topic of one tracked object's poses (geometry_msgs/PoseStamped): format with the world object's id.
 TOPIC = "/tracker/{id}/pose"
 
+#: How the tracker may lie (a test of what a lie can do; config/sim.yaml's tracker/fault): none; frozen (every
+#: measurement repeats the object's first pose, freshly stamped: a track stuck where the person was); offset (every
+#: position moved by fault_offset along the world's y: a track beside the person).
+FAULTS = ("none", "frozen", "offset")
+
 #: A measurement older than this (s) when advance() is called is not taken: after a long pause of the clock a tracker
 #: reports what it sees now, not a backlog of the past.
 MAX_BACKLOG = 1.0
@@ -51,6 +56,8 @@ class TrackerOptions:
     dropout: float  # long-run fraction of lost measurements, in [0, 1)
     dropout_burst: float  # mean length of a run of lost measurements (measurements, >= 1)
     seed: int  # of the noise and the losses
+    fault: str = "none"  # FAULTS
+    fault_offset: float = 0.0  # m along y (fault offset)
 
     @classmethod
     def from_dict(cls, values: dict, where: str = "tracker") -> "TrackerOptions":
@@ -78,6 +85,8 @@ class TrackerOptions:
                 dropout=float(values["dropout"]),
                 dropout_burst=float(values["dropout_burst"]),
                 seed=int(values["seed"]),
+                fault=str(values["fault"]),
+                fault_offset=float(values["fault_offset"]),
             )
         except (TypeError, ValueError) as exc:
             raise TrackerOptionsError(f"{where}: {exc}") from None
@@ -96,6 +105,10 @@ class TrackerOptions:
             bad("noise", "a standard deviation in metres >= 0")
         if not (math.isfinite(self.dropout_burst) and self.dropout_burst >= 1.0):
             bad("dropout_burst", "a mean run length >= 1 measurement")
+        if self.fault not in FAULTS:
+            bad("fault", f"one of {', '.join(FAULTS)}")
+        if not math.isfinite(self.fault_offset):
+            bad("fault_offset", "a finite number of metres")
         limit = self.dropout_burst / (1.0 + self.dropout_burst)  # the chain's entry probability reaches 1 there
         if not (0.0 <= self.dropout < limit):
             bad("dropout", f"a fraction in [0, {limit:.3g}) (dropout_burst / (1 + dropout_burst))")
@@ -132,6 +145,7 @@ class Tracker:
         self._recover = 1.0 / options.dropout_burst
         self._enter = options.dropout * self._recover / (1.0 - options.dropout)
         self._pending = collections.deque()  # (delivery time, Measurement), in delivery order
+        self._frozen = {}  # fault frozen: each object's first pose
         self.taken = 0  # measurements taken (per object each)
         self.dropped = 0  # of them, lost
 
@@ -169,6 +183,8 @@ class Tracker:
             self._k += math.ceil((now - MAX_BACKLOG - t) / self._period)
             t = self.next_measurement()
         latency, noise, rng = self.options.latency, self.options.noise, self._rng
+        frozen = self.options.fault == "frozen"
+        offset = self.options.fault_offset if self.options.fault == "offset" else 0.0
         while t <= now:
             poses = truth(t)
             self.taken += 1
@@ -178,7 +194,8 @@ class Tracker:
                 if lost:
                     self.dropped += 1
                     continue
-                x, y, z, qx, qy, qz, qw = poses[oid]
+                x, y, z, qx, qy, qz, qw = self._frozen.setdefault(oid, poses[oid]) if frozen else poses[oid]
+                y += offset
                 if noise > 0.0:
                     x, y, z = x + rng.gauss(0.0, noise), y + rng.gauss(0.0, noise), z + rng.gauss(0.0, noise)
                 self._pending.append((t + latency, Measurement(oid, t, (x, y, z, qx, qy, qz, qw))))

@@ -20,7 +20,8 @@
  *   what it would have explained, at once);
  * - a part whose ball holds ISO's margin around every cell it explains: not used (it would change nothing).
  * What is: that a reported part is where the tracker says within `position_error`, carries nothing beyond its radius,
- * and moved at the reported speed within `speed_error` (ISO/TS 15066 asks the speed monitoring itself to be safety
+ * that nothing else moves within its reach (a seen cell there is the part's, or still), and that it moved at the
+ * reported speed within `speed_error` (ISO/TS 15066 asks the speed monitoring itself to be safety
  * rated: a tracker that under-reports a speed is the one assumption this rule rests on).
  */
 #pragma once

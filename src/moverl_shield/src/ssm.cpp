@@ -35,29 +35,47 @@ bool monitored(const PartState& part, const SsmParams& params) {
   return part.tracked && part.age <= params.max_track_age;
 }
 
-double personReach(const PartState& part, double t, const SsmParams& params) {
-  checkParams(params);
-  checkPart(part);
+namespace {
+
+// The rule's terms for checked parameters and parts (the public functions check them once).
+double reachOf(const PartState& part, double t, const SsmParams& params) {
   if (!finiteNonNegative(t)) throw std::invalid_argument("ssm: a time must be finite and >= 0");
   const double horizon = part.age + t;
   if (!monitored(part, params)) return params.iso.distance(horizon);
   return params.motion.travel(part.speed, horizon) + part.radius;
 }
 
+double separationOf(const PartState& part, const StopBound& stop, const std::vector<double>& radius_bounds,
+                    const SsmParams& params) {
+  return reachOf(part, stop.duration(), params) + pointTravelBound(stop.travel, radius_bounds) +
+         params.sensor_uncertainty + params.robot_uncertainty;
+}
+
+}  // namespace
+
+double personReach(const PartState& part, double t, const SsmParams& params) {
+  checkParams(params);
+  checkPart(part);
+  return reachOf(part, t, params);
+}
+
 double protectiveSeparation(const PartState& part, const StopBound& stop, const std::vector<double>& radius_bounds,
                             const SsmParams& params) {
-  return personReach(part, stop.duration(), params) + pointTravelBound(stop.travel, radius_bounds) +
-         params.sensor_uncertainty + params.robot_uncertainty;
+  checkParams(params);
+  checkPart(part);
+  return separationOf(part, stop, radius_bounds, params);
 }
 
 double speedScale(double distance, const PartState& part, const std::vector<double>& q, const std::vector<double>& v,
                   const StopLimits& limits, const std::vector<double>& radius_bounds, const SsmParams& params,
                   double resolution) {
   if (!(resolution > 0.0)) throw std::invalid_argument("ssm: the speed scale's resolution must be positive");
+  checkParams(params);  // once: the bisection below evaluates S_p about log2(1 / resolution) times
+  checkPart(part);
   auto separation = [&](double s) {
     std::vector<double> vs(v);
     for (double& x : vs) x *= s;
-    return protectiveSeparation(part, failsafeStop(q, vs, limits), radius_bounds, params);
+    return separationOf(part, failsafeStop(q, vs, limits), radius_bounds, params);
   };
   if (!(distance >= separation(0.0))) return 0.0;  // (NaN: stop)
   if (separation(1.0) <= distance) return 1.0;

@@ -21,7 +21,6 @@ largest excess per joint and fails naming the worst stop.
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 
@@ -29,6 +28,7 @@ import numpy as np
 import pytest
 import yaml
 
+from moverl_gym.paths import workspace_binary
 from moverl_sim.core import Simulator
 from moverl_sim.robot_config import load_robot_config
 from moverl_sim.settings import sim_settings
@@ -43,15 +43,7 @@ Z_R = 0.01  # m: the position uncertainty the dynamic motors need (measured: 8.0
 
 
 def failsafe_binary() -> str:
-    candidates = [Path(p) / "lib" / "moverl_shield" / "failsafe_stop" for p in
-                  os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep) if p]  # fmt: skip
-    candidates.append(REPO / "devel" / "lib" / "moverl_shield" / "failsafe_stop")
-    for c in candidates:
-        if c.is_file() and os.access(c, os.X_OK):
-            return str(c)
-    raise FileNotFoundError(
-        "failsafe_stop not built (./catkin_ws_setup.sh); looked in " + ", ".join(map(str, candidates))
-    )
+    return workspace_binary("moverl_shield", "failsafe_stop")
 
 
 class Model:

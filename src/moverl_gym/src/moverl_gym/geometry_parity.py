@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -46,21 +45,12 @@ class GeometryParityError(RuntimeError):
 
 def scene_geometry_binary() -> str:
     """Path of the scene_geometry executable of the catkin workspace (devel or install space)."""
-    from .paths import repo_root
+    from .paths import workspace_binary
 
-    candidates = [
-        Path(p) / "lib" / "moverl_planning_scene" / "scene_geometry"
-        for p in os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep)
-        if p
-    ]
-    candidates.append(repo_root() / "devel" / "lib" / "moverl_planning_scene" / "scene_geometry")
-    for c in candidates:
-        if c.is_file() and os.access(c, os.X_OK):
-            return str(c)
-    raise GeometryParityError(
-        "scene_geometry not found (build the workspace: ./catkin_ws_setup.sh); looked in "
-        + ", ".join(str(c) for c in candidates)
-    )
+    try:
+        return workspace_binary("moverl_planning_scene", "scene_geometry")
+    except FileNotFoundError as exc:
+        raise GeometryParityError(str(exc)) from None
 
 
 def urdf_movable_joints(urdf_path) -> list[str]:

@@ -18,6 +18,21 @@ def repo_root() -> Path:
     return Path(__file__).resolve().parents[4]
 
 
+def workspace_binary(package: str, name: str) -> str:
+    """Path of a C++ executable of the catkin workspace (its devel or install space, then this checkout's devel/);
+    FileNotFoundError naming where it looked when it is not built."""
+    candidates = [
+        Path(p) / "lib" / package / name for p in os.environ.get("CMAKE_PREFIX_PATH", "").split(os.pathsep) if p
+    ]
+    candidates.append(repo_root() / "devel" / "lib" / package / name)
+    for c in candidates:
+        if c.is_file() and os.access(c, os.X_OK):
+            return str(c)
+    raise FileNotFoundError(
+        f"{name} not found (build the workspace: ./catkin_ws_setup.sh); looked in " + ", ".join(map(str, candidates))
+    )
+
+
 def config_file(name: str) -> Path:
     return repo_root() / "config" / name
 

@@ -494,3 +494,12 @@ def test_tracked_people_need_ssm_and_the_simulators_tracker():
     assert params["/planning_scene/octomap/ssm/tracking/use"] is True, r.stdout[-3000:]
     _, r = roslaunch("obstacles:=sensed")
     assert yaml.safe_load(r.stdout)["/planning_scene/octomap/ssm/tracking/use"] is False  # the YAML's
+
+
+def test_tracker_fault_reaches_the_simulators_tracker():
+    """tracker_fault:= sets the simulator's tracker/fault; empty keeps config/sim.yaml's (none)."""
+    _, r = roslaunch("obstacle_poses:=tracker", "tracker_fault:=frozen")
+    assert r.returncode == 0, r.stderr
+    assert yaml.safe_load(r.stdout)["/sim/tracker/fault"] == "frozen"
+    _, r = roslaunch("obstacle_poses:=tracker")
+    assert yaml.safe_load(r.stdout)["/sim/tracker/fault"] == "none"

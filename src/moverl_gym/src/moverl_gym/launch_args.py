@@ -82,7 +82,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "safety": ("", "separation", "ssm"),  # moverl_planning_scene/src/sensed_margin.cpp: safetyName, parseSafety
     # ("": config/planning_scene.yaml's octomap/safety)
     "people": ("", "unmonitored", "tracked"),  # launch/planning_scene.launch: octomap/ssm/tracking/use
-    "tracker_fault": ("none", "frozen", "offset"),  # moverl_sim.tracker.FAULTS
+    "tracker_fault": ("", "none", "frozen", "offset"),  # moverl_sim.tracker.FAULTS ("": config/sim.yaml's)
     "obstacle_poses": ("world_file", "tracker"),  # the env (RosBackend); moverl.launch maps tracker onto sim.launch's
 }
 #: Arguments whose values are not a closed set -> what they take (each is checked: see check()).

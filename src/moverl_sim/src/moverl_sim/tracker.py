@@ -56,8 +56,8 @@ class TrackerOptions:
     dropout: float  # long-run fraction of lost measurements, in [0, 1)
     dropout_burst: float  # mean length of a run of lost measurements (measurements, >= 1)
     seed: int  # of the noise and the losses
-    fault: str = "none"  # FAULTS
-    fault_offset: float = 0.0  # m along y (fault offset)
+    fault: str  # FAULTS
+    fault_offset: float  # m along y (fault offset)
 
     @classmethod
     def from_dict(cls, values: dict, where: str = "tracker") -> "TrackerOptions":

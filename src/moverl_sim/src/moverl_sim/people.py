@@ -19,11 +19,12 @@ frames up in its own frame either way. A body is listed as tracked while any of 
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from typing import Tuple
 
-from .world import WorldFileError
+from .world import _fail
 
 __all__ = ["FRAMES", "Person", "PersonPart", "parse_people", "part_frames", "tracked_bodies"]
 
@@ -65,10 +66,6 @@ class PersonPart:
 class Person:
     body: str
     parts: Tuple[PersonPart, ...]
-
-
-def _fail(source, key, msg):
-    raise WorldFileError("%s: '%s': %s" % (source, key, msg))
 
 
 def parse_people(raw, objects, source):
@@ -119,14 +116,9 @@ def parse_people(raw, objects, source):
                     source, key + ".object", "%r is not observed: the tracker measures observed objects only" % obj.id
                 )
             at = spec.get("at", [0.0, 0.0, 0.0])
-            if (
-                not isinstance(at, (list, tuple))
-                or len(at) != 3
-                or any(
-                    isinstance(v, bool) or not isinstance(v, (int, float)) or v != v or abs(v) == float("inf")
-                    for v in at
-                )
-            ):
+            numbers = isinstance(at, (list, tuple)) and len(at) == 3
+            numbers = numbers and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in at)
+            if not (numbers and all(math.isfinite(v) for v in at)):
                 _fail(source, key + ".at", "expected 3 finite numbers (m, the object's frame), got %r" % (at,))
             parts.append(PersonPart(frame=frame, object=obj.id, at=tuple(float(v) for v in at)))
         people.append(Person(body=body, parts=tuple(parts)))

@@ -256,10 +256,10 @@ def test_a_collada_visual_is_simplified_and_one_it_cannot_read_is_left_to_pybull
     assert (v1.min(axis=0) >= v0.min(axis=0) - 0.003).all() and (v1.max(axis=0) <= v0.max(axis=0) + 0.003).all()
 
 
-def test_simulator_refuses_a_visual_mesh_it_cannot_simplify(tmp_path):
+def test_simulator_refuses_a_visual_mesh_it_cannot_simplify(tmp_path, monkeypatch):
     """robot_visuals simplified with a broken visual mesh: a ValueError naming the mesh (the node's clear error), and
-    no scratch folder left behind."""
-    import glob
+    no scratch folder left behind. The scratch folders go to a temp dir of this test's own: the suite's parallel
+    workers make theirs in the shared one at the same time."""
     import tempfile
 
     from moverl_sim.core import Simulator
@@ -270,7 +270,9 @@ def test_simulator_refuses_a_visual_mesh_it_cannot_simplify(tmp_path):
     urdf.write_text(
         '<robot name="r"><link name="a"><visual><geometry><mesh filename="bad.obj"/></geometry></visual></link></robot>'
     )
-    before = set(glob.glob(os.path.join(tempfile.gettempdir(), "moverl_robot_*")))
+    scratch_root = tmp_path / "tmp"
+    scratch_root.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch_root))
     with pytest.raises(ValueError, match="bad.obj cannot be simplified"):
         Simulator(str(urdf), [], "a", None, None, **{**sim_settings(), "robot_visuals": "simplified"})
-    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "moverl_robot_*"))) == before
+    assert list(scratch_root.iterdir()) == []

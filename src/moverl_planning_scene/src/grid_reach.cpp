@@ -12,55 +12,36 @@ namespace {
 
 constexpr int kBlockShift = 2;  // blocks of 4^3 cells (OccupancyMap::kBlockBits)
 
-/// out |= in shifted by `by` cells (toward higher cell ids when by > 0). Bits shifted past a row's (plane's) end land
-/// in cells next to the grid's edge, whose steps the edge bounds anyway (steps()).
-void orShifted(const std::vector<std::uint64_t>& in, std::int64_t by, std::vector<std::uint64_t>* out) {
-  const auto n = static_cast<std::int64_t>(in.size());
-  const std::int64_t q = std::llabs(by) >> 6;
-  const int r = static_cast<int>(std::llabs(by) & 63);
-  std::vector<std::uint64_t>& o = *out;
-  if (by > 0) {
-    for (std::int64_t w = q; w < n; ++w) {
-      std::uint64_t v = in[w - q] << r;
-      if (r != 0 && w - q - 1 >= 0) v |= in[w - q - 1] >> (64 - r);
-      o[w] |= v;
-    }
-  } else {
-    for (std::int64_t w = 0; w + q < n; ++w) {
-      std::uint64_t v = in[w + q] >> r;
-      if (r != 0 && w + q + 1 < n) v |= in[w + q + 1] << (64 - r);
-      o[w] |= v;
-    }
-  }
+/// The 26 neighbours and the set itself: one cell along z, then y, then x (separable); the result in *a.
+void dilateOnce(const std::int64_t* size, const std::vector<std::uint64_t>& in, std::vector<std::uint64_t>* a,
+                std::vector<std::uint64_t>* b) {
+  dilateBits(in, 1, b);
+  dilateBits(*b, size[2], a);
+  dilateBits(*a, size[1] * size[2], b);
+  a->swap(*b);
 }
 
-/// The 26 neighbours and the set itself: one cell along z, then y, then x (separable).
-void dilateOnce(const std::int64_t* size, std::vector<std::uint64_t>* set, std::vector<std::uint64_t>* tmp) {
-  const std::int64_t strides[3] = {1, size[2], size[1] * size[2]};
-  for (std::int64_t stride : strides) {
-    tmp->assign(set->begin(), set->end());
-    orShifted(*set, stride, tmp);
-    orShifted(*set, -stride, tmp);
-    set->swap(*tmp);
-  }
-}
-
-/// The same on a grid of bytes (the blocks), x-major, z fastest.
+/// The same on a grid of bytes (the blocks), x-major, z fastest: along each axis a pass over contiguous runs.
 void dilateBlocksOnce(const std::int64_t* n, std::vector<std::uint8_t>* set, std::vector<std::uint8_t>* tmp) {
+  tmp->resize(set->size());
   for (int axis = 2; axis >= 0; --axis) {
-    tmp->assign(set->size(), 0);
-    std::int64_t at[3];
-    for (at[0] = 0; at[0] < n[0]; ++at[0]) {
-      for (at[1] = 0; at[1] < n[1]; ++at[1]) {
-        for (at[2] = 0; at[2] < n[2]; ++at[2]) {
-          const std::int64_t b = (at[0] * n[1] + at[1]) * n[2] + at[2];
-          if ((*set)[b] == 0) continue;
-          (*tmp)[b] = 1;
-          std::int64_t q[3] = {at[0], at[1], at[2]};
-          for (int d = -1; d <= 1; d += 2) {
-            q[axis] = at[axis] + d;
-            if (q[axis] >= 0 && q[axis] < n[axis]) (*tmp)[(q[0] * n[1] + q[1]) * n[2] + q[2]] = 1;
-          }
+    const std::uint8_t* in = set->data();
+    std::uint8_t* out = tmp->data();
+    // Cell (outer, c, inner) along the axis: outer over the axes before it, inner (contiguous) over the ones after.
+    std::int64_t outer = 1, inner = 1;
+    for (int a = 0; a < axis; ++a) outer *= n[a];
+    for (int a = axis + 1; a < 3; ++a) inner *= n[a];
+    const std::int64_t len = n[axis];
+    for (std::int64_t o = 0; o < outer; ++o) {
+      for (std::int64_t c = 0; c < len; ++c) {
+        const std::int64_t row = (o * len + c) * inner;
+        const std::uint8_t* lo = c > 0 ? in + row - inner : nullptr;
+        const std::uint8_t* hi = c + 1 < len ? in + row + inner : nullptr;
+        for (std::int64_t i = 0; i < inner; ++i) {
+          std::uint8_t v = in[row + i];
+          if (lo != nullptr) v |= lo[i];
+          if (hi != nullptr) v |= hi[i];
+          out[row + i] = v;
         }
       }
     }
@@ -69,6 +50,31 @@ void dilateBlocksOnce(const std::int64_t* n, std::vector<std::uint8_t>* set, std
 }
 
 }  // namespace
+
+void dilateBits(const std::vector<std::uint64_t>& in, std::int64_t stride, std::vector<std::uint64_t>* out) {
+  const auto n = static_cast<std::int64_t>(in.size());
+  const std::int64_t q = stride >> 6;
+  const int r = static_cast<int>(stride & 63);
+  out->resize(in.size());
+  std::uint64_t* o = out->data();
+  const std::uint64_t* a = in.data();
+  auto word = [&](std::int64_t w) {  // (every bound checked: the words next to the set's ends)
+    std::uint64_t v = a[w];
+    if (w - q >= 0) v |= r == 0 ? a[w - q] : (a[w - q] << r) | (w - q - 1 >= 0 ? a[w - q - 1] >> (64 - r) : 0);
+    if (w + q < n) v |= r == 0 ? a[w + q] : (a[w + q] >> r) | (w + q + 1 < n ? a[w + q + 1] << (64 - r) : 0);
+    return v;
+  };
+  // The words whose neighbours all lie in the set, without a branch (vectorised), then the ends.
+  const std::int64_t first = std::min(n, q + 1), last = std::max(first, n - q - 1);
+  if (r == 0) {
+    for (std::int64_t w = first; w < last; ++w) o[w] = a[w] | a[w - q] | a[w + q];
+  } else {
+    for (std::int64_t w = first; w < last; ++w)
+      o[w] = a[w] | (a[w - q] << r) | (a[w - q - 1] >> (64 - r)) | (a[w + q] >> r) | (a[w + q + 1] << (64 - r));
+  }
+  for (std::int64_t w = 0; w < first; ++w) o[w] = word(w);
+  for (std::int64_t w = last; w < n; ++w) o[w] = word(w);
+}
 
 void GridReach::build(const std::int64_t size[3], const std::vector<std::uint64_t>& marked,
                       const std::vector<std::uint64_t>& blocked, int cells,
@@ -80,17 +86,16 @@ void GridReach::build(const std::int64_t size[3], const std::vector<std::uint64_
   cells_ = std::max(0, cells);
   levels_ = std::max(0, levels);
   layers_.resize(static_cast<std::size_t>(cells_));
-  std::vector<std::uint64_t> prev = marked;
+  const std::vector<std::uint64_t>* prev = &marked;
   for (int s = 0; s < cells_; ++s) {
-    scratch_a_ = prev;
-    dilateOnce(size_, &scratch_a_, &scratch_b_);
+    dilateOnce(size_, *prev, &scratch_a_, &scratch_b_);
     std::vector<std::uint64_t>& layer = layers_[static_cast<std::size_t>(s)];
-    layer.resize(prev.size());
-    for (std::size_t w = 0; w < prev.size(); ++w) {
+    layer.resize(prev->size());
+    for (std::size_t w = 0; w < layer.size(); ++w) {
       const std::uint64_t stop = w < blocked.size() ? blocked[w] : 0;
-      layer[w] = prev[w] | (scratch_a_[w] & ~stop);
+      layer[w] = (*prev)[w] | (scratch_a_[w] & ~stop);
     }
-    prev = layer;
+    prev = &layer;
   }
   // The blocks: the ring (Chebyshev, in blocks) of the nearest marked one, grown one ring at a time.
   block_rings_.assign(block_marked.size(), static_cast<std::uint8_t>(std::min(levels_ + 1, 255)));

@@ -222,23 +222,11 @@ void OccupancyMap::watchAll(int L) {
   // occupied_ dilated by L along z, then y, then x, each a shift of the whole set (a row's, a plane's stride). A shift
   // carries bits across a row's (plane's) end only into cells within L of the grid's edge, which are set anyway.
   const std::size_t n = occupied_.size();
-  // out = in | in shifted by +-stride x r cells: one pass of a doubling dilation. When in is the set dilated by d
-  // along the axis (its cells within d of a set one) and r <= 2 d + 1, out is the set dilated by d + r: in's bands
-  // [-d, d] and [r - d, r + d] (and their mirror) leave no gap.
+  // One doubling pass: when *set is the set dilated by d along the axis (its cells within d of a set one) and
+  // r <= 2 d + 1, the set or'ed with itself shifted by +-r cells is the set dilated by d + r (the bands [-d, d] and
+  // [r - d, r + d], and their mirror, leave no gap).
   auto dilate = [&](std::vector<std::uint64_t>* set, std::vector<std::uint64_t>* tmp, std::int64_t stride, int r) {
-    const std::vector<std::uint64_t>& in = *set;
-    std::vector<std::uint64_t>& out = *tmp;
-    out.resize(n);
-    const std::int64_t bits = stride * r, words = bits >> 6;
-    const int o = static_cast<int>(bits & 63);
-    const auto nn = static_cast<std::int64_t>(n);
-    for (std::int64_t w = 0; w < nn; ++w) {
-      std::uint64_t v = in[w];
-      const std::int64_t lo = w - words, hi = w + words;
-      if (lo >= 0) v |= o == 0 ? in[lo] : (in[lo] << o) | (lo >= 1 ? in[lo - 1] >> (64 - o) : 0);
-      if (hi < nn) v |= o == 0 ? in[hi] : (in[hi] >> o) | (hi + 1 < nn ? in[hi + 1] << (64 - o) : 0);
-      out[w] = v;
-    }
+    dilateBits(*set, stride * r, tmp);
     set->swap(*tmp);
   };
   // Chebyshev dilation by L along one axis as doubling passes (radii 1, 2, 4, ..., the last what is left): about

@@ -36,7 +36,9 @@
 #include <cstring>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <sstream>
+#include <string>
 
 #include "moverl_planning_scene/cloud_integrator.h"
 #include "moverl_planning_scene/occupancy_map.h"
@@ -356,6 +358,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<mps::OccupancyMap> map;
     std::unique_ptr<mps::CloudIntegrator> integrator;
     std::vector<double> t_points, t_self, t_static, t_update, t_known_free, t_apply, t_close, t_total;
+    std::map<std::string, std::vector<double>> camera_update, camera_close;  ///< per camera id, after the fill
     std::size_t hidden = 0, stale = 0, batches = 0;
     std::vector<double> t_steady;  ///< total, the clouds after each camera's fill views
     std::size_t free_cells = 0, changed = 0, fallbacks = 0, freed_inside = 0, reused = 0;
@@ -494,7 +497,11 @@ int main(int argc, char** argv) {
       r.t_apply.push_back(apply);
       r.t_close.push_back(closing);
       r.t_total.push_back(t.total() + apply + closing);
-      if (view_index >= fill_views) r.t_steady.push_back(t.total() + apply + closing);
+      if (view_index >= fill_views) {
+        r.t_steady.push_back(t.total() + apply + closing);
+        r.camera_update[c.camera].push_back(t.update);
+        r.camera_close[c.camera].push_back(closing);
+      }
       r.free_cells += u.stats.free_cells;
       r.changed += u.stats.changed_cells;
       r.reused += u.stats.reused_blocks;
@@ -537,6 +544,10 @@ int main(int argc, char** argv) {
     report("total", r.t_total);
     if (r.integration == mps::Integration::kProjective) {
       report("total after the map's fill", r.t_steady);
+      for (const auto& [camera, update] : r.camera_update) {
+        report(("  " + camera + ": update").c_str(), update);
+        report(("  " + camera + ": batch close").c_str(), r.camera_close[camera]);
+      }
       std::printf(
           "    (the fill: each camera's first %d views, which see free again the cells the ones before saw free, "
           "until they reach clamp_min)\n",

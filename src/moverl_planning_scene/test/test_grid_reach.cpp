@@ -153,3 +153,31 @@ TEST(GridReach, TheBlocksBoundFarCells) {
   reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), 4, g.blockMarks(), 2);
   EXPECT_EQ(reach.steps(30, 30, 30), 9);  // 2 rings looked at, both clear
 }
+
+TEST(GridReach, DilateBitsIsTheSetOrItsShiftsByTheStride) {
+  // Random bit sets of lengths around word multiples, shifted by strides below, at and above a word (and farther than
+  // the set is long): bit k of the result is bit k, k - stride or k + stride of the input.
+  std::mt19937 rng(7);
+  for (std::int64_t bits : {1, 63, 64, 65, 500, 4096, 10007}) {
+    for (std::int64_t stride : {1, 5, 63, 64, 65, 128, 253, 700, 20000}) {
+      const std::size_t words = static_cast<std::size_t>((bits + 63) / 64);
+      std::vector<std::uint64_t> in(words, 0), out;
+      std::vector<std::uint8_t> set(static_cast<std::size_t>(words * 64), 0);
+      for (std::int64_t k = 0; k < bits; ++k) {
+        if (std::uniform_int_distribution<int>(0, 9)(rng) == 0) {
+          set[k] = 1;
+          in[k >> 6] |= std::uint64_t{1} << (k & 63);
+        }
+      }
+      mps::dilateBits(in, stride, &out);
+      ASSERT_EQ(out.size(), in.size());
+      const auto n = static_cast<std::int64_t>(words * 64);
+      for (std::int64_t k = 0; k < n; ++k) {
+        const bool want =
+            set[k] != 0 || (k - stride >= 0 && set[k - stride] != 0) || (k + stride < n && set[k + stride] != 0);
+        ASSERT_EQ(((out[k >> 6] >> (k & 63)) & 1u) != 0, want)
+            << "bit " << k << " of " << bits << ", stride " << stride;
+      }
+    }
+  }
+}

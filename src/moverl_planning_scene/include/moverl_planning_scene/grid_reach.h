@@ -17,6 +17,12 @@
 
 namespace moverl_planning_scene {
 
+/// \brief out = in | in shifted by +-stride bits (toward higher and lower bit ids), in one pass: a bit set of grid
+///        cells (cell k is bit k & 63 of word k >> 6) grown by one step along the axis whose neighbours lie `stride`
+///        cells apart (`stride` x r: r steps). Bits shifted past a row's (plane's) end land in the cells at the grid's
+///        other edge: the callers treat the cells next to the edge as marked anyway.
+void dilateBits(const std::vector<std::uint64_t>& in, std::int64_t stride, std::vector<std::uint64_t>* out);
+
 class GridReach {
  public:
   /// \brief Build the layers.

@@ -10,8 +10,6 @@
 namespace moverl_planning_scene {
 namespace {
 
-constexpr int kBlockShift = 2;  // blocks of 4^3 cells (OccupancyMap::kBlockBits)
-
 /// The 26 neighbours and the set itself: one cell along z, then y, then x (separable); the result in *a.
 void dilateOnce(const std::int64_t* size, const std::vector<std::uint64_t>& in, std::vector<std::uint64_t>* a,
                 std::vector<std::uint64_t>* b) {
@@ -19,34 +17,6 @@ void dilateOnce(const std::int64_t* size, const std::vector<std::uint64_t>& in, 
   dilateBits(*b, size[2], a);
   dilateBits(*a, size[1] * size[2], b);
   a->swap(*b);
-}
-
-/// The same on a grid of bytes (the blocks), x-major, z fastest: along each axis a pass over contiguous runs.
-void dilateBlocksOnce(const std::int64_t* n, std::vector<std::uint8_t>* set, std::vector<std::uint8_t>* tmp) {
-  tmp->resize(set->size());
-  for (int axis = 2; axis >= 0; --axis) {
-    const std::uint8_t* in = set->data();
-    std::uint8_t* out = tmp->data();
-    // Cell (outer, c, inner) along the axis: outer over the axes before it, inner (contiguous) over the ones after.
-    std::int64_t outer = 1, inner = 1;
-    for (int a = 0; a < axis; ++a) outer *= n[a];
-    for (int a = axis + 1; a < 3; ++a) inner *= n[a];
-    const std::int64_t len = n[axis];
-    for (std::int64_t o = 0; o < outer; ++o) {
-      for (std::int64_t c = 0; c < len; ++c) {
-        const std::int64_t row = (o * len + c) * inner;
-        const std::uint8_t* lo = c > 0 ? in + row - inner : nullptr;
-        const std::uint8_t* hi = c + 1 < len ? in + row + inner : nullptr;
-        for (std::int64_t i = 0; i < inner; ++i) {
-          std::uint8_t v = in[row + i];
-          if (lo != nullptr) v |= lo[i];
-          if (hi != nullptr) v |= hi[i];
-          out[row + i] = v;
-        }
-      }
-    }
-    set->swap(*tmp);
-  }
 }
 
 }  // namespace
@@ -77,14 +47,10 @@ void dilateBits(const std::vector<std::uint64_t>& in, std::int64_t stride, std::
 }
 
 void GridReach::build(const std::int64_t size[3], const std::vector<std::uint64_t>& marked,
-                      const std::vector<std::uint64_t>& blocked, int cells,
-                      const std::vector<std::uint8_t>& block_marked, int levels) {
-  for (int a = 0; a < 3; ++a) {
-    size_[a] = size[a];
-    blocks_[a] = size[a] > 0 ? ((size[a] - 1) >> kBlockShift) + 1 : 0;
-  }
+                      const std::vector<std::uint64_t>& blocked, int cells, int far) {
+  for (int a = 0; a < 3; ++a) size_[a] = size[a];
   cells_ = std::max(0, cells);
-  levels_ = std::max(0, levels);
+  far_ = std::max(far, cells_ + 1);
   layers_.resize(static_cast<std::size_t>(cells_));
   const std::vector<std::uint64_t>* prev = &marked;
   for (int s = 0; s < cells_; ++s) {
@@ -97,17 +63,18 @@ void GridReach::build(const std::int64_t size[3], const std::vector<std::uint64_
     }
     prev = &layer;
   }
-  // The blocks: the ring (Chebyshev, in blocks) of the nearest marked one, grown one ring at a time.
-  block_rings_.assign(block_marked.size(), static_cast<std::uint8_t>(std::min(levels_ + 1, 255)));
-  if (levels_ == 0) return;
-  block_scratch_a_.assign(block_marked.size(), 0);
-  for (std::size_t b = 0; b < block_marked.size(); ++b) {
-    if (block_marked[b] != 0) block_scratch_a_[b] = 1, block_rings_[b] = 0;
-  }
-  for (int g = 1; g <= std::min(levels_, 254); ++g) {
-    dilateBlocksOnce(blocks_, &block_scratch_a_, &block_scratch_b_);
-    for (std::size_t b = 0; b < block_rings_.size(); ++b) {
-      if (block_scratch_a_[b] != 0 && block_rings_[b] > g) block_rings_[b] = static_cast<std::uint8_t>(g);
+  near_.clear();
+  if (far_ <= cells_ + 1) return;
+  // The marked cells dilated by far - 1 along each axis, in doubling passes: a set dilated by d, or'ed with itself
+  // shifted by +-r (r <= d + 1), is the set dilated by d + r.
+  near_ = marked;
+  const std::int64_t strides[3] = {1, size_[2], size_[1] * size_[2]};
+  for (std::int64_t stride : strides) {
+    for (int done = 0; done < far_ - 1;) {
+      const int r = std::min(done + 1, far_ - 1 - done);
+      dilateBits(near_, stride * r, &scratch_a_);
+      near_.swap(scratch_a_);
+      done += r;
     }
   }
 }
@@ -123,14 +90,9 @@ int GridReach::steps(std::int64_t i, std::int64_t j, std::int64_t k) const {
   }
   if (e <= cells_) return e;
   int bound = cells_ + 1;
-  if (levels_ > 0) {
-    const std::int64_t bi = i >> kBlockShift, bj = j >> kBlockShift, bk = k >> kBlockShift;
-    const int ring = block_rings_[static_cast<std::size_t>((bi * blocks_[1] + bj) * blocks_[2] + bk)];
-    // No marked block within g rings (g >= 1: ring 1 holds the cell's own block's neighbours and itself) puts the
-    // nearest marked cell at least g x 4 + 1 steps away.
-    const int clear = std::max(1, ring) - 1;
-    bound = std::max(bound, clear * (1 << kBlockShift) + 1);
-  }
+  // Farther than far - 1 (Chebyshev) from every marked cell: at least far steps. (A bit carried across a row's end by
+  // the dilation's shifts lies within far - 1 of the grid's edge, where e bounds anyway.)
+  if (!near_.empty() && ((near_[static_cast<std::size_t>(c >> 6)] >> (c & 63)) & 1u) == 0) bound = far_;
   return std::min(bound, e);
 }
 

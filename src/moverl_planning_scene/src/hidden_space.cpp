@@ -33,7 +33,7 @@ constexpr int kBlockShift = OccupancyMap::kBlockBits, kSubShift = OccupancyMap::
 constexpr std::uint64_t kAllCells = ~std::uint64_t{0};
 /// Closes between two full recomputes of the watched blocks (between them the watch only grows, a superset).
 constexpr int kFullWatchEvery = 32;
-/// The steps to the nearest possibly-occupied cell are exact this far (cells: GridReach's layers); beyond, blocks.
+/// The steps to the nearest possibly-occupied cell are exact this far (cells: GridReach's layers); beyond, a bound.
 constexpr int kCellSearch = 4;
 /// watchMask's widest watch (cells): its window of rows is 4 + 2 L cells along each axis, up to 64.
 constexpr int kMaskCells = 30;
@@ -381,22 +381,9 @@ void OccupancyMap::cellsIn(const Eigen::AlignedBox3d& box, std::vector<Eigen::Ve
 }
 
 void OccupancyMap::buildReach(int needed) {
-  // Exactly up to kCellSearch steps (or needed, if fewer: beyond needed a cell is out of reach anyway), then the
-  // blocks far enough for a bound past needed.
-  const int cells = std::min(needed, kCellSearch);
-  const int levels = needed > kCellSearch ? needed / (1 << kBlockShift) + 2 : 0;
-  const std::int64_t X = blocks_[0], Y = blocks_[1], Z = blocks_[2];
-  reach_blocks_.assign(static_cast<std::size_t>(X * Y * Z), 0);
-  if (levels > 0) {
-    for (std::int64_t x = 0; x < X; ++x) {
-      for (std::int64_t y = 0; y < Y; ++y) {
-        for (std::int64_t z = 0; z < Z; ++z) {
-          reach_blocks_[static_cast<std::size_t>((x * Y + y) * Z + z)] = block_count_[blockIndex(x, y, z)] != 0;
-        }
-      }
-    }
-  }
-  reach_.build(size_, occupied_, solid_, cells, reach_blocks_, levels);
+  // Exactly up to kCellSearch steps (or needed, if fewer), and a cell farther than needed - 1 (Chebyshev) from every
+  // possibly-occupied one is at least needed steps away: out of reach until now, which is all closeBatch asks.
+  reach_.build(size_, occupied_, solid_, std::min(needed, kCellSearch), needed);
 }
 
 void OccupancyMap::refreshFree(std::int64_t c) {

@@ -2,7 +2,7 @@
  * \file test_grid_reach.cpp
  * \brief GridReach (the hidden-space rule's distance) against a plain breadth-first search, without a roscore: random
  *        grids whose sizes are not multiples of a block, marked and blocked cells at random; exact up to the layers,
- *        a lower bound beyond them.
+ *        a lower bound beyond them (far: the cells that far from every marked one).
  */
 #include <gtest/gtest.h>
 
@@ -27,18 +27,6 @@ struct Grid {
     std::vector<std::uint64_t> out(static_cast<std::size_t>((cells() + 63) / 64), 0);
     for (std::int64_t c = 0; c < cells(); ++c) {
       if (v[c] != 0) out[c >> 6] |= std::uint64_t{1} << (c & 63);
-    }
-    return out;
-  }
-  std::vector<std::uint8_t> blockMarks() const {
-    const std::int64_t b[3] = {(size[0] + 3) / 4, (size[1] + 3) / 4, (size[2] + 3) / 4};
-    std::vector<std::uint8_t> out(static_cast<std::size_t>(b[0] * b[1] * b[2]), 0);
-    for (std::int64_t i = 0; i < size[0]; ++i) {
-      for (std::int64_t j = 0; j < size[1]; ++j) {
-        for (std::int64_t k = 0; k < size[2]; ++k) {
-          if (marked[id(i, j, k)] != 0) out[((i / 4) * b[1] + j / 4) * b[2] + k / 4] = 1;
-        }
-      }
     }
     return out;
   }
@@ -101,14 +89,14 @@ TEST(GridReach, ExactUpToItsLayersAndALowerBoundBeyond) {
   std::mt19937 rng(52);
   int compared = 0, exact = 0, beyond = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    // Sparse marks (long ways, the blocks' bound counts), dense ones, and walls of blocked cells to go around.
+    // Sparse marks (long ways, the far bound counts), dense ones, and walls of blocked cells to go around.
     const double p_marked = trial % 3 == 0 ? 0.0005 : trial % 3 == 1 ? 0.01 : 0.05;
     const Grid g = randomGrid(&rng, p_marked, trial % 2 == 0 ? 0.0 : 0.3);
     const std::vector<int> want = reference(g);
     for (int cells : {1, 2, 4}) {
-      for (int levels : {0, 3}) {
+      for (int far : {0, 7}) {
         mps::GridReach reach;
-        reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), cells, g.blockMarks(), levels);
+        reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), cells, far);
         for (std::int64_t i = 0; i < g.size[0]; ++i) {
           for (std::int64_t j = 0; j < g.size[1]; ++j) {
             for (std::int64_t k = 0; k < g.size[2]; ++k) {
@@ -124,7 +112,7 @@ TEST(GridReach, ExactUpToItsLayersAndALowerBoundBeyond) {
                 ++beyond;
                 ASSERT_GT(got, cells) << "trial " << trial;
                 ASSERT_LE(got, w) << "not a lower bound: cell " << i << " " << j << " " << k << ", trial " << trial
-                                  << ", levels " << levels;
+                                  << ", far " << far;
               }
             }
           }
@@ -138,20 +126,22 @@ TEST(GridReach, ExactUpToItsLayersAndALowerBoundBeyond) {
   EXPECT_GT(compared, exact);
 }
 
-TEST(GridReach, TheBlocksBoundFarCells) {
-  // One marked cell in a 60^3 grid, a cell 20 cells from it along x and 30 from every edge: its block is 5 blocks from
-  // the marked one's (4 clear rings), so it is at least 4 x 4 + 1 = 17 steps away, more than the 4 exact layers show.
+TEST(GridReach, ACellFarFromEveryMarkedOneIsAtLeastFarAway) {
+  // One marked cell in a 60^3 grid: a cell 20 cells from it along x (and 30 from every edge) is at least far = 17
+  // steps away, more than the 4 exact layers show; one 16 cells away only beyond them (5); one 17 away, 17.
   Grid g{{60, 60, 60}, {}, {}};
   g.marked.assign(static_cast<std::size_t>(g.cells()), 0);
   g.blocked.assign(static_cast<std::size_t>(g.cells()), 0);
   g.marked[g.id(10, 30, 30)] = 1;
   mps::GridReach reach;
-  reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), 4, g.blockMarks(), 8);
+  reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), 4, 17);
   EXPECT_EQ(reach.steps(13, 30, 30), 3);
   EXPECT_EQ(reach.steps(30, 30, 30), 17);
+  EXPECT_EQ(reach.steps(26, 30, 30), 5);
+  EXPECT_EQ(reach.steps(27, 30, 30), 17);
   EXPECT_EQ(reach.steps(30, 30, 59), 1);  // next to the outside
-  reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), 4, g.blockMarks(), 2);
-  EXPECT_EQ(reach.steps(30, 30, 30), 9);  // 2 rings looked at, both clear
+  reach.build(g.size, g.bits(g.marked), g.bits(g.blocked), 4, 2);
+  EXPECT_EQ(reach.steps(30, 30, 30), 5);  // no far bound: beyond the layers
 }
 
 TEST(GridReach, DilateBitsIsTheSetOrItsShiftsByTheStride) {

@@ -440,7 +440,7 @@ class OccupancyMap {
   std::int64_t blockFirstCell(const std::int64_t* block_at) const;
   /// The steps from the cells to the nearest possibly-occupied cell (occupied_) or the grid's outside, around the
   ///        solid cells (a person goes around a table, not through it): reach_, exact up to needed (kCellSearch at
-  ///        most), a lower bound beyond (GridReach).
+  ///        most), and at least needed for the cells that far from every one (GridReach's far).
   void buildReach(int needed);
   /// The watched cells: the free cells within watch_cells_ (Chebyshev, in cells) of a possibly-occupied cell or of the
   /// grid's edge. full: recompute every block's (else only near the blocks whose cells changed since: grown_blocks_).
@@ -558,7 +558,6 @@ class OccupancyMap {
   static constexpr int kIntervals = 8;                            ///< the batches whose intervals size the watch
   double intervals_[kIntervals] = {};                             ///< s: the last batches' intervals (0: none yet)
   GridReach reach_;                          ///< closeBatch's steps to the possibly-occupied cells (buildReach)
-  std::vector<std::uint8_t> reach_blocks_;   ///< buildReach's blocks holding a possibly-occupied cell, in x, y, z order
   std::vector<std::uint8_t> reach_scratch_;  ///< closeBatch's blocks, when a batch came later than the watch covers
   int closes_since_full_watch_ = 0;
   double batch_stamp_ = std::numeric_limits<double>::quiet_NaN();

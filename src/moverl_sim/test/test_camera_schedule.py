@@ -4,7 +4,7 @@ The sim node's lockstep ~execute is moverl_sim.lockstep.run_motion with the node
 the start of a move render, then the motion runs in pieces of CameraSchedule.piece substeps, the due cameras rendering
 after each piece, and those due at the end after the move (the node, once it published the final state). run_move
 below does exactly that on a real Simulator whose robot stands still, and reports the substeps (the simulator's own
-count) at which cameras rendered. The camera thread's choices (CameraSchedule.next_render) are tested at the end.
+count) at which cameras rendered. The camera thread's choices (CameraSchedule.next_renders) are tested at the end.
 """
 
 import math
@@ -167,26 +167,30 @@ def test_a_stopped_schedule_renders_nothing_and_runs_moves_in_one_piece():
     schedule.stop()
     assert schedule.stopped
     assert schedule.due_now(10.0) == [] and schedule.piece(10.0, 500, HZ) == 500
-    assert schedule.next_render(10.0, realtime=True) is None
+    assert schedule.next_renders(10.0, realtime=True) == []
 
 
-def test_the_camera_thread_renders_the_most_overdue_first():
-    """next_render: pending cameras first (in both modes), then (real time only) those that never rendered, then the
-    oldest render; with nothing due, next_due is the earliest due time (real time) or never (lockstep)."""
+def test_the_camera_thread_renders_every_due_camera_at_once_most_overdue_first():
+    """next_renders: pending cameras (in both modes) and (real time only) those due, together, most overdue first:
+    pending, then never rendered, then the oldest render; with nothing due, next_due is the earliest due time (real
+    time) or never (lockstep)."""
     periods = [0.5, 0.5, 0.5]
     schedule = schedule_of([0.4, 0.1, 0.7], periods)
-    assert schedule.next_render(1.0, realtime=False) is None and schedule.next_due == math.inf
-    assert schedule.next_render(1.0, realtime=True) == 1  # due since 0.6 s; camera 0 since 0.9 s; camera 2 at 1.2 s
+    assert schedule.next_renders(1.0, realtime=False) == [] and schedule.next_due == math.inf
+    assert schedule.next_renders(1.0, realtime=True) == [1, 0]  # due since 0.6 s and 0.9 s; camera 2 at 1.2 s
     schedule.rendered(1, 1.0)
-    assert schedule.next_render(1.0, realtime=True) == 0
     schedule.rendered(0, 1.0)
-    assert schedule.next_render(1.0, realtime=True) is None
+    assert schedule.next_renders(1.0, realtime=True) == []
     assert schedule.next_due == pytest.approx(1.2 - DUE_TOLERANCE, abs=1e-15)  # camera 2's
-    assert schedule.next_render(1.3, realtime=True) == 2
+    assert schedule.next_renders(1.3, realtime=True) == [2]
     schedule.last[1] = None  # never rendered: before the overdue camera 2
-    assert schedule.next_render(1.3, realtime=True) == 1
-    schedule.pending[0] = True  # pending: before a never-rendered one although it rendered last, and in lockstep too
-    assert schedule.next_render(1.3, realtime=True) == 0 and schedule.next_render(1.3, realtime=False) == 0
+    assert schedule.next_renders(1.3, realtime=True) == [1, 2]
+    schedule.pending[0] = True  # pending: before a never-rendered one although it rendered last; in lockstep only it
+    assert schedule.next_renders(1.3, realtime=True) == [0] and schedule.next_renders(1.3, realtime=False) == [0]
     schedule.rendered(0, 1.3)
-    assert schedule.next_render(1.3, realtime=False) is None  # lockstep: only pending ones
+    assert schedule.next_renders(1.3, realtime=False) == []  # lockstep: only pending ones
     assert schedule.pending == [False, False, False] and schedule.last == [1.3, None, 0.7]
+    # Cameras that rendered together stay together: at 1.5 s both 1 and 2 are due again (2 since 1.2 s).
+    schedule.rendered(1, 1.3)
+    schedule.rendered(2, 1.3)
+    assert schedule.next_renders(1.8, realtime=True) == [0, 1, 2]

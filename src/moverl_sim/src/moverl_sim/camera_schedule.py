@@ -7,8 +7,8 @@ sim node and answers its three questions:
 
 * lockstep ``~execute`` / ``~reset_robot``: which cameras are due at the current substep (``due_now``), and how many
   substeps the motion may run before the next one falls due (``piece``; moverl_sim.lockstep.run_motion runs it so);
-* the camera thread: which camera to render next, the most overdue first (``next_render``), and when none is, the sim
-  time at which one will be (``next_due``: the real-time loop wakes the thread once sim time reaches it);
+* the camera thread: which cameras to render together now, the most overdue first (``next_renders``), and when none
+  is, the sim time at which one will be (``next_due``: the real-time loop wakes the thread once sim time reaches it);
 * a render failed or the node closes: no camera renders again (``stop``).
 
 Not locked: the sim node calls it with its simulator lock held, except ``request_all`` from a subscriber callback,
@@ -70,7 +70,7 @@ class CameraSchedule:
         last (List[Optional[float]]): per camera, the sim time of its last render (None: never rendered).
         pending (List[bool]): per camera, render at once whatever the sim time (all, at the start).
         next_due (float): real time: the sim time at which the camera thread has something to render again
-            (-inf: now; set by next_render when it finds nothing due).
+            (-inf: now; set by next_renders when it finds nothing due).
     """
 
     def __init__(self, periods):
@@ -123,24 +123,26 @@ class CameraSchedule:
             return remaining
         return min(remaining, max(1, substeps_until_due(self.last, self.periods, now, physics_hz)))
 
-    def next_render(self, now: float, realtime: bool):
-        """The camera the camera thread renders next at sim time now, or None.
+    def next_renders(self, now: float, realtime: bool) -> list:
+        """The cameras the camera thread renders together at sim time now (one instant, one stamp), or [].
 
-        Pending cameras render in both modes; in real time also those whose period has passed. The most overdue goes
-        first: pending ones, then those that never rendered, then the oldest render. When none is due, next_due is
-        set: in real time to the earliest due time (less DUE_TOLERANCE), in lockstep to +inf (~execute renders
-        there).
+        Pending cameras render in both modes; in real time also those whose period has passed. They render as one
+        instant, as lockstep's due cameras do and a hardware-synchronised rig does: the planning scene integrates the
+        clouds of one instant as one batch of its hidden space, closed once (cameras rendered one after another would
+        each be a batch of their own). Listed most overdue first: pending ones, then those that never rendered, then
+        the oldest render. When none is due, next_due is set: in real time to the earliest due time (less
+        DUE_TOLERANCE), in lockstep to +inf (~execute renders there).
         """
         if self._stopped.is_set():
-            return None
+            return []
         last = self.last
         due = [i for i in range(len(self.periods)) if self.pending[i]]
         if not due and realtime:
             due = due_cameras(last, self.periods, now)
         if due:
-            return min(due, key=lambda k: (not self.pending[k], -math.inf if last[k] is None else last[k]))
+            return sorted(due, key=lambda k: (not self.pending[k], -math.inf if last[k] is None else last[k]))
         if realtime and self.periods:
             self.next_due = min(t + p for t, p in zip(last, self.periods)) - DUE_TOLERANCE
         else:
             self.next_due = math.inf
-        return None
+        return []

@@ -16,6 +16,7 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <visualization_msgs/Marker.h>
 
+#include "moverl_planning_scene/pending_clouds.h"
 #include "moverl_planning_scene/ros_param.h"
 #include "moverl_planning_scene/sensed_margin.h"
 
@@ -315,33 +316,21 @@ void OctomapMonitor::onJointState(const sensor_msgs::JointState::ConstPtr& msg) 
 void OctomapMonitor::onCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
   {
     std::lock_guard<std::mutex> lock(pending_mutex_);
-    // Lockstep: every view, in order (a step's answers are the simulation's, not the CPU's), up to queue_size per
-    // camera (a long move's backlog keeps its newest views: the map stays young). Real time: the newest view is what
-    // counts, and an older one still pending is replaced, except one of the batch being integrated (the instant of
-    // the open batch or of the cloud in flight): it is kept, with the newest behind it, so that a batch falling
-    // behind is still integrated whole and closed once (not one cloud a batch, each close costing the hidden space's
-    // watch over the longer interval).
-    auto& queue = pending_[msg->header.frame_id];
-    const bool keep_front =
-        !lockstep_ && !queue.empty() &&
-        (queue.front()->header.stamp == open_batch_ || (integrating_ && queue.front()->header.stamp == in_flight_));
-    const std::size_t depth = lockstep_ ? queue_depth_ : (keep_front ? 2 : 1);
-    std::size_t dropped = 0;  // unintegrated: their places in outstanding_ go to msg
-    for (; queue.size() >= depth; ++dropped) {
-      if (keep_front) {
-        queue.pop_back();
-      } else {
-        queue.pop_front();
-      }
-    }
+    // What a camera keeps waiting: pending_clouds.h (lockstep: every view up to queue_size; real time: the newest, and
+    // a cloud of the batch being integrated).
+    const double batch = open_batch_.isZero() ? std::numeric_limits<double>::quiet_NaN() : open_batch_.toSec();
+    const double flight = integrating_ ? in_flight_.toSec() : std::numeric_limits<double>::quiet_NaN();
+    const std::size_t dropped = admitCloud(
+        &pending_[msg->header.frame_id], msg,
+        [](const sensor_msgs::PointCloud2::ConstPtr& m) { return m->header.stamp.toSec(); }, lockstep_, queue_depth_,
+        batch, flight);
     if (dropped > 0 && lockstep_) {
       ROS_WARN_THROTTLE(5.0,
                         "planning_scene: lockstep: more than octomap/queue_size (%zu) views of '%s' waiting: "
                         "the oldest is skipped (a long move's backlog; the map keeps the newest)",
                         queue_depth_, msg->header.frame_id.c_str());
     }
-    outstanding_ += 1 - static_cast<int>(dropped);
-    queue.push_back(msg);
+    outstanding_ += 1 - static_cast<int>(dropped);  // the dropped ones' places go to msg
   }
   pending_cv_.notify_one();
 }

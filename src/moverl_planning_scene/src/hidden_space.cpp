@@ -317,17 +317,22 @@ void OccupancyMap::updateWatched(bool full) {
   std::int64_t at[3];
   if (!active) {
     for (std::int64_t b = 0; b < nb; ++b) setWatched(b, 0);
-  } else if (full || grown_blocks_.size() > kIncrementalWatch) {
-    // (the whole grid at once when many blocks changed: its bit operations cost less than as many blocks' masks)
-    watchAll(watch_cells_);
-    closes_since_full_watch_ = 0;
   } else {
-    // The blocks near a cell that changed (turned possibly occupied or free): their cells' distances changed.
-    const std::int64_t m = (watch_cells_ + (1 << kBlockShift) - 1) >> kBlockShift;
+    // The blocks near a cell that changed (turned possibly occupied or free): their cells' distances changed. Their
+    // masks one by one, or the whole grid at once (watchAll's bit operations) when that costs less: a block's mask
+    // reads a window of (4 + 2 L)^2 rows and ors 16 (2 L + 1)^2 of them; the whole grid is a few passes over its
+    // words per axis and 16 rows a block.
+    const int L = watch_cells_;
+    const std::int64_t m = (L + (1 << kBlockShift) - 1) >> kBlockShift;
+    const double per_block = std::pow(4.0 + 2.0 * L, 2) + 16.0 * std::pow(2.0 * L + 1.0, 2);
+    const double whole = 3.0 * (std::log2(std::max(1, L)) + 2.0) * static_cast<double>(occupied_.size()) +
+                         16.0 * static_cast<double>(nb);
+    const double most = whole / per_block;  // blocks beyond which watchAll costs less
     std::vector<std::int64_t> todo;
-    for (std::int64_t b : grown_blocks_) {
+    bool all = full || grown_blocks_.size() > kIncrementalWatch;
+    for (std::size_t g = 0; g < grown_blocks_.size() && !all; ++g) {
       std::int64_t q[3];
-      blockCoords(b, at);
+      blockCoords(grown_blocks_[g], at);
       for (q[0] = std::max<std::int64_t>(0, at[0] - m); q[0] <= std::min(blocks_[0] - 1, at[0] + m); ++q[0]) {
         for (q[1] = std::max<std::int64_t>(0, at[1] - m); q[1] <= std::min(blocks_[1] - 1, at[1] + m); ++q[1]) {
           for (q[2] = std::max<std::int64_t>(0, at[2] - m); q[2] <= std::min(blocks_[2] - 1, at[2] + m); ++q[2]) {
@@ -338,11 +343,18 @@ void OccupancyMap::updateWatched(bool full) {
           }
         }
       }
+      all = static_cast<double>(todo.size()) > most;
     }
-    for (std::int64_t n : todo) {
-      blockCoords(n, at);
-      setWatched(n, watchMask(at, watch_cells_));
-      grown_mark_[n] = 0;
+    if (all) {
+      for (std::int64_t n : todo) grown_mark_[n] = 0;
+      watchAll(L);
+      closes_since_full_watch_ = 0;
+    } else {
+      for (std::int64_t n : todo) {
+        blockCoords(n, at);
+        setWatched(n, watchMask(at, L));
+        grown_mark_[n] = 0;
+      }
     }
   }
   for (std::int64_t b : grown_blocks_) grown_mark_[b] = 0;

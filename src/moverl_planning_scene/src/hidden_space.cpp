@@ -324,7 +324,8 @@ void OccupancyMap::updateWatched(bool full) {
     // words per axis and 16 rows a block.
     const int L = watch_cells_;
     const std::int64_t m = (L + (1 << kBlockShift) - 1) >> kBlockShift;
-    const double per_block = std::pow(4.0 + 2.0 * L, 2) + 16.0 * std::pow(2.0 * L + 1.0, 2);
+    const double per_block =
+        L > kMaskCells ? 1.0 : std::pow(4.0 + 2.0 * L, 2) + 16.0 * std::pow(2.0 * L + 1.0, 2);  // (wider: every free)
     const double whole = 3.0 * (std::log2(std::max(1, L)) + 2.0) * static_cast<double>(occupied_.size()) +
                          16.0 * static_cast<double>(nb);
     const double most = whole / per_block;  // blocks beyond which watchAll costs less

@@ -374,6 +374,16 @@ void OctomapMonitor::integrateLoop() {
         return false;
       };
       auto pick = pick_oldest();
+      if (!lockstep_ && open_batch_.isZero()) {
+        // Real time, between batches: the newest instant every camera sending has a cloud of, whole; the older clouds
+        // go (pending_clouds.h). None (unsynchronised cameras, one still on its way): the oldest cloud, as below.
+        const auto stamp_of = [](const sensor_msgs::PointCloud2::ConstPtr& m) { return m->header.stamp.toSec(); };
+        const double at = newestWholeInstant(pending_, sendingCameras(), stamp_of);
+        if (!std::isnan(at)) {
+          outstanding_ -= static_cast<int>(dropOlderThan(&pending_, at, stamp_of));
+          pick = pick_oldest();
+        }
+      }
       if (missing(pick->second.front()->header.stamp)) {
         const auto until =
             std::chrono::steady_clock::now() +
@@ -397,6 +407,23 @@ void OctomapMonitor::integrateLoop() {
     }
     idle_cv_.notify_all();
   }
+}
+
+std::vector<std::string> OctomapMonitor::sendingCameras() {
+  // (pending_mutex_ held.) The cameras with clouds waiting, and the world's cameras integrated within max_age of the
+  // newest waiting cloud: heard lately, their cloud of that instant may still be on its way.
+  std::vector<std::string> out;
+  double newest = -std::numeric_limits<double>::infinity();
+  for (const auto& [frame, queue] : pending_) {
+    out.push_back(frame);
+    newest = std::max(newest, queue.back()->header.stamp.toSec());
+  }
+  for (const auto& cam : cameras_) {
+    const auto it = integrated_.find(cam);
+    if (pending_.count(cam) != 0 || it == integrated_.end()) continue;
+    if (newest - it->second.toSec() <= max_age_) out.push_back(cam);
+  }
+  return out;
 }
 
 void OctomapMonitor::integrate(const sensor_msgs::PointCloud2::ConstPtr& msg) {

@@ -105,6 +105,8 @@ class OctomapMonitor {
   /// The cloud stamped `stamp` from `frame` is in the map the checks read (its age counts it).
   void markSeen(const std::string& frame, const ros::Time& stamp);
   void integrate(const sensor_msgs::PointCloud2::ConstPtr& msg);
+  /// Real time, pending_mutex_ held: the cameras a whole batch needs (with clouds waiting, or heard lately).
+  std::vector<std::string> sendingCameras();
   /// An update of map_ (a cloud's, or a batch's close: frame ""): into map_ now, and into the checks' map now or, with
   /// octomap/lockstep_lag, held for it. The integration thread only.
   void intoMaps(const MapUpdate& update, const ros::Time& stamp, const std::string& frame);

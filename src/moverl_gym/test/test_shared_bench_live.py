@@ -47,8 +47,8 @@ def test_ssm_reaches_the_shared_goal_without_moving_into_the_person(tmp_path):
 
 def test_in_real_time_the_map_takes_each_instants_clouds_as_one_batch(tmp_path):
     """Real time, five cameras at 30 Hz, ISO's speeds: the cameras due at an instant render together, and the scene
-    opens each batch at the newest instant every camera has a cloud of and closes it once (pending_clouds.h). A batch that
-    misses a camera finds what only that camera sees unseen: at ISO's speeds such a close turned most of the map
+    opens each batch at the newest instant every camera has a cloud of and closes it once (pending_clouds.h). A batch
+    that misses a camera finds what only that camera sees unseen: at ISO's speeds such a close turned most of the map
     possibly occupied. Structural, not a speed target: the clouds per batch, however few batches a loaded machine
     integrates (its long run is docs/sensed_person/map_wait)."""
     out = tmp_path / "wait.json"

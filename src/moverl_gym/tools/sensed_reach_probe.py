@@ -14,7 +14,9 @@ to one camera period between renders, so the camera rate decides how close the h
 Each rate runs in its own ROS graph (--obstacles, default sensed), with the world's cameras set to that rate (launch
 argument camera_rate). Writes <out>/probe.md and probe.json: per rate, episodes that reach the
 goal (the env's is_success), steps to get there, the closest distance, the shield's verdicts, ground-truth contacts,
-steps/s.
+steps/s. It also gives the goal configuration's clearance from each moving world object where the world file puts
+it (motion time 0: the person at rest), in the simulator the node runs: what ISO's margin must stay below for the goal
+to be held.
 """
 
 from __future__ import annotations
@@ -90,6 +92,34 @@ def worker(args) -> dict:
     return {"episodes": episodes, "steps_per_s": steps / (time.perf_counter() - t0)}
 
 
+def goal_clearance(robot: str, world: str, goal_q) -> dict:
+    """{object id: metres} from the robot at goal_q to each moving world object at motion time 0 (PyBullet's closest
+    points between collision shapes, within 2 m; farther ones left out). The static ones are left out too: the sensed
+    modes know them exactly and keep no margin from them."""
+    import pybullet
+
+    from moverl_gym.paths import robot_config_file, world_file
+    from moverl_sim.robot_config import load_robot_config
+    from moverl_sim.settings import simulator_for
+    from moverl_sim.world import load_world
+
+    w = load_world(world_file(world))
+    moving = {o.id for o in w.objects if o.motion is not None}
+    sim = simulator_for(load_robot_config(robot_config_file(robot)), w)
+    try:
+        sim.reset_robot(list(goal_q))
+        out = {}
+        for oid, (body, link) in sim.object_bodies.items():
+            if oid not in moving:
+                continue
+            pts = pybullet.getClosestPoints(sim.robot, body, 2.0, linkIndexB=link, physicsClientId=sim.client_id)
+            if pts:
+                out[oid] = round(float(min(p[8] for p in pts)), 4)
+        return dict(sorted(out.items(), key=lambda kv: kv[1]))
+    finally:
+        sim.close()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
@@ -126,6 +156,8 @@ def main(argv=None) -> int:
     if args.worker_rate is not None:
         print(json.dumps(worker(args)))
         return 0
+    clearance = goal_clearance(args.robot, args.world, args.goal_q)
+    print("goal configuration's clearance (m): " + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items()), flush=True)
     rows = []
     runs = [
         (rate, safety, people if safety == "ssm" else "")
@@ -179,6 +211,9 @@ def main(argv=None) -> int:
         "episodes. contacts: ground truth, of them moving: while the robot moved (safety ssm allows the others). "
         "safety off: the shield off (the world file's objects unchecked).",
         "",
+        "The goal configuration's clearance from the world's objects at rest (m): "
+        + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items()),
+        "",
         "| camera rate (per simulated s) | safety | people | episodes | reached | steps to goal | closest (m) | "
         "contacts | moving | verdicts | steps/s |",
         "|---:|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
@@ -197,7 +232,9 @@ def main(argv=None) -> int:
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "probe.md").write_text(text)
-        (args.out / "probe.json").write_text(json.dumps({"command": command, "rows": rows}, indent=2) + "\n")
+        (args.out / "probe.json").write_text(
+            json.dumps({"command": command, "goal_clearance": clearance, "rows": rows}, indent=2) + "\n"
+        )
     shielded = [r for r in rows if r["safety"] != "off"]
     return 1 if any(r["contacts_moving"] if r["safety"] == "ssm" else r["contacts"] for r in shielded) else 0
 

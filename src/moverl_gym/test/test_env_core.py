@@ -299,3 +299,38 @@ def test_the_env_step_deadline_exceeds_the_shields_own_bound():
         + shield["result_margin"]
     )
     assert task.step_timeout > bound
+
+
+def test_a_worlds_goal_region_samples_each_episodes_goal_in_it():
+    """shared_bench's goal_region: every reset's goal lies in the box and is where the end effector of
+    goal_configuration is (what a scripted policy drives at); reset's options or goal= fix one, as in any world."""
+    from moverl_gym.paths import world_file
+    from moverl_gym.sampling import in_region
+    from moverl_sim.world import load_world
+
+    region = load_world(world_file("shared_bench")).goal_region
+    assert region is not None
+    env = make("MoveRL/PandaReachSharedBench-v0")
+    try:
+        u, goals = env.unwrapped, set()
+        for seed in range(8):
+            env.reset(seed=seed)
+            goal, q = u.task.goal.copy(), u.goal_configuration
+            assert in_region(goal, region) and q is not None
+            goals.add(tuple(np.round(goal, 6)))
+            env.reset(options={"start": q, "goal": goal})  # the robot at the configuration: its hand at the goal
+            assert u.distance < 1e-6 and u.goal_configuration is None
+        assert len(goals) == 8
+        env.reset(seed=0)
+        first = u.task.goal.copy()
+        env.reset(seed=0)
+        np.testing.assert_array_equal(u.task.goal, first)  # seeded
+    finally:
+        env.close()
+    env = make("MoveRL/PandaReachSharedBench-v0", goal=[0.3, 0.0, 0.3])
+    try:
+        env.reset(seed=0)
+        np.testing.assert_allclose(env.unwrapped.task.goal, [0.3, 0.0, 0.3])
+        assert env.unwrapped.goal_configuration is None
+    finally:
+        env.close()

@@ -39,7 +39,7 @@ def worker(args) -> dict:
     import moverl_gym  # noqa: F401
     from moverl_gym.registration import env_id
 
-    goal_q = np.asarray(args.goal_q, dtype=float)
+    goal_q = np.asarray(args.goal_q, dtype=float) if args.goal_q else None
     safety = args.worker_safety
     env = gym.make(
         env_id(args.robot, "Human"),
@@ -58,14 +58,18 @@ def worker(args) -> dict:
         task={"max_episode_steps": args.max_steps},
     )
     u = env.unwrapped
+    fixed = {"goal": u.task.goal.copy()} if goal_q is not None else {}  # the world's goal, not its goal_region
     episodes, t0, steps = [], time.perf_counter(), 0
     try:
         for ep in range(args.episodes):
-            env.reset(seed=args.seed + ep)
+            env.reset(seed=args.seed + ep, options=fixed)
+            target = goal_q if goal_q is not None else u.goal_configuration
+            if target is None:
+                raise SystemExit(f"world {args.world!r} has no goal_region: give --goal-q")
             verdicts, contacts, moving, closest, reached_at = {}, 0, 0, float("inf"), None
             done = False
             while not done:
-                d = goal_q - u.q[: len(goal_q)]
+                d = target - u.q[: len(target)]
                 action = np.clip(d / max(float(np.abs(d).max()), 1e-9), -1.0, 1.0).astype(np.float32)
                 _, _, terminated, truncated, info = env.step(action)
                 steps += 1
@@ -85,6 +89,8 @@ def worker(args) -> dict:
                     "verdicts": verdicts,
                     "contacts": contacts,
                     "contacts_moving": moving,
+                    "goal": [float(v) for v in u.task.goal],
+                    "goal_q": [float(v) for v in target],
                 }
             )
     finally:
@@ -96,6 +102,11 @@ def goal_clearance(robot: str, world: str, goal_q) -> dict:
     """{object id: metres} from the robot at goal_q to each moving world object at motion time 0 (PyBullet's closest
     points between collision shapes, within 2 m; farther ones left out). The static ones are left out too: the sensed
     modes know them exactly and keep no margin from them."""
+    return goal_clearances(robot, world, [goal_q])[0]
+
+
+def goal_clearances(robot: str, world: str, configurations) -> list:
+    """goal_clearance of each configuration, in one simulator."""
     import pybullet
 
     from moverl_gym.paths import robot_config_file, world_file
@@ -107,24 +118,48 @@ def goal_clearance(robot: str, world: str, goal_q) -> dict:
     moving = {o.id for o in w.objects if o.motion is not None}
     sim = simulator_for(load_robot_config(robot_config_file(robot)), w)
     try:
-        sim.reset_robot(list(goal_q))
-        out = {}
-        for oid, (body, link) in sim.object_bodies.items():
-            if oid not in moving:
-                continue
-            pts = pybullet.getClosestPoints(sim.robot, body, 2.0, linkIndexB=link, physicsClientId=sim.client_id)
-            if pts:
-                out[oid] = round(float(min(p[8] for p in pts)), 4)
-        return dict(sorted(out.items(), key=lambda kv: kv[1]))
+        found = []
+        for q in configurations:
+            sim.reset_robot(list(q))
+            out = {}
+            for oid, (body, link) in sim.object_bodies.items():
+                if oid not in moving:
+                    continue
+                pts = pybullet.getClosestPoints(sim.robot, body, 2.0, linkIndexB=link, physicsClientId=sim.client_id)
+                if pts:
+                    out[oid] = round(float(min(p[8] for p in pts)), 4)
+            found.append(dict(sorted(out.items(), key=lambda kv: kv[1])))
+        return found
     finally:
         sim.close()
+
+
+#: m: the bins of a goal configuration's clearance from the nearest moving object (probe.md's last column)
+CLEARANCE_BINS = (0.3, 0.45)
+
+
+def by_clearance(episodes) -> list:
+    """[reached, episodes] per clearance bin: below CLEARANCE_BINS[0], between, from CLEARANCE_BINS[-1] on."""
+    edges = (-np.inf, *CLEARANCE_BINS, np.inf)
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        inside = [e for e in episodes if e["clearance"] is not None and lo <= e["clearance"] < hi]
+        out.append([sum(e["reached_at"] is not None for e in inside), len(inside)])
+    return out
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
     p.add_argument("--world", default="human", help="world name (worlds/<name>.yaml) or file")
-    p.add_argument("--goal-q", type=float, nargs="+", required=True, help="a configuration whose hand is at the goal")
+    p.add_argument(
+        "--goal-q",
+        type=float,
+        nargs="+",
+        default=None,
+        help="a configuration whose hand is at the world's goal (default: the goals the env samples in the world's "
+        "goal_region, each driven at the configuration it came from)",
+    )
     p.add_argument("--camera-rates", type=float, nargs="+", default=[2.0], help="renders per simulated second")
     p.add_argument("--obstacles", choices=SENSED_OBSTACLES, default="sensed")
     p.add_argument("--strategy", choices=CHOICES["strategy"], default=None, help="default: the launch file's")
@@ -156,8 +191,9 @@ def main(argv=None) -> int:
     if args.worker_rate is not None:
         print(json.dumps(worker(args)))
         return 0
-    clearance = goal_clearance(args.robot, args.world, args.goal_q)
-    print("goal configuration's clearance (m): " + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items()), flush=True)
+    clearance = goal_clearance(args.robot, args.world, args.goal_q) if args.goal_q else None
+    if clearance is not None:
+        print("goal configuration's clearance (m): " + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items()))
     rows = []
     runs = [
         (rate, safety, people if safety == "ssm" else "")
@@ -173,6 +209,8 @@ def main(argv=None) -> int:
         worker_args += ["--worker-safety", safety, "--worker-people", people]
         r = run_json_worker(__file__, worker_args, what, timeout=600 + 120 * args.episodes)
         eps = r["episodes"]
+        for e, c in zip(eps, goal_clearances(args.robot, args.world, [e["goal_q"] for e in eps])):
+            e["clearance"] = min(c.values()) if c else None  # from the nearest moving object
         verdicts = {}
         for e in eps:
             for k, v in e["verdicts"].items():
@@ -191,6 +229,7 @@ def main(argv=None) -> int:
                 "contacts_moving": int(sum(e["contacts_moving"] for e in eps)),
                 "verdicts": dict(sorted(verdicts.items())),
                 "steps_per_s": r["steps_per_s"],
+                "reached_by_clearance": by_clearance(eps),
                 "per_episode": eps,
             }
         )
@@ -211,12 +250,18 @@ def main(argv=None) -> int:
         "episodes. contacts: ground truth, of them moving: while the robot moved (safety ssm allows the others). "
         "safety off: the shield off (the world file's objects unchecked).",
         "",
-        "The goal configuration's clearance from the world's objects at rest (m): "
-        + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items()),
+        (
+            "The goal configuration's clearance from the world's moving objects at rest (m): "
+            + ", ".join(f"{k} {v:.3f}" for k, v in clearance.items())
+            if clearance is not None
+            else "Goals sampled in the world's goal_region, the same ones in every row (seeded). by clearance: "
+            "reached / episodes whose goal configuration's clearance from the nearest moving object at rest is below "
+            f"{CLEARANCE_BINS[0]} m, {CLEARANCE_BINS[0]}-{CLEARANCE_BINS[1]} m, from {CLEARANCE_BINS[1]} m on."
+        ),
         "",
         "| camera rate (per simulated s) | safety | people | episodes | reached | steps to goal | closest (m) | "
-        "contacts | moving | verdicts | steps/s |",
-        "|---:|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
+        "contacts | moving | verdicts | steps/s | by clearance |",
+        "|---:|---|---|---:|---:|---:|---:|---:|---:|---|---:|---|",
     ]
     for r in rows:
         steps = "-" if r["steps_to_goal_mean"] is None else f"{r['steps_to_goal_mean']:.1f}"
@@ -225,7 +270,7 @@ def main(argv=None) -> int:
             f"| {r['camera_rate']:g} | {r['safety']} | {r['people']} | {r['episodes']} | **{r['reached']}** | "
             f"{steps} | "
             f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | "
-            f"{r['steps_per_s']:.1f} |"
+            f"{r['steps_per_s']:.1f} | {' · '.join(f'{a}/{b}' for a, b in r['reached_by_clearance'])} |"
         )
     text = "\n".join(lines) + "\n"
     print(text)

@@ -40,6 +40,14 @@ def test_all_shapes_and_defaults(tmp_path):
     assert c.quaternion == pytest.approx((0.0, 0.0, h, h))
 
 
+def test_goal_region(tmp_path):
+    p = tmp_path / "w.yaml"
+    p.write_text("name: w\ngoal_region: {low: [0.2, -0.4, 0.1], high: [0.5, 0.1, 0.4]}\n")
+    w = load_world(p)
+    assert w.goal is None and w.goal_region == ((0.2, -0.4, 0.1), (0.5, 0.1, 0.4))
+    assert load_world(TABLE_WORLD).goal_region is None
+
+
 def test_rpy_to_quaternion_roll_pitch():
     assert rpy_to_quaternion((math.pi, 0, 0)) == pytest.approx((1, 0, 0, 0), abs=1e-12)
     assert rpy_to_quaternion((0, math.pi / 2, 0)) == pytest.approx((0, math.sqrt(0.5), 0, math.sqrt(0.5)))
@@ -87,6 +95,10 @@ BAD_WORLDS = {
     "sensing_negative_speed": ("name: w\nsensing: {speed_bound: -1}\n", ">= 0"),
     "sensing_infinite_speed": ("name: w\nsensing: {speed_bound: .inf}\n", "sensing.speed_bound"),
     "sensing_unknown_not_bool": ("name: w\nsensing: {unknown_occupied: 1}\n", "sensing.unknown_occupied"),
+    "goal_region_not_a_box": ("name: w\ngoal_region: [0, 0, 0]\n", "keys low and high"),
+    "goal_region_extra_key": ("name: w\ngoal_region: {low: [0, 0, 0], high: [1, 1, 1], z: 1}\n", "keys low and high"),
+    "goal_region_short": ("name: w\ngoal_region: {low: [0, 0], high: [1, 1, 1]}\n", "goal_region.low"),
+    "goal_region_inverted": ("name: w\ngoal_region: {low: [0, 0, 0], high: [1, -1, 1]}\n", "below its high"),
 }
 
 

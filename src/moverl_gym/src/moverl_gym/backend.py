@@ -36,6 +36,7 @@ class WorldInfo:
     obstacles: tuple  # of Obstacle
     motion_epoch: float = 0.0  # driver clock (s) at which motion time was 0
     frame: str = "world"  # the frame of the poses (= the robot's base frame)
+    goal_region: "tuple | None" = None  # ((low x, y, z), (high x, y, z)): each episode's goal sampled in it
 
 
 @dataclass

@@ -49,6 +49,7 @@ class BulletBackend(Backend):
         self.world = WorldInfo(
             name=self._world.name,
             goal=self._world.goal,
+            goal_region=self._world.goal_region,
             obstacles=tuple(
                 Obstacle(
                     id=o.id, pose=np.array(list(o.start) + list(o.quaternion)), observed=o.observed, motion=o.motion

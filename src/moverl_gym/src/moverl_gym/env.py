@@ -30,6 +30,7 @@ from .launch_args import LaunchArgError
 from .launch_args import checked as checked_launch
 from .paths import config_file
 from .robot import ActionScaler, JointLimits, chain_reach
+from .sampling import sample_goal, sample_start
 from .task import ReachTask, TaskConfig
 from .tracking import TrackedPoses
 
@@ -251,9 +252,16 @@ class MoveRLReachEnv(gym.Env):
         self.world_name = w.name
         if self.attached and world and os.sep not in str(world) and world != w.name:
             raise GraphError(f"the attached graph runs world '{w.name}', the env was asked for '{world}'")
-        if goal is None and w.goal is None:
+        # A world's goal_region: each reset samples the goal in it (unless goal= fixes one, or reset's options do).
+        self._goal_region = w.goal_region if goal is None else None
+        self.goal_configuration = None  # the configuration a sampled goal came from (None: a given goal)
+        if goal is None and w.goal is None and self._goal_region is None:
             raise ValueError(f"world '{w.name}' has no goal: give one (goal=[x, y, z])")
         self.reach = chain_reach(b.urdf, b.ee_link)  # positions the end effector can reach: within +-reach of the base
+        if goal is None and w.goal is None:
+            goal = list(np.mean(self._goal_region, axis=0))  # until the first reset samples one
+        for corner in self._goal_region or ():
+            self._make_task(corner)  # a region beyond the robot's reach is refused here, naming it
         self.task = self._make_task(goal if goal is not None else list(w.goal))
         observed = [o for o in w.obstacles if o.observed]
         self._obstacles0 = np.concatenate([o.pose for o in observed]) if observed else np.zeros(0)  # at motion time 0
@@ -385,7 +393,8 @@ class MoveRLReachEnv(gym.Env):
     def _reset(self, options):
         if "goal" in options:
             self.task = self._make_task(options["goal"])
-        elif self.config.goal_noise > 0:
+            self.goal_configuration = None
+        elif self.config.goal_noise > 0 or self._goal_region is not None:
             try:
                 self.task = self._make_task(self._sample_goal())
             except NoFreeConfiguration:
@@ -474,39 +483,37 @@ class MoveRLReachEnv(gym.Env):
         return self._sample_start(near_home=near_home)
 
     def _sample_goal(self) -> np.ndarray:
-        """A goal in the reachable region: the end-effector position of a random collision-free configuration
-        within +-goal_noise rad of home (config/env.yaml), so that every sampled goal can be reached."""
-        lo = np.maximum(self.limits.lower, self._home - self.config.goal_noise)
-        hi = np.minimum(self.limits.upper, self._home + self.config.goal_noise)
-        for _ in range(self.config.start_sampling_attempts):
-            q = self.np_random.uniform(lo, hi)
-            if self._backend.check_state(q):
-                return self._backend.ee_pose(q)[:3]
-        raise NoFreeConfiguration(
-            f"no collision-free goal configuration found in {self.config.start_sampling_attempts} "
-            f"random samples of world '{self.world_name}'{self._unseen_reason()}"
-        )
+        """A goal that can be reached (moverl_gym.sampling): the end-effector position of a random collision-free
+        configuration within +-goal_noise rad of home (config/env.yaml), and in the world's goal_region when it has
+        one. The configuration is kept in goal_configuration."""
+        n = self.config.start_sampling_attempts
+        found = sample_goal(
+            self.np_random, self._backend, self.limits.lower, self.limits.upper, self._home,
+            self.config.goal_noise, n, self._goal_region,
+        )  # fmt: skip
+        if found is None:
+            where = f" with its end effector in goal_region {self._goal_region}" if self._goal_region else ""
+            raise NoFreeConfiguration(
+                f"no collision-free goal configuration{where} found in {n} random samples of world "
+                f"'{self.world_name}'{self._unseen_reason()}"
+            )
+        goal, self.goal_configuration = found
+        return goal
 
     def _sample_start(self, near_home: bool = True) -> np.ndarray:
-        """A random collision-free start (config/env.yaml: start_noise around the robot's home, or uniform; when no
-        sample near home is free, or near_home is false, uniform)."""
-        lo, hi = self.limits.lower, self.limits.upper
-        ranges = [(lo, hi)]
-        noise = self.config.start_noise
-        if noise > 0 and near_home:
-            ranges.insert(0, (np.maximum(lo, self._home - noise), np.minimum(hi, self._home + noise)))
-        for a, b in ranges:
-            for _ in range(self.config.start_sampling_attempts):
-                q = self.np_random.uniform(a, b)
-                if self._backend.check_state(q) and not self.task.is_success(
-                    self.task.distance(self._backend.ee_pose(q)[:3])
-                ):
-                    return q
-        raise NoFreeConfiguration(
-            f"no collision-free start configuration found in {self.config.start_sampling_attempts} random samples "
-            f"{'near home nor as many ' if len(ranges) > 1 else ''}over the joint range of world '{self.world_name}'"
-            f"{self._unseen_reason()}"
-        )
+        """A random collision-free start not at the goal (moverl_gym.sampling; config/env.yaml: start_noise around
+        the robot's home, then, or when near_home is false, uniform)."""
+        noise = self.config.start_noise if near_home else 0.0
+        n = self.config.start_sampling_attempts
+        q = sample_start(self.np_random, self._backend, self.limits.lower, self.limits.upper, self._home, noise, n,
+                         lambda ee: self.task.is_success(self.task.distance(ee)))  # fmt: skip
+        if q is None:
+            raise NoFreeConfiguration(
+                f"no collision-free start configuration found in {n} random samples "
+                f"{'near home nor as many ' if noise > 0 else ''}over the joint range of world '{self.world_name}'"
+                f"{self._unseen_reason()}"
+            )
+        return q
 
     def _unseen_reason(self) -> str:
         """': <how much of the reach no camera sees, where, and the tool that shows it>' when the sensed map's

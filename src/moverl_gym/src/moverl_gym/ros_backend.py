@@ -538,6 +538,7 @@ def _world_info(w) -> WorldInfo:
     return WorldInfo(
         name=w.name,
         goal=tuple(w.goal) if len(w.goal) else None,
+        goal_region=(tuple(w.goal_region[:3]), tuple(w.goal_region[3:])) if len(w.goal_region) == 6 else None,
         obstacles=tuple(obstacles),
         motion_epoch=w.motion_epoch.to_sec(),
         frame=w.header.frame_id or "world",

@@ -54,6 +54,7 @@ def world_to_msg(world, stamp_sec=0.0, motion_epoch_sec=0.0):
     msg.name = world.name
     if "goal" in WorldMsg.__slots__:  # float64[] goal, added to World.msg after the first contract
         msg.goal = list(world.goal) if world.goal is not None else []
+        msg.goal_region = [v for corner in world.goal_region for v in corner] if world.goal_region else []
     msg.sensed_speed_bound = -1.0 if world.sensed_speed_bound is None else world.sensed_speed_bound
     msg.sensed_unknown_occupied = world.sensed_unknown_occupied
     msg.camera_frames = [c.optical_frame for c in world.cameras]

@@ -32,7 +32,7 @@ __all__ = [
 # Number of size values per shape (shape_msgs/SolidPrimitive conventions).
 SHAPE_SIZES = {"box": 3, "sphere": 1, "cylinder": 2}
 _SIZE_DOC = {"box": "[x, y, z]", "sphere": "[radius]", "cylinder": "[height, radius]"}
-_TOP_KEYS = {"name", "frame", "goal", "objects", "cameras", "sensing", "people"}
+_TOP_KEYS = {"name", "frame", "goal", "goal_region", "objects", "cameras", "sensing", "people"}
 _SENSING_KEYS = {"speed_bound", "unknown_occupied"}
 _OBJECT_KEYS = {"id", "shape", "size", "xyz", "rpy", "observed", "motion"}
 MOTION_TYPES = ("oscillate", "reach")
@@ -210,6 +210,9 @@ class World:
     name: str
     frame: str = "world"
     goal: Optional[Tuple[float, float, float]] = None
+    #: ``goal_region: {low: [x, y, z], high: [x, y, z]}``: the box (world frame) each episode's goal is sampled in
+    #: (moverl_gym.sampling); None: every episode's goal is ``goal``.
+    goal_region: Optional[Tuple[Tuple[float, float, float], Tuple[float, float, float]]] = None
     objects: Tuple[WorldObject, ...] = ()
     source: str = field(default="<memory>", compare=False)  # file it was read from
     cameras: Tuple[WorldCamera, ...] = ()
@@ -500,6 +503,7 @@ def parse_world(data, source="<memory>"):
     goal = None
     if data.get("goal") is not None:
         goal = _numbers(data["goal"], source, "goal", 3)
+    goal_region = _goal_region(data.get("goal_region"), source)
     raw_objects = data.get("objects", [])
     if raw_objects is None:
         raw_objects = []
@@ -568,6 +572,7 @@ def parse_world(data, source="<memory>"):
         name=name,
         frame=frame,
         goal=goal,
+        goal_region=goal_region,
         objects=tuple(objects),
         source=source,
         cameras=cameras,
@@ -575,6 +580,19 @@ def parse_world(data, source="<memory>"):
         sensed_unknown_occupied=unknown_occupied,
         people=parse_people(data.get("people"), objects, source),
     )
+
+
+def _goal_region(raw, source):
+    """``goal_region: {low: [x, y, z], high: [x, y, z]}`` checked: each low below its high; None when not given."""
+    if raw is None:
+        return None
+    if not isinstance(raw, dict) or set(map(str, raw)) != {"low", "high"}:
+        _fail(source, "goal_region", "expected a mapping with keys low and high, got %r" % (raw,))
+    low = _numbers(raw["low"], source, "goal_region.low", 3)
+    high = _numbers(raw["high"], source, "goal_region.high", 3)
+    if not all(a < b for a, b in zip(low, high)):
+        _fail(source, "goal_region", "each low must lie below its high, got low %r, high %r" % (list(low), list(high)))
+    return (tuple(low), tuple(high))
 
 
 def sensing_problems(world, default_speed_bound, default_source="config/planning_scene.yaml's octomap/speed_bound"):

@@ -20,12 +20,16 @@ def in_region(position, region) -> bool:
     return bool(np.all(p >= low) and np.all(p <= high))
 
 
+def _near_home(lower, upper, home, noise: float):
+    """The joint box within +-noise rad of home, clipped to [lower, upper]."""
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    return np.maximum(lo, np.asarray(home) - noise), np.minimum(hi, np.asarray(home) + noise)
+
+
 def sample_goal(rng, backend, lower, upper, home, noise: float, attempts: int, region=None):
     """(goal (x, y, z), its configuration) from at most `attempts` random configurations; None when none was free
     (and, with a region, had its end effector in it)."""
-    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    if noise > 0:
-        lo, hi = np.maximum(lo, np.asarray(home) - noise), np.minimum(hi, np.asarray(home) + noise)
+    lo, hi = _near_home(lower, upper, home, noise) if noise > 0 else (np.asarray(lower), np.asarray(upper))
     for _ in range(attempts):
         q = rng.uniform(lo, hi)
         if region is not None:
@@ -41,10 +45,9 @@ def sample_goal(rng, backend, lower, upper, home, noise: float, attempts: int, r
 def sample_start(rng, backend, lower, upper, home, noise: float, attempts: int, at_goal):
     """A free configuration from at most `attempts` random ones within +-noise rad of home (noise > 0), then as many
     over the joint range, whose end effector's (x, y, z) is not at_goal; None when there is none."""
-    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-    ranges = [(lo, hi)]
+    ranges = [(np.asarray(lower, dtype=float), np.asarray(upper, dtype=float))]
     if noise > 0:
-        ranges.insert(0, (np.maximum(lo, np.asarray(home) - noise), np.minimum(hi, np.asarray(home) + noise)))
+        ranges.insert(0, _near_home(lower, upper, home, noise))
     for a, b in ranges:
         for _ in range(attempts):
             q = rng.uniform(a, b)

@@ -21,13 +21,31 @@ esac
 set +u; source ./env.sh; set -u  # ROS's setup scripts read unset variables
 export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
 RESULTS=$(mktemp -d /tmp/moverl_test_results.XXXXXX)  # rostest's XML results (its default is a shared ~/.ros path)
-passed=0; failed=0; failures=(); t_start=$SECONDS
+OUTPUTS=$(mktemp -d /tmp/moverl_test_outputs.XXXXXX)  # each suite's output, for the failures' summary at the end
+trap 'rm -rf "$OUTPUTS"' EXIT
+passed=0; failed=0; failures=(); failed_logs=(); t_start=$SECONDS
 suite() {
   local name=$1; shift
   printf '\n\033[1m== %s\033[0m\n' "$name"
-  local t0=$SECONDS
-  if "$@"; then passed=$((passed + 1)); echo "-- $name: ok ($((SECONDS - t0)) s)";
-  else failed=$((failed + 1)); failures+=("$name"); echo "-- $name: FAILED ($((SECONDS - t0)) s)"; fi
+  local t0=$SECONDS log; log="$OUTPUTS/$((passed + failed)).log"
+  # Into a file, shown as it grows: tail follows the suite's process, not its output, so a process a test leaves
+  # behind holding the output cannot stall the run.
+  local rc=0 pid
+  : > "$log"
+  "$@" > "$log" 2>&1 &
+  pid=$!
+  tail -n +1 -s 0.2 -f --pid="$pid" "$log"
+  wait "$pid" || rc=$?
+  if [ "$rc" -eq 0 ]; then passed=$((passed + 1)); echo "-- $name: ok ($((SECONDS - t0)) s)"; rm -f "$log";
+  else
+    failed=$((failed + 1)); failures+=("$name"); failed_logs+=("$log")
+    echo "-- $name: FAILED ($((SECONDS - t0)) s)"
+  fi
+}
+# The end of a failed suite's output, again at the end of the run (where CI's excerpt is): the lines that say why.
+# rostest and pytest print the failing tests' assertions and tracebacks near their end; ROS's own chatter is left out.
+why_failed() {
+  grep -v -E '^\S*\[ *(WARN|INFO|DEBUG)\]|TF_REPEATED_DATA|^\s*$' "$1" | tail -n 60
 }
 pytest_() { python -m pytest -q -p no:cacheprovider "$@"; }
 # A rostest suite. Without --text: with it, rostest exits 0 even when its tests fail or its test node dies
@@ -71,6 +89,10 @@ for tier in "${tiers[@]}"; do
 done
 
 echo
+for k in "${!failures[@]}"; do
+  printf '\n\033[1m== why %s failed (the end of its output)\033[0m\n' "${failures[$k]}"
+  why_failed "${failed_logs[$k]}"
+done
 [ ${#failures[@]} -gt 0 ] && printf 'failed suite: %s\n' "${failures[@]}"
 echo "$passed passed, $failed failed; tiers ${tiers[*]}: $(((SECONDS - t_start) / 60)) min $(((SECONDS - t_start) % 60)) s"
 [ "$failed" -eq 0 ]

@@ -19,11 +19,11 @@ at motion time 0 and slides sideways: 0.37 m away at 25 s, more than 0.3 m from 
   (e) lockstep renders keep simulated time (test_camera_schedule): after a reset every camera renders at the reset's
       sim time; over 20 env steps of dt = 0.05 s and one 0.6 s hold each camera's clouds are stamped exactly
       1/camera_rate of sim time apart (also in the middle of a move, with a joint state stamped alike for the self
-      filter), and a
-      cloud stamped within a step has arrived when the step's call returns (give or take ARRIVAL_SLACK). The lockstep
-      lag (octomap/lockstep_lag): each step's check read exactly the clouds up to the previous check's state, none of
-      the latest step's (info["map_age"] / ShieldStep.map_age, predicted from the render times), and its margin
-      covered that age and the move (sensed_margin >= the world's speed_bound x (map_age + the move's duration)).
+      filter), and a cloud stamped within a step has arrived when the step's call returns (most within ARRIVAL_SLACK:
+      see its use). The lockstep lag (octomap/lockstep_lag): each step's check read exactly the clouds up to the
+      previous check's state, none of the latest step's (info["map_age"] / ShieldStep.map_age, predicted from the
+      render times), and its margin covered that age and the move (sensed_margin >= the world's speed_bound x
+      (map_age + the move's duration)).
   (f) unknown is occupied (a world's `sensing: unknown_occupied: true`, switched on here by publishing the world with
       it): with the same map, every configuration that collides with unknown cells free also collides with them
       occupied, some free ones now collide with the cells no camera has seen, home stays free (the cells inside the
@@ -66,7 +66,7 @@ CAMERAS = ("right_optical_frame", "left_optical_frame")
 # show that the launch argument reached the cameras.
 CAMERA_PERIOD = 0.2
 WORLD_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "worlds", "sensed_box.yaml")
-ARRIVAL_SLACK = 0.01  # s (wall) a cloud may be handled after the call that rendered it returned (see its use)
+ARRIVAL_SLACK = 0.01  # s (wall) a cloud may be handled after the call that rendered it returned, mostly (see its use)
 
 
 class SensedObstacleLive(LiveAssertions, unittest.TestCase):
@@ -159,17 +159,25 @@ class SensedObstacleLive(LiveAssertions, unittest.TestCase):
             for f in CAMERAS:
                 np.testing.assert_allclose(stamps(f, t0), expected, atol=1e-6, err_msg="camera %s" % f)
             # Each cloud arrived before the call that rendered it returned. The cloud and the response travel on
-            # different connections and this process's threads race to read them: ~1 % of clouds are handled up to
-            # 3 ms after the call returned (measured); a render after the response would come >= 1 render (~25 ms)
-            # after it.
+            # different connections and this process's threads race to read them (the cloud's thread must take the
+            # GIL): idle, ~1 % of clouds are handled up to 3 ms after the call returned; with both cores busy, in one
+            # run of four the two clouds of one instant (of 9) came 16 ms after it (measured). A sim that rendered
+            # after responding would make every cloud late by at least a render (~25 ms, more under load), so at most a
+            # third may be late.
             with lock:
-                late = [
+                rendered = [
                     (f, t, round(a - ret, 4))
                     for f, t, a in clouds
                     for lo, hi, ret in calls
-                    if lo - 1e-6 <= t <= hi + 1e-6 and a > ret + ARRIVAL_SLACK
+                    if lo - 1e-6 <= t <= hi + 1e-6
                 ]
-            self.assertEqual(late, [], "clouds that arrived after their call returned (frame, stamp, s late)")
+            late = [c for c in rendered if c[2] > ARRIVAL_SLACK]
+            self.assertEqual(len(rendered), len(CAMERAS) * len(expected), rendered)
+            self.assertLessEqual(
+                3 * len(late),
+                len(rendered),
+                "clouds that arrived after their call returned (frame, stamp, s late): %s" % late,
+            )
             # The renders in the middle of the hold came with a joint state stamped like them.
             deadline = time.monotonic() + 2.0
             mid_move = [t for t in expected if prev - 0.6 + 1e-6 < t < prev - 1e-6]

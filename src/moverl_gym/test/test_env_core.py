@@ -4,6 +4,8 @@ reward, starts and episode rules as on the ROS backend; no shield).
 Gymnasium's and SB3's check_env, seed determinism, the reward and success rules, episode truncation, and that the
 moving obstacles the env observes are where the simulator has them."""
 
+import time
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -332,5 +334,46 @@ def test_a_worlds_goal_region_samples_each_episodes_goal_in_it():
         env.reset(seed=0)
         np.testing.assert_allclose(env.unwrapped.task.goal, [0.3, 0.0, 0.3])
         assert env.unwrapped.goal_configuration is None
+    finally:
+        env.close()
+
+
+class _RegionBusy(moverl_gym.bullet_backend.BulletBackend):
+    """The PyBullet backend of shared_bench with every state whose hand lies in the goal region refused until `busy`
+    s after it was made (a person standing in the region at the first reset, who then moves on)."""
+
+    def __init__(self, busy):
+        super().__init__("shared_bench")
+        from moverl_gym.sampling import in_region
+
+        self.until, self._in_region = time.monotonic() + busy, in_region
+
+    def check_state(self, q):
+        held = time.monotonic() < self.until and self._in_region(self.ee_pose(q)[:3], self.world.goal_region)
+        return not held and super().check_state(q)
+
+
+def test_the_first_reset_looks_again_while_a_person_stands_in_the_goal_region():
+    """No goal in the region free now: the reset samples again until config/env.yaml's goal_wait, and the person who
+    moves on within it costs a wait, not an error; one who stays past it gives NoFreeConfiguration."""
+    from moverl_gym.errors import NoFreeConfiguration
+    from moverl_gym.sampling import in_region
+
+    env = gym.make("MoveRL/PandaReachSharedBench-v0", backend=_RegionBusy(busy=0.6), shield=False)
+    try:
+        t0 = time.monotonic()
+        env.reset(seed=0)
+        assert time.monotonic() - t0 >= 0.4  # (the backend was made a little before)
+        u = env.unwrapped
+        assert in_region(u.task.goal, u._backend.world.goal_region) and u.goal_configuration is not None
+    finally:
+        env.close()
+    env = gym.make("MoveRL/PandaReachSharedBench-v0", backend=_RegionBusy(busy=60.0), shield=False,
+                   task={"goal_wait": 0.5})  # fmt: skip
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(NoFreeConfiguration, match="goal_region"):
+            env.reset(seed=0)
+        assert 0.5 <= time.monotonic() - t0 < 5.0
     finally:
         env.close()

@@ -486,11 +486,15 @@ class MoveRLReachEnv(gym.Env):
         """A goal that can be reached (moverl_gym.sampling): the end-effector position of a random collision-free
         configuration within +-goal_noise rad of home (config/env.yaml), and in the world's goal_region when it has
         one. The configuration is kept in goal_configuration."""
-        n = self.config.start_sampling_attempts
-        found = sample_goal(
-            self.np_random, self._backend, self.limits.lower, self.limits.upper, self._home,
-            self.config.goal_noise, n, self._goal_region,
-        )  # fmt: skip
+        n, deadline = self.config.start_sampling_attempts, time.monotonic() + self.config.goal_wait
+        while True:  # (a person in the region now moves on: look again until config/env.yaml's goal_wait)
+            found = sample_goal(
+                self.np_random, self._backend, self.limits.lower, self.limits.upper, self._home,
+                self.config.goal_noise, n, self._goal_region,
+            )  # fmt: skip
+            if found is not None or time.monotonic() >= deadline:
+                break
+            time.sleep(0.2)
         if found is None:
             where = f" with its end effector in goal_region {self._goal_region}" if self._goal_region else ""
             raise NoFreeConfiguration(

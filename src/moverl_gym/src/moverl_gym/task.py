@@ -26,6 +26,7 @@ class TaskConfig:
     start_noise: float
     goal_noise: float
     start_sampling_attempts: int
+    goal_wait: float
     step_timeout: float
     reset_timeout: float
     max_graph_restarts: int

@@ -62,28 +62,12 @@ int OccupancyMap::cellsWithin(double seconds) const {
       std::min(most, std::floor(options_.speed_bound * std::max(0.0, seconds) / options_.resolution) + 1.0));
 }
 
-double OccupancyMap::usualInterval() const {
-  // The lower median of the intervals known: a batch that came late (a reset, the machine busy) does not widen the
-  // watch. A watch narrower than a batch's interval costs precision, not soundness: that close counts every free cell
-  // the views did not look at as hidden (closeBatch's `wider`). A watch sized by the longest interval made every view
-  // look at more cells after one late batch, so the next came late too: under ISO's speeds a real-time map stayed a
-  // second behind (docs/notes/hidden_space_cost.md).
-  double known[kIntervals];
-  int n = 0;
-  for (double t : intervals_) {
-    if (std::isfinite(t)) known[n++] = t;
-  }
-  if (n == 0) return options_.watch_time;
-  std::nth_element(known, known + (n - 1) / 2, known + n);
-  return known[(n - 1) / 2];
-}
-
 void OccupancyMap::setSpeedBound(double speed_bound) {
   options_.speed_bound = std::isfinite(speed_bound) ? std::max(0.0, speed_bound) : 0.0;
   if (!options_.hidden_space) return;
-  // Until batches come, watch as far as watch_time lets something come; then as far as the batches' usual interval
-  // does (closeBatch's apply: usualInterval).
-  std::fill(intervals_, intervals_ + kIntervals, std::numeric_limits<double>::quiet_NaN());
+  // Until batches come, watch as far as watch_time lets something come; then as far as the batches' interval does
+  // (the longest of the last kIntervals: a reset's extra batch a substep after the one before counts as short).
+  std::fill(intervals_, intervals_ + kIntervals, options_.watch_time);
   watch_cells_ = options_.speed_bound > 0.0 ? cellsWithin(options_.watch_time) : -1;
   updateWatched(true);
 }
@@ -545,12 +529,13 @@ void OccupancyMap::applyClose(const MapUpdate& update) {
   std::vector<std::uint64_t> held;
   held.swap(held_misses_);
   for (std::uint64_t key : held) applyOne(static_cast<std::int64_t>(key), false);
-  // The watch: as far as something may come within the batches' usual interval (a quarter more).
+  // The watch: as far as something may come within the longest of the last batches' intervals (a quarter more).
   bool resized = false;
   if (std::isfinite(update.stamp) && std::isfinite(map_time_) && update.stamp > map_time_ && watch_cells_ >= 0) {
     std::rotate(intervals_, intervals_ + 1, intervals_ + kIntervals);
     intervals_[kIntervals - 1] = update.stamp - map_time_;
-    const int m = std::min(cellsWithin(options_.watch_time), cellsWithin(1.25 * usualInterval()));
+    const double longest = *std::max_element(intervals_, intervals_ + kIntervals);
+    const int m = std::min(cellsWithin(options_.watch_time), cellsWithin(1.25 * longest));
     resized = m != watch_cells_;
     watch_cells_ = m;
   }

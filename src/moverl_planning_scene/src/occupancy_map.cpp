@@ -1349,7 +1349,7 @@ void OccupancyMap::clear() {
     held_misses_.clear();
     batch_stamp_ = std::numeric_limits<double>::quiet_NaN();
     map_time_ = -std::numeric_limits<double>::infinity();
-    std::fill(intervals_, intervals_ + kIntervals, std::numeric_limits<double>::quiet_NaN());
+    std::fill(intervals_, intervals_ + kIntervals, options_.watch_time);
     if (watch_cells_ >= 0) watch_cells_ = cellsWithin(options_.watch_time);
     recording_ = false;
   }

@@ -459,8 +459,6 @@ class OccupancyMap {
   std::uint64_t watchMask(const std::int64_t* block_at, int L) const;
   /// How many cells away (Chebyshev) something at the speed bound may come within `seconds`.
   int cellsWithin(double seconds) const;
-  /// s: the interval the watch is sized for: the lower median of the last batches' intervals (watch_time before any).
-  double usualInterval() const;
   /// A block's watched cells, as its bits.
   std::uint64_t watchedBits(std::int64_t b) const { return block_watched_.empty() ? 0 : block_watched_[b]; }
   /// A cell turned possibly occupied because something may have come there since it was seen free.
@@ -560,7 +558,7 @@ class OccupancyMap {
   std::vector<std::uint64_t> turned_free_;  ///< per block, its cells that turned free since the watch was made
   std::vector<std::uint64_t> watch_scratch_a_, watch_scratch_b_;  ///< watchAll's bit sets
   static constexpr int kIntervals = 8;                            ///< the batches whose intervals size the watch
-  double intervals_[kIntervals] = {};        ///< s: the last batches' intervals (NaN: none yet; setSpeedBound, clear)
+  double intervals_[kIntervals] = {};                             ///< s: the last batches' intervals (0: none yet)
   GridReach reach_;                          ///< closeBatch's steps to the possibly-occupied cells (buildReach)
   std::vector<std::uint8_t> reach_scratch_;  ///< closeBatch's blocks, when a batch came later than the watch covers
   int closes_since_full_watch_ = 0;

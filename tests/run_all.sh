@@ -23,6 +23,16 @@ export ROS_LOG_DIR=${ROS_LOG_DIR:-$(mktemp -d /tmp/moverl_test_logs.XXXXXX)}
 RESULTS=$(mktemp -d /tmp/moverl_test_results.XXXXXX)  # rostest's XML results (its default is a shared ~/.ros path)
 OUTPUTS=$(mktemp -d /tmp/moverl_test_outputs.XXXXXX)  # each suite's output, for the failures' summary at the end
 trap 'rm -rf "$OUTPUTS"' EXIT
+# A suite runs in the background (below), where a shell without job control ignores SIGINT: on Ctrl-C (or TERM) the
+# suite and its children are stopped here, not left running.
+suite_pid=""
+interrupted() {
+  if [ -n "$suite_pid" ]; then pkill -TERM -P "$suite_pid" 2>/dev/null; kill -TERM "$suite_pid" 2>/dev/null; fi
+  wait 2>/dev/null
+  echo "run_all.sh: interrupted" >&2
+  exit 130
+}
+trap interrupted INT TERM
 passed=0; failed=0; failures=(); failed_logs=(); t_start=$SECONDS
 suite() {
   local name=$1; shift
@@ -30,12 +40,13 @@ suite() {
   local t0=$SECONDS log; log="$OUTPUTS/$((passed + failed)).log"
   # Into a file, shown as it grows: tail follows the suite's process, not its output, so a process a test leaves
   # behind holding the output cannot stall the run.
-  local rc=0 pid
+  local rc=0
   : > "$log"
   "$@" > "$log" 2>&1 &
-  pid=$!
-  tail -n +1 -s 0.2 -f --pid="$pid" "$log"
-  wait "$pid" || rc=$?
+  suite_pid=$!
+  tail -n +1 -s 0.2 -f --pid="$suite_pid" "$log"
+  wait "$suite_pid" || rc=$?
+  suite_pid=""
   if [ "$rc" -eq 0 ]; then passed=$((passed + 1)); echo "-- $name: ok ($((SECONDS - t0)) s)"; rm -f "$log";
   else
     failed=$((failed + 1)); failures+=("$name"); failed_logs+=("$log")

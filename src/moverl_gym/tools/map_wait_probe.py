@@ -2,7 +2,8 @@
 """Does the sensed map keep up, and what does a step wait for? In one graph (lockstep, or --mode realtime): each step's
 wall time, verdict and map age, and each camera's cloud integration times (the planning scene's ~octomap_status, a
 batch's close included in its last cloud's), how many clouds and batches (instants) the map took in, and how many
-the cameras sent. The slowest steps are listed with the clouds integrated while they ran.
+the cameras sent. The slowest steps are listed with the clouds integrated while they ran, and the closes are split into
+those of batches later than the hidden space's watch covers and the others, with the cells each turned stale.
 
     python src/moverl_gym/tools/map_wait_probe.py --world shared_bench --camera-rate 5 --safety ssm \\
         --strategy discard --steps 100 --goal-q -0.034 -0.489 -0.561 -2.95 -0.421 2.483 -0.2
@@ -24,6 +25,33 @@ import time
 import numpy as np
 
 from moverl_gym.launch_args import CHOICES, SENSED_OBSTACLES
+
+#: The scene's rule for the hidden space's watch (moverl_planning_scene/src/hidden_space.cpp, applyClose): as far as
+#: something may come within the longest of the last WATCH_INTERVALS intervals between batches, times WATCH_MARGIN. A
+#: batch later than that closes "wider": every free cell the views did not look at counts as hidden.
+WATCH_INTERVALS, WATCH_MARGIN = 8, 1.25
+
+
+def closes_by_watch(batches) -> dict:
+    """batches: [(map time, cells its close turned stale)] in time order, one per batch. Splits the closes into those of
+    batches later than the watch made from the intervals before them covers, and the others: how many cells each
+    kind turned stale."""
+
+    def summary(turned):
+        return {
+            "closes": len(turned),
+            "turned_median": float(np.median(turned)) if turned else None,
+            "turned_max": int(max(turned)) if turned else None,
+            "over_100k": sum(t > 100_000 for t in turned),
+        }
+
+    times = [t for t, _ in batches]
+    intervals = np.diff(times)
+    later, others = [], []
+    for i in range(WATCH_INTERVALS + 1, len(batches)):
+        longest = float(max(intervals[i - 1 - WATCH_INTERVALS : i - 1]))
+        (later if intervals[i - 1] > WATCH_MARGIN * longest + 1e-9 else others).append(int(batches[i][1]))
+    return {"later_than_watch": summary(later), "others": summary(others)}
 
 
 def main(argv=None) -> int:
@@ -124,6 +152,10 @@ def main(argv=None) -> int:
         },
         "slowest": [],
     }
+    last_close = {}  # map time -> what its batch's close turned stale (the status after the close reports both)
+    for c in clouds:
+        last_close[c[3]] = c[5]
+    result["closes"] = closes_by_watch(sorted(last_close.items()))
     for k in np.argsort(-wall)[: args.slowest]:
         t0, t1, verdict, age, first = steps[k]
         during = [(round(c[0] - t0, 3), c[1], round(c[2] * 1e3, 1), c[4], c[5]) for c in clouds if t0 <= c[0] <= t1]
@@ -149,6 +181,11 @@ def main(argv=None) -> int:
     print("| camera | clouds | integration median (ms) | max (ms) |\n|---|---:|---:|---:|")
     for f, v in result["integration_ms"].items():
         print(f"| {f} | {v['clouds']} | {v['median']:.1f} | {v['max']:.0f} |")
+    for kind, c in result["closes"].items():
+        print(
+            f"closes, {kind.replace('_', ' ')}: {c['closes']}, cells turned stale median {c['turned_median']}, "
+            f"max {c['turned_max']}, over 100,000 in {c['over_100k']}"
+        )
     for s in result["slowest"]:
         print(
             f"slow step {s['ms']:.0f} ms (step {s['step']}{', after a reset' if s['first_of_episode'] else ''}), "

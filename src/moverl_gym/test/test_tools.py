@@ -209,13 +209,10 @@ def test_pushing_targets_penetrate_and_spread_over_objects():
 
 
 # ----------------------------------------------------------------------------- map wait probe
-def test_closes_by_watch_splits_the_closes_of_batches_later_than_the_watch():
+def test_closes_by_watch_splits_the_closes_the_scene_reports_beyond_their_watch():
     probe = _load("map_wait_probe")
     period = 1 / 30
-    times = [k * period for k in range(10)] + [9 * period + 3 * period, 12 * period + period]
-    turned = [0] * 10 + [500_000, 7]
-    out = probe.closes_by_watch(list(zip(times, turned)))
-    # The 11th batch came three periods after the one before, eight of one period: later than 1.25 x the longest.
-    assert out["later_than_watch"] == {"closes": 1, "turned_median": 500_000.0, "turned_max": 500_000, "over_100k": 1}
-    # The 10th (the first with eight intervals before it) and the 12th, one period after the one before, are within.
-    assert out["others"]["closes"] == 2 and out["others"]["turned_max"] == 7
+    batches = [(k * period, 0, False) for k in range(10)] + [(12 * period, 500_000, True), (13 * period, 7, False)]
+    out = probe.closes_by_watch(batches)
+    assert out["beyond_watch"] == {"closes": 1, "turned_median": 500_000.0, "turned_max": 500_000, "over_100k": 1}
+    assert out["others"] == {"closes": 11, "turned_median": 0.0, "turned_max": 7, "over_100k": 0}

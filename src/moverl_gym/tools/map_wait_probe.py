@@ -3,7 +3,8 @@
 wall time, verdict and map age, and each camera's cloud integration times (the planning scene's ~octomap_status, a
 batch's close included in its last cloud's), how many clouds and batches (instants) the map took in, and how many
 the cameras sent. The slowest steps are listed with the clouds integrated while they ran, and the closes are split into
-those of batches later than the hidden space's watch covers and the others, with the cells each turned stale.
+those the scene reports as later than their views' watch covered (OctomapStatus.beyond_watch) and the others, with the
+cells each turned stale, and how many batches had the watch widened before their views (watches_ahead).
 
     python src/moverl_gym/tools/map_wait_probe.py --world shared_bench --camera-rate 5 --safety ssm \\
         --strategy discard --steps 100 --goal-q -0.034 -0.489 -0.561 -2.95 -0.421 2.483 -0.2
@@ -26,16 +27,12 @@ import numpy as np
 
 from moverl_gym.launch_args import CHOICES, SENSED_OBSTACLES
 
-#: The scene's rule for the hidden space's watch (moverl_planning_scene/src/hidden_space.cpp, applyClose): as far as
-#: something may come within the longest of the last WATCH_INTERVALS intervals between batches, times WATCH_MARGIN. A
-#: batch later than that closes "wider": every free cell the views did not look at counts as hidden.
-WATCH_INTERVALS, WATCH_MARGIN = 8, 1.25
-
 
 def closes_by_watch(batches) -> dict:
-    """batches: [(map time, cells its close turned stale)] in time order, one per batch. Splits the closes into those of
-    batches later than the watch made from the intervals before them covers, and the others: how many cells each
-    kind turned stale."""
+    """batches: [(map time, cells its close turned stale, beyond_watch)] in time order, one per batch (the scene's
+    ~octomap_status after the close). Splits the closes into those the scene reports as later than their views' watch
+    covered (they count every free cell the views did not look at as hidden) and the others: how many cells each kind
+    turned stale."""
 
     def summary(turned):
         return {
@@ -45,13 +42,9 @@ def closes_by_watch(batches) -> dict:
             "over_100k": sum(t > 100_000 for t in turned),
         }
 
-    times = [t for t, _ in batches]
-    intervals = np.diff(times)
-    later, others = [], []
-    for i in range(WATCH_INTERVALS + 1, len(batches)):
-        longest = float(max(intervals[i - 1 - WATCH_INTERVALS : i - 1]))
-        (later if intervals[i - 1] > WATCH_MARGIN * longest + 1e-9 else others).append(int(batches[i][1]))
-    return {"later_than_watch": summary(later), "others": summary(others)}
+    later = [int(n) for _, n, beyond in batches if beyond]
+    others = [int(n) for _, n, beyond in batches if not beyond]
+    return {"beyond_watch": summary(later), "others": summary(others)}
 
 
 def main(argv=None) -> int:
@@ -104,7 +97,16 @@ def main(argv=None) -> int:
             "/planning_scene/octomap_status",
             OctomapStatus,
             lambda m: clouds.append(
-                (time.perf_counter(), m.sensor_frame, m.integration_time, m.map_time, m.hidden_cells, m.turned_stale)
+                (
+                    time.perf_counter(),
+                    m.sensor_frame,
+                    m.integration_time,
+                    m.map_time,
+                    m.hidden_cells,
+                    m.turned_stale,
+                    m.beyond_watch,
+                    m.watches_ahead,
+                )
             ),
             queue_size=1000,
         )
@@ -152,10 +154,12 @@ def main(argv=None) -> int:
         },
         "slowest": [],
     }
-    last_close = {}  # map time -> what its batch's close turned stale (the status after the close reports both)
+    last_close = {}  # map time -> what its batch's close turned stale, and whether it was beyond its watch
     for c in clouds:
-        last_close[c[3]] = c[5]
-    result["closes"] = closes_by_watch(sorted(last_close.items()))
+        last_close[c[3]] = (c[5], c[6])
+    result["closes"] = closes_by_watch([(t, *v) for t, v in sorted(last_close.items())])
+    # Batches whose watch the scene widened before their views (later after the one before than the watch covered).
+    result["watches_ahead"] = int(clouds[-1][7] - clouds[0][7]) if clouds else 0
     for k in np.argsort(-wall)[: args.slowest]:
         t0, t1, verdict, age, first = steps[k]
         during = [(round(c[0] - t0, 3), c[1], round(c[2] * 1e3, 1), c[4], c[5]) for c in clouds if t0 <= c[0] <= t1]
@@ -186,6 +190,7 @@ def main(argv=None) -> int:
             f"closes, {kind.replace('_', ' ')}: {c['closes']}, cells turned stale median {c['turned_median']}, "
             f"max {c['turned_max']}, over 100,000 in {c['over_100k']}"
         )
+    print(f"batches with the watch widened before their views: {result['watches_ahead']}")
     for s in result["slowest"]:
         print(
             f"slow step {s['ms']:.0f} ms (step {s['step']}{', after a reset' if s['first_of_episode'] else ''}), "

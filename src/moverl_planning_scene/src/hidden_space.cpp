@@ -426,7 +426,11 @@ bool OccupancyMap::beginView(double stamp, MapUpdate* close, const KnownFree* kn
   if (!options_.hidden_space) return false;
   bool closed = false;
   if (!std::isnan(batch_stamp_) && stamp > batch_stamp_) closed = closeBatch(close, stats, known_free);
-  if (std::isnan(batch_stamp_) && stamp > map_time_) batch_stamp_ = stamp;
+  if (std::isnan(batch_stamp_) && stamp > map_time_) {
+    batch_stamp_ = stamp;
+    // (A close returned here widens the watch for this batch when it is applied: applyClose.)
+    if (!closed && watchAhead()) updateWatched(true);
+  }
   recording_ = stamp == batch_stamp_;  // else late: it sees nothing free that another view may contradict
   return closed;
 }
@@ -454,6 +458,7 @@ bool OccupancyMap::closeBatch(MapUpdate* out, BatchStats* stats, const KnownFree
       // The blocks something may have come into since the batch before: the watched ones, or, when this batch came
       // later than the watch was made for, every block that near (what the views did not look at counts as hidden).
       const bool wider = cellsWithin(now - before) > watch_cells_;
+      bs.beyond_watch = wider;
       if (wider) dilateBlocks(blocksWithin(now - before), &reach_scratch_);
       std::int64_t at[3];
       bool reach_built = false;  // (made when the first hidden cell needs it)
@@ -540,7 +545,23 @@ void OccupancyMap::applyClose(const MapUpdate& update) {
     watch_cells_ = m;
   }
   if (std::isfinite(update.stamp)) map_time_ = std::max(map_time_, update.stamp);
+  resized = watchAhead() || resized;  // the next batch, when its first view closed this one
   updateWatched(resized || ++closes_since_full_watch_ >= kFullWatchEvery);
+}
+
+bool OccupancyMap::watchAhead() {
+  // The open batch comes later after the map's time than the watch covers (the integrator skipped instants): its
+  // views must look at every free cell something may have reached by then, else its close counts the ones they did
+  // not look at as hidden, seen free or not (the stale floods of docs/notes/ssm_research.md). A batch later than
+  // watch_time finds everything possibly occupied anyway (forget).
+  if (!hiddenSpaceActive() || watch_cells_ < 0 || std::isnan(batch_stamp_) || !std::isfinite(map_time_)) return false;
+  const double gap = batch_stamp_ - map_time_;
+  if (gap > options_.watch_time) return false;
+  const int needed = cellsWithin(gap);
+  if (needed <= watch_cells_) return false;
+  watch_cells_ = needed;
+  ++watches_ahead_;
+  return true;
 }
 
 void OccupancyMap::census(const Eigen::Vector3d& at, double radius, MapCensus* out) const {

@@ -819,6 +819,8 @@ void OctomapMonitor::publishStatus(const ros::Time& stamp, const std::string& se
   }
   s.hidden_cells = static_cast<uint32_t>(batch_stats_.hidden);
   s.turned_stale = static_cast<uint32_t>(batch_stats_.stale);
+  s.beyond_watch = batch_stats_.beyond_watch;
+  s.watches_ahead = static_cast<uint32_t>(map_->watchesAhead());
   s.sensor_frame = sensor_frame;
   const MapUpdateStats& u = update_.stats;
   s.points = static_cast<uint32_t>(u.points);

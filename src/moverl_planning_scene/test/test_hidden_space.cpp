@@ -201,6 +201,45 @@ TEST(HiddenSpace, ABatchLaterThanItsWatchCoversStaysSoundAndWidensTheWatch) {
   EXPECT_TRUE(map->stale(axis(20)));  // (19 x 0.02 m within 0.4 s)
 }
 
+TEST(HiddenSpace, ABatchLaterThanTheWatchHasItWidenedBeforeItsViewsAndTurnsNothingTheySawStale) {
+  // The integrator skips instants: a batch 0.2 s after the last, when the watch covers 0.125 s. Its views see the whole
+  // cone free (no robot in front): with the watch widened before them (beginView), they look at every cell something
+  // could have reached, and the close turns none of them stale. Were the watch not widened, the close would count the
+  // free cells 8-11 cells from the view's edges (looked at by no view) as hidden.
+  constexpr double kFast = 1.0;
+  for (bool open_by_next_view : {false, true}) {
+    SCOPED_TRACE(open_by_next_view ? "closed by the next instant's first view" : "closed by its last view");
+    auto map = makeMap(kFast);
+    double t = 0.0;
+    for (int k = 0; k < 10; ++k, t += kPeriod) batch(map.get(), t, false);
+    ASSERT_EQ(map->watchCells(), 7);
+    const double late = t - kPeriod + 0.2;
+    mps::BatchStats stats;
+    if (!open_by_next_view) {
+      batch(map.get(), late, false, nullptr, &stats);
+    } else {
+      // A view of the last instant opens a batch that the late batch's first view closes (path of the node).
+      mps::MapUpdate close, u;
+      ASSERT_FALSE(map->beginView(late - 0.2 + 1e-3, &close));  // (stamped after the map's time: a batch of its own)
+      view(map.get(), false, &u);
+      map->apply(u);
+      ASSERT_TRUE(map->beginView(late + 1e-3, &close, nullptr, &stats));
+      EXPECT_FALSE(stats.beyond_watch);
+      map->apply(close);  // the watch widens here, before the late batch's view
+      view(map.get(), false, &u);
+      map->apply(u);
+      ASSERT_TRUE(map->closeBatch(&close, &stats));
+      map->apply(close);
+    }
+    EXPECT_EQ(map->watchesAhead(), 1u);
+    EXPECT_FALSE(stats.beyond_watch);
+    EXPECT_FALSE(stats.forget);
+    EXPECT_EQ(stats.stale, 0u);
+    EXPECT_EQ(map->staleCount(), 0u);
+    EXPECT_EQ(map->watchCells(), 13);  // (then the history's 0.2 s x 1.25)
+  }
+}
+
 TEST(HiddenSpace, ALateViewSeesNothingFreeThatWasPossiblyOccupied) {
   auto map = makeMap();
   batch(map.get(), 0.0, false);

@@ -197,6 +197,11 @@ struct BatchStats {
   std::size_t hidden = 0;          ///< watched free cells no view of the batch saw
   std::size_t stale = 0;           ///< of those, the ones that turned possibly occupied
   bool forget = false;             ///< every free cell turned possibly occupied (the batch came too late)
+  /// The batch came later than its views' watch covered (they did not look at every cell something may have reached):
+  /// its close counted every free cell within reach that they did not look at as hidden. Sound, but it turns cells
+  /// the cameras saw free possibly occupied; beginView widens the watch first, so only a close computed before its
+  /// predecessor's close was applied does this.
+  bool beyond_watch = false;
 };
 
 /// \brief Occupancy grid in the robot base frame.
@@ -309,6 +314,8 @@ class OccupancyMap {
   std::size_t staleCount() const { return stale_cells_; }
   /// hidden_space: how far (cells, Chebyshev) from a possibly-occupied cell the views look at free cells (-1: off).
   int watchCells() const { return watch_cells_; }
+  /// hidden_space: how many batches came later than the watch covered and had it widened before their views.
+  std::size_t watchesAhead() const { return watches_ahead_; }
   /// \brief True when the cell containing p is such a cell.
   bool stale(const Eigen::Vector3d& p) const;
   /// \brief What the cells whose centre lies within `radius` of `at` (map frame) hold: free, seen occupied,
@@ -467,6 +474,9 @@ class OccupancyMap {
   void refreshFree(std::int64_t c);
   /// The apply() part of a batch's close.
   void applyClose(const MapUpdate& update);
+  /// Widen watch_cells_ to what the open batch's interval since the map's time lets something come (true if it did:
+  /// then updateWatched(true)), so that the batch's views look at every cell its close asks about.
+  bool watchAhead();
   /// hidden_space with a bound: the rule applies (unknown_occupied, speed bound > 0).
   bool hiddenSpaceActive() const {
     return options_.hidden_space && options_.unknown_occupied && options_.speed_bound > 0.0;
@@ -559,6 +569,7 @@ class OccupancyMap {
   std::vector<std::uint64_t> watch_scratch_a_, watch_scratch_b_;  ///< watchAll's bit sets
   static constexpr int kIntervals = 8;                            ///< the batches whose intervals size the watch
   double intervals_[kIntervals] = {};                             ///< s: the last batches' intervals (0: none yet)
+  std::size_t watches_ahead_ = 0;                                 ///< watchAhead's widenings so far
   GridReach reach_;                          ///< closeBatch's steps to the possibly-occupied cells (buildReach)
   std::vector<std::uint8_t> reach_scratch_;  ///< closeBatch's blocks, when a batch came later than the watch covers
   int closes_since_full_watch_ = 0;

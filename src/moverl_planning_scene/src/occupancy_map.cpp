@@ -140,6 +140,8 @@ std::unique_ptr<OccupancyMap> OccupancyMap::create(const OccupancyMapOptions& o,
   };
   if (!std::isfinite(o.resolution) || o.resolution <= 0.0) return bad("resolution must be > 0");
   if (!std::isfinite(o.max_range) || o.max_range <= 0.0) return bad("max_range must be > 0");
+  if (!std::isfinite(o.fixture_pullback) || o.fixture_pullback < 0.0 || o.fixture_pullback >= o.resolution)
+    return bad("fixture_pullback must be >= 0 and below the resolution");
   if (!probability(o.prob_hit) || o.prob_hit <= 0.5) return bad("prob_hit must be in (0.5, 1)");
   if (!probability(o.prob_miss) || o.prob_miss >= 0.5) return bad("prob_miss must be in (0, 0.5)");
   if (!probability(o.clamp_min) || !probability(o.clamp_max) || o.clamp_min >= o.clamp_max) {
@@ -335,8 +337,14 @@ void OccupancyMap::collectEndCells(const std::vector<Eigen::Vector3d>& points,
   //    a run of points per cell), in parts on the pool; then the table, in the points' order.
   point_cell_.resize(points.size());
   point_flags_.resize(points.size());
+  // A beam's end: cut at max_range (flags 0), or a fixture point pulled back toward the sensor (fixture_pullback).
   auto end_of = [&](const Eigen::Vector3d& p, std::uint8_t flags) -> Eigen::Vector3d {
-    return flags == 0 ? Eigen::Vector3d(origin + (p - origin) * (options_.max_range / (p - origin).norm())) : p;
+    if (flags == 0) return origin + (p - origin) * (options_.max_range / (p - origin).norm());
+    if (flags == kFixture && options_.fixture_pullback > 0.0) {
+      const double d = (p - origin).norm();
+      return d > options_.fixture_pullback ? Eigen::Vector3d(p - (p - origin) * (options_.fixture_pullback / d)) : p;
+    }
+    return p;
   };
   // Without beams a part also folds its points into runs (the points that end in one cell one after another, invalid
   // points and points without a cell skipped: neighbouring pixels), written over its own first elements of point_cell_

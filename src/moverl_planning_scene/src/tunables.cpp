@@ -147,6 +147,7 @@ void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o) {
   o->clamp_max = t.require<double>("octomap/clamp_max");
   o->occupancy_threshold = t.require<double>("octomap/occupancy_threshold");
   o->watch_time = t.require<double>("octomap/watch_time");
+  o->fixture_pullback = t.require<double>("octomap/static_filter_padding");  // (the fixture points' distance)
 }
 
 void readSensedMarginTunables(const Tunables& t, SensedMarginRule* rule) {

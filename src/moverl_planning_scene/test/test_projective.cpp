@@ -157,6 +157,61 @@ TEST(Projective, SeesFreeWhatLiesBeforeAWallAndNothingBehindIt) {
   EXPECT_FALSE(map->observed(Eigen::Vector3d(0.5, 0.9, 0.01)));   // outside the view (half angle ~38 deg)
 }
 
+TEST(Projective, TheLayerRestingOnAFixtureIsSeenFreeAgainOnceWhatLayThereLeft) {
+  // A fixture's top (a table at z = -0.2, a cell boundary) seen obliquely, its points 0.1 mm inside it (the camera's
+  // depth error): they end in the fixture's own cells, none in the layer resting on it (z -0.2 to -0.18), and
+  // projection never sees that layer free (the pixels just below a cell's see the fixture in front of its far
+  // corner). A hand lay in the layer (hit); then only the fixture is seen. With fixture_pullback (the scene sets it
+  // to octomap/static_filter_padding) the fixture's points end 3 mm before themselves toward the camera, in the layer:
+  // seen down to the surface, free again. Without it the layer stays occupied for good.
+  const double top = -0.2001, far = 3.5;
+  auto table = [&](int, int v) {
+    const double z = v > kCamera.cy ? -top * kCamera.fy / (v - kCamera.cy) : far;
+    return z < 2.9 ? z : far;
+  };
+  const auto xyz = image(kCamera, table);
+  const Eigen::Isometry3d pose = lookingAlongX(Eigen::Vector3d(0.0, 0.0, 0.0));
+  const std::vector<Eigen::Vector3d> points = mapPoints(xyz, pose);
+  const std::vector<std::uint8_t> fixture(points.size(), mps::kPointOnFixture);
+  const Eigen::Vector3d layer(0.99, 0.01, -0.19);  // (pixel 39, 40 sees the table at x 0.991, y 0.0099)
+  for (double pullback : {0.0, 0.003}) {
+    SCOPED_TRACE(pullback);
+    mps::OccupancyMapOptions o = mps::panda::mapOptions();
+    o.resolution = 0.02;
+    o.max_range = 3.0;
+    o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+    o.fixture_pullback = pullback;
+    std::string error;
+    auto map = mps::OccupancyMap::create(o, &error);
+    ASSERT_TRUE(map) << error;
+    {  // the hand in the layer
+      std::vector<Eigen::Vector3d> with_hand = points;
+      std::vector<std::uint8_t> mask = fixture;
+      with_hand.push_back(layer);
+      mask.push_back(mps::kPointObstacle);
+      mps::MapUpdate u;
+      map->computeUpdateProjective(with_hand, mask, depths(xyz), {}, kCamera, pose, &u);
+      map->apply(u);
+      ASSERT_TRUE(map->occupied(layer));
+    }
+    for (int k = 0; k < 6; ++k) {  // then the table alone
+      mps::MapUpdate u;
+      map->computeUpdateProjective(points, fixture, depths(xyz), {}, kCamera, pose, &u);
+      map->apply(u);
+    }
+    EXPECT_EQ(map->occupied(layer), pullback == 0.0);
+    EXPECT_FALSE(map->occupied(layer + Eigen::Vector3d(0.0, 0.0, 0.06)));  // above it: seen free either way
+  }
+  mps::OccupancyMapOptions o = mps::panda::mapOptions();
+  o.resolution = 0.02;
+  o.max_range = 3.0;
+  o.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(-0.5, -1.0, -1.0), Eigen::Vector3d(2.5, 1.0, 1.0));
+  o.fixture_pullback = 0.02;
+  std::string error;
+  EXPECT_FALSE(mps::OccupancyMap::create(o, &error));  // a pullback of a cell or more is refused
+  EXPECT_NE(error.find("fixture_pullback"), std::string::npos) << error;
+}
+
 TEST(Projective, AHitCellOrAFixturesEndCellIsNotSeenFreeByTheProjectionToo) {
   // A wall at x = 1.5 in every pixel; besides its points, an obstacle's point and a fixture's point in front of it,
   // on rays that see past them (the depths say free there). The obstacle's cell is hit and stays so (occupied wins);

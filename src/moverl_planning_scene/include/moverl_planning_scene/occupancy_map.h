@@ -93,6 +93,12 @@ struct OccupancyMapOptions {
   double clamp_min = kUnset;   ///< clamping of cell probabilities (lets cells change state quickly)
   double clamp_max = kUnset;
   double occupancy_threshold = kUnset;  ///< a cell above this probability is an obstacle
+  /// m: how far from a static object's surface its points may lie (octomap/static_filter_padding: the points the
+  /// caller masks kPointOnFixture). A fixture point's beam ends this much before it, toward the sensor: a cell resting
+  /// on the surface (a table top's first layer) is then one where its points end, seen down to the surface and free,
+  /// whichever side of the cell boundary the camera's depth put them. Else such a cell, once something lay there, is
+  /// never seen free again (projection needs every depth beyond a cell). 0: the points' own cells.
+  double fixture_pullback = 0.0;
   /// Only this box (map frame) is mapped: beams are clipped to it, hits outside it are ignored. Required (the dense
   /// grid covers it). The node sets it to the robot's padded reach plus the largest predictive margin a check may use
   /// (nothing outside can touch the robot within the margin's time).

@@ -60,7 +60,8 @@ class YamlTunables : public Tunables {
 void readSceneTunables(const Tunables& t, PlanningSceneOptions* o);
 
 /// \brief Fill the occupancy map's tunables (octomap/resolution, max_range, prob_hit, prob_miss, clamp_min, clamp_max,
-///        occupancy_threshold, watch_time). Throws std::runtime_error naming a missing key.
+///        occupancy_threshold, watch_time; static_filter_padding as fixture_pullback). Throws std::runtime_error naming
+///        a missing key.
 void readOccupancyMapTunables(const Tunables& t, OccupancyMapOptions* o);
 
 /// \brief Fill the sensed margin's rule (octomap/safety, speed_bound, latency, plan_horizon, max_age, ssm/intrusion,

@@ -358,7 +358,7 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
       findLastFree(/*goal_checked=*/false, out);
       out->path_check_time = since(t0);
     }
-    if (!measured) retreat(req, margin.end, deadline, out);
+    if (!measured) retreat(req, margin.end, margin.hold_when_threatened, deadline, out);
     return;
   }
   // Straight path (interior states only: both ends are free).
@@ -403,10 +403,11 @@ void PlanningScene::validateMotion(const MotionRequest& req, MotionCheck* out, c
     }
   }
   out->message = m.str();
-  if (!out->replanned && !measured) retreat(req, margin.end, deadline, out);
+  if (!out->replanned && !measured) retreat(req, margin.end, margin.hold_when_threatened, deadline, out);
 }
 
-void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::time_point deadline, MotionCheck* out) {
+void PlanningScene::retreat(const MotionRequest& req, double end_margin, bool hold, Clock::time_point deadline,
+                            MotionCheck* out) {
   FclCollisionChecker& c = *checker_;
   if (req.retreat_reach.empty() || !c.hasOccupancy()) return;
   const auto t0 = Clock::now();
@@ -435,6 +436,7 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, Clock::
     out->message = m.str();
     out->path_check_time += since(t0);
   };
+  if (hold) return done(" (safety ssm): held still, as a person may touch a robot at rest but not one backing away");
   if (!(seen > 0.0)) return done(" touching them: no move is known to back away, held");
   // The clearance from every occupied cell, seen or unseen: a retreat ends clearer of them, and no state of it comes
   // closer to any of them than the robot stands, so nothing (the seen person, or one hidden in unseen space) can reach

@@ -101,6 +101,7 @@ double sensedMapAge(const std::vector<double>& last_cloud_stamps, double stamp, 
 bool SensedMarginRule::compute(double map_age, double duration, SensedMargins* out, std::string* why) const {
   out->map_age = map_age;
   out->plan_horizon = plan_horizon;
+  out->hold_when_threatened = safety == Safety::kSsm;
   if (!std::isfinite(map_age)) {  // blind, even without an age limit
     *why = "no camera has been seen since the world's motions restarted (or at all): nothing is known to be free";
     return false;

@@ -627,6 +627,23 @@ TEST_F(PandaOctomap, ARobotRestingWithinTheMarginBacksAway) {
   scene_->validateMotion(req, &mc, &sm);
   EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;  // the goal is checked first
   EXPECT_EQ(mc.retreat_state.size(), 7u) << mc.message;
+  // safety:=ssm (SensedMargins::hold_when_threatened): threatened, the robot holds still. The move that backs away
+  // is refused (a person may touch a robot at rest, not one moving), and no retreat is proposed.
+  {
+    mps::SensedMargins ssm = sm;
+    ssm.hold_when_threatened = true;
+    mps::MotionRequest held = req;
+    held.goal = back;
+    scene_->validateMotion(held, &mc, &ssm);
+    EXPECT_NE(mc.outcome, mps::MotionOutcome::kValid) << mc.message;
+    EXPECT_TRUE(mc.threatened) << mc.message;
+    EXPECT_TRUE(mc.retreat_state.empty());
+    EXPECT_NE(mc.message.find("held still"), std::string::npos) << mc.message;
+    held.goal = closer;
+    scene_->validateMotion(held, &mc, &ssm);
+    EXPECT_EQ(mc.outcome, mps::MotionOutcome::kPoseCollision) << mc.message;
+    EXPECT_TRUE(mc.retreat_state.empty()) << mc.message;
+  }
   // What a retreat costs (printed, not asserted).
   const auto t0 = Clock::now();
   for (int k = 0; k < 20; ++k) scene_->validateMotion(req, &mc, &sm);
@@ -1114,6 +1131,7 @@ TEST(SensedMargin, AgeAndRule) {
   mps::SensedMargins m;
   std::string why;
   ASSERT_TRUE(rule.compute(0.1, 0.05, &m, &why)) << why;
+  EXPECT_FALSE(m.hold_when_threatened);  // separation: a threatened robot may back away
   EXPECT_NEAR(m.start, 1.6 * 0.13, 1e-12);
   EXPECT_NEAR(m.end, 1.6 * 0.18, 1e-12);
   EXPECT_EQ(m.plan, inf);  // 1.6 x 1.13 = 1.81 m > max_margin: no plan can be checked, straight moves can
@@ -1175,6 +1193,7 @@ TEST(SensedMargin, SsmUsesIso13855WhateverTheSpeedBound) {
   mps::SensedMargins m;
   std::string why;
   ASSERT_TRUE(rule.compute(0.033, 0.05, &m, &why)) << why;
+  EXPECT_TRUE(m.hold_when_threatened);  // ssm: a threatened robot holds still
   EXPECT_NEAR(m.start, 2.0 * 0.063 + 0.048 + 0.01, 1e-12);
   EXPECT_NEAR(m.end, 2.0 * 0.113 + 0.048 + 0.01, 1e-12);  // 0.284 m: within reach, the hand's speed
   EXPECT_EQ(m.plan, inf);                                 // 1.6 x 1.063 + C: beyond max_margin, no plan

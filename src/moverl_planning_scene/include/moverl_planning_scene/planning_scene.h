@@ -55,6 +55,9 @@ struct SensedMargins {
   /// safety:=ssm with a tracker: the tracked parts the start's and the end's checks use, for the move's window's end
   /// (tracked_parts.h; a plan's checks use none: ISO's margin)
   std::vector<ExplainedPart> parts;
+  /// safety:=ssm: a threatened robot holds still, neither taking a commanded move that backs away nor proposing one
+  /// (a person may touch a robot at rest, never a moving one: a hand at 2.0 m/s catches an arm backing away).
+  bool hold_when_threatened = false;
 };
 
 /// \brief One validateMotion question (moverl_msgs/ValidateMotion's request, whose comments say more).
@@ -164,9 +167,10 @@ class PlanningScene {
   void findLastFree(bool goal_checked, MotionCheck* out);
   /// Retreat: after the outcome of a request with retreat_reach is known (start_, goal_ set), decide whether the
   /// robot is threatened (a cell seen occupied within its padding + end_margin) and, if so, accept the commanded move
-  /// when it backs away or propose one that does (out->retreat_state). Stops (holding) at `deadline`.
-  void retreat(const MotionRequest& request, double end_margin, std::chrono::steady_clock::time_point deadline,
-               MotionCheck* out);
+  /// when it backs away or propose one that does (out->retreat_state). Stops (holding) at `deadline`. hold: it holds
+  /// when threatened (SensedMargins::hold_when_threatened).
+  void retreat(const MotionRequest& request, double end_margin, bool hold,
+               std::chrono::steady_clock::time_point deadline, MotionCheck* out);
   /// The clearance (m) of q from every occupied cell when it is at least `clearance` + kRetreatGain, else less.
   double clearanceAbove(const std::vector<double>& q, double clearance);
   /// True when the straight move start_ -> q backs away: q free of self collisions and the world objects, its path

@@ -426,9 +426,6 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, bool ho
   // its own shadow, the KUKA iiwa searched for a retreat at every step and found none).
   if (c.occupancyFree(start_.data(), CellClass::kSeen)) return;  // resting here is covered by the margin
   out->threatened = true;
-  // Not free at padding + end margin: the clearance is below that (plus the inflation's rounding).
-  const double reach = c.options().padding + end_margin + FclCollisionChecker::kMarginStep;
-  const double seen = c.occupancyDistance(start_.data(), 0.0, reach, CellClass::kSeen);
   std::ostringstream m;
   m << out->message << (out->message.empty() ? "" : "; ") << "the robot rests within the sensed margin of seen cells";
   auto done = [&](const char* why) {
@@ -437,6 +434,9 @@ void PlanningScene::retreat(const MotionRequest& req, double end_margin, bool ho
     out->path_check_time += since(t0);
   };
   if (hold) return done(" (safety ssm): held still, as a person may touch a robot at rest but not one backing away");
+  // Not free at padding + end margin: the clearance is below that (plus the inflation's rounding).
+  const double reach = c.options().padding + end_margin + FclCollisionChecker::kMarginStep;
+  const double seen = c.occupancyDistance(start_.data(), 0.0, reach, CellClass::kSeen);
   if (!(seen > 0.0)) return done(" touching them: no move is known to back away, held");
   // The clearance from every occupied cell, seen or unseen: a retreat ends clearer of them, and no state of it comes
   // closer to any of them than the robot stands, so nothing (the seen person, or one hidden in unseen space) can reach

@@ -5,6 +5,7 @@ Gymnasium's and SB3's check_env, seed determinism, the reward and success rules,
 moving obstacles the env observes are where the simulator has them."""
 
 import time
+import types
 
 import gymnasium as gym
 import numpy as np
@@ -234,6 +235,43 @@ def test_starts_are_sampled_over_the_whole_range_when_home_is_blocked():
     try:
         with pytest.raises(MoveRLError, match="20 random samples near home nor as many over the joint range"):
             env.reset(seed=0)
+    finally:
+        env.close()
+
+
+class _HomeUnseenUntilLooked(_HomeBlocked):
+    """A teleporting backend with a sensed map (as a freshly launched sensed graph): the states near home are refused
+    until the robot has been stood at home, where the cameras see around it."""
+
+    teleports = True
+
+    def __init__(self):
+        super().__init__()
+        self.looked = False
+
+    def sensed_census(self):
+        return types.SimpleNamespace(cells=0, unknown_occupied=True, hidden=0)  # a sensed map (it tells nothing)
+
+    def reset(self, q):
+        if q is not None and np.allclose(q, self.home):
+            self.looked = True
+        return super().reset(q)
+
+    def check_state(self, q):
+        return (self.looked or np.max(np.abs(np.asarray(q) - np.asarray(self.home))) >= 0.5) and super(
+            _HomeBlocked, self
+        ).check_state(q)
+
+
+def test_a_sensed_map_that_has_not_seen_home_yet_looks_again_before_starting_far_from_home():
+    """No start near home free in a sensed map that can look again: the robot is stood at home and the start is
+    sampled near home, not over the whole joint range (a first episode far from home was held still)."""
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=_HomeUnseenUntilLooked(), shield=False)
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        assert u._backend.looked
+        assert np.max(np.abs(u.q - np.asarray(u._backend.home))) <= u.config.start_noise + 1e-9
     finally:
         env.close()
 

@@ -468,12 +468,15 @@ class MoveRLReachEnv(gym.Env):
         turns possibly occupied (docs/sensing.md, "Space no camera sees"): the arm where an episode ended can hide the
         space next to every start. A simulator may stand the robot elsewhere (it refuses poses that touch or will be
         walked into by an obstacle, from its ground truth); its cameras then see what the arm hid, and the starts are
-        sampled again from those views.
+        sampled again from those views. There, when no start near home is free, the cameras look again before any
+        start over the whole joint range is tried (a freshly launched graph's map has seen little around the robot's
+        first pose, and a start far from home held the first episode still: 1 of 300 in docs/sensed_person).
         """
+        can_look = getattr(self._backend, "teleports", False) and self._backend.sensed_census() is not None
         try:
-            return self._sample_start(near_home=near_home)
+            return self._sample_start(near_home=near_home, over_range=not (can_look and near_home))
         except MoveRLError:
-            if not getattr(self._backend, "teleports", False) or self._backend.sensed_census() is None:
+            if not can_look:
                 raise
         lo, hi = self.limits.lower, self.limits.upper
         for k in range(self.config.start_sampling_attempts):
@@ -504,17 +507,24 @@ class MoveRLReachEnv(gym.Env):
         goal, self.goal_configuration = found
         return goal
 
-    def _sample_start(self, near_home: bool = True) -> np.ndarray:
+    def _sample_start(self, near_home: bool = True, over_range: bool = True) -> np.ndarray:
         """A random collision-free start not at the goal (moverl_gym.sampling; config/env.yaml: start_noise around
-        the robot's home, then, or when near_home is false, uniform)."""
+        the robot's home, then (unless over_range is false), or when near_home is false, uniform)."""
         noise = self.config.start_noise if near_home else 0.0
         n = self.config.start_sampling_attempts
         q = sample_start(self.np_random, self._backend, self.limits.lower, self.limits.upper, self._home, noise, n,
-                         lambda ee: self.task.is_success(self.task.distance(ee)))  # fmt: skip
+                         lambda ee: self.task.is_success(self.task.distance(ee)), over_range)  # fmt: skip
         if q is None:
             raise NoFreeConfiguration(
                 f"no collision-free start configuration found in {n} random samples "
-                f"{'near home nor as many ' if noise > 0 else ''}over the joint range of world '{self.world_name}'"
+                + (
+                    "over the joint range "
+                    if noise <= 0
+                    else "near home nor as many over the joint range "
+                    if over_range
+                    else "near home "
+                )
+                + f"of world '{self.world_name}'"
                 f"{self._unseen_reason()}"
             )
         return q

@@ -42,10 +42,11 @@ def sample_goal(rng, backend, lower, upper, home, noise: float, attempts: int, r
     return None
 
 
-def sample_start(rng, backend, lower, upper, home, noise: float, attempts: int, at_goal):
-    """A free configuration from at most `attempts` random ones within +-noise rad of home (noise > 0), then as many
-    over the joint range, whose end effector's (x, y, z) is not at_goal; None when there is none."""
-    ranges = [(np.asarray(lower, dtype=float), np.asarray(upper, dtype=float))]
+def sample_start(rng, backend, lower, upper, home, noise: float, attempts: int, at_goal, over_range: bool = True):
+    """A free configuration from at most `attempts` random ones within +-noise rad of home (noise > 0), then (unless
+    over_range is false) as many over the joint range, whose end effector's (x, y, z) is not at_goal; None when there
+    is none."""
+    ranges = [(np.asarray(lower, dtype=float), np.asarray(upper, dtype=float))] if over_range or noise <= 0 else []
     if noise > 0:
         ranges.insert(0, _near_home(lower, upper, home, noise))
     for a, b in ranges:

@@ -22,7 +22,9 @@ to be held.
 from __future__ import annotations
 
 import argparse
+import collections
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -59,6 +61,7 @@ def worker(args) -> dict:
     )
     u = env.unwrapped
     fixed = {"goal": u.task.goal.copy()} if goal_q is not None else {}  # the world's goal, not its goal_region
+    reacher = CartesianReacher(args.robot, args.world, u.scaler.max_delta) if args.policy == "cartesian" else None
     episodes, t0, steps = [], time.perf_counter(), 0
     try:
         for ep in range(args.episodes):
@@ -67,14 +70,20 @@ def worker(args) -> dict:
             if target is None:
                 raise SystemExit(f"world {args.world!r} has no goal_region: give --goal-q")
             verdicts, contacts, moving, closest, reached_at = {}, 0, 0, float("inf"), None
+            refusals = collections.Counter()  # the discarded steps by what the shield's message names
             done = False
             while not done:
-                d = target - u.q[: len(target)]
-                action = np.clip(d / max(float(np.abs(d).max()), 1e-9), -1.0, 1.0).astype(np.float32)
+                if reacher is not None:
+                    action = reacher.action(u.q[: len(target)], u.task.goal)
+                else:
+                    d = target - u.q[: len(target)]
+                    action = np.clip(d / max(float(np.abs(d).max()), 1e-9), -1.0, 1.0).astype(np.float32)
                 _, _, terminated, truncated, info = env.step(action)
                 steps += 1
                 done = terminated or truncated
                 verdicts[info["verdict"]] = verdicts.get(info["verdict"], 0) + 1
+                if info["verdict"].startswith("discarded"):
+                    refusals[refusal_kind(info.get("message", ""))] += 1
                 contacts += max(info.get("contacts", 0), 0)
                 moving += max(info.get("contacts_moving", 0), 0)
                 closest = min(closest, float(info["distance"]))
@@ -91,11 +100,60 @@ def worker(args) -> dict:
                     "contacts_moving": moving,
                     "goal": [float(v) for v in u.task.goal],
                     "goal_q": [float(v) for v in target],
+                    "refusals": dict(refusals.most_common()),
                 }
             )
     finally:
         env.close()
+        if reacher is not None:
+            reacher.close()
     return {"episodes": episodes, "steps_per_s": steps / (time.perf_counter() - t0)}
+
+
+def refusal_kind(message: str) -> str:
+    """What a shield message refused, without its links and numbers: its first clause up to the colon, the world
+    objects it names (table, octomap, ...), and "held still" when the robot held (e.g. "goal collides with the world:
+    octomap, table; held still"), so that an episode's refusals can be counted by kind."""
+    head, _, rest = message.partition(":")
+    objects = sorted(set(re.findall(r"\w+ / (\w+)", rest.split(";")[0]))) if "world" in head else []
+    return head + (": " + ", ".join(objects) if objects else "") + ("; held still" if "held still" in message else "")
+
+
+class CartesianReacher:
+    """--policy cartesian: the end effector (the robot config's ee_link) driven straight at the goal. The joint step
+    is the damped least-squares solution of J dq = goal - ee (PyBullet's Jacobian, in the simulator the node runs),
+    scaled down to action 1 on its largest joint when it is longer than one step. Unlike the joint policy it does not
+    swing the base around to a goal configuration sampled anywhere in the joint limits."""
+
+    def __init__(self, robot: str, world: str, max_delta, damping: float = 0.05):
+        from moverl_gym.paths import robot_config_file, world_file
+        from moverl_sim.robot_config import load_robot_config
+        from moverl_sim.settings import simulator_for
+        from moverl_sim.world import load_world
+
+        config = load_robot_config(robot_config_file(robot))
+        self.sim = simulator_for(config, load_world(world_file(world)))
+        self.max_delta, self.damping = np.asarray(max_delta, dtype=float), damping
+        p, body = self.sim.client, self.sim.robot
+        self._ee = self.sim.link_index[config["ee_link"]]
+        self._movable = [j for j in range(p.getNumJoints(body)) if p.getJointInfo(body, j)[2] != p.JOINT_FIXED]
+        self._columns = [self._movable.index(j) for j in self.sim.joint_indices]
+
+    def action(self, q, goal) -> np.ndarray:
+        sim, p, body = self.sim, self.sim.client, self.sim.robot
+        sim.reset_robot(q)
+        ee = np.asarray(p.getLinkState(body, self._ee, computeForwardKinematics=True)[4])
+        positions = [p.getJointState(body, j)[0] for j in self._movable]
+        zeros = [0.0] * len(positions)
+        jac = np.asarray(p.calculateJacobian(body, self._ee, [0.0, 0.0, 0.0], positions, zeros, zeros)[0])
+        jac = jac[:, self._columns]
+        e = np.asarray(goal[:3], dtype=float) - ee
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + self.damping**2 * np.eye(3), e)
+        a = dq / self.max_delta
+        return (a / max(1.0, float(np.abs(a).max()))).astype(np.float32)
+
+    def close(self):
+        self.sim.close()
 
 
 def goal_clearance(robot: str, world: str, goal_q) -> dict:
@@ -148,6 +206,15 @@ def by_clearance(episodes) -> list:
     return out
 
 
+def misses_by_refusal(episodes) -> dict:
+    """{refusal kind: missed episodes} by the kind most of a missed episode's discarded steps got ("none": it was
+    never refused, the time ran out)."""
+    kinds = collections.Counter(
+        max(e["refusals"], key=e["refusals"].get) if e["refusals"] else "none" for e in episodes if not e["success"]
+    )
+    return dict(kinds.most_common())
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--robot", default="panda", help="config/robots/<robot>.yaml")
@@ -177,6 +244,13 @@ def main(argv=None) -> int:
         default=[""],
         help="with ssm: the people unmonitored or tracked (launch argument people; tracked runs the simulator's "
         "tracker, obstacle_poses:=tracker), each in its own graph (default: config/planning_scene.yaml's)",
+    )
+    p.add_argument(
+        "--policy",
+        choices=("joint", "cartesian"),
+        default="joint",
+        help="the scripted policy: joint drives the joints straight at the goal configuration; cartesian drives the "
+        "end effector straight at the goal (CartesianReacher; region goals only)",
     )
     p.add_argument("--shield-off", action="store_true", help="add the same policy with the shield off (a baseline)")
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock (default: lockstep)")
@@ -230,6 +304,7 @@ def main(argv=None) -> int:
                 "verdicts": dict(sorted(verdicts.items())),
                 "steps_per_s": r["steps_per_s"],
                 "reached_by_clearance": by_clearance(eps),
+                "misses_by_refusal": misses_by_refusal(eps),
                 "per_episode": eps,
             }
         )
@@ -244,9 +319,14 @@ def main(argv=None) -> int:
         "",
         "    " + command,
         "",
-        "A scripted policy drives the joints straight at the goal configuration (max-norm action 1 toward it) and "
-        "keeps pushing while the shield holds the arm. reached: episodes whose end effector came within the task's "
-        "goal tolerance; steps to goal: mean over those; closest: the smallest distance to the goal, mean over "
+        (
+            "A scripted policy drives the end effector straight at the goal (CartesianReacher: damped least squares, "
+            "at most action 1 per joint) "
+            if args.policy == "cartesian"
+            else "A scripted policy drives the joints straight at the goal configuration (max-norm action 1 toward it) "
+        )
+        + "and keeps pushing while the shield holds the arm. reached: episodes whose end effector came within the "
+        "task's goal tolerance; steps to goal: mean over those; closest: the smallest distance to the goal, mean over "
         "episodes. contacts: ground truth, of them moving: while the robot moved (safety ssm allows the others). "
         "safety off: the shield off (the world file's objects unchecked).",
         "",
@@ -273,6 +353,12 @@ def main(argv=None) -> int:
             f"{r['closest_mean']:.3f} | {r['contacts']} | {r['contacts_moving']} | {verdicts} | "
             f"{r['steps_per_s']:.1f} | {' · '.join(f'{a}/{b}' for a, b in r['reached_by_clearance'])} |"
         )
+    if any(r["misses_by_refusal"] for r in rows):
+        lines += ["", "Missed episodes by the refusal most of their discarded steps got:", ""]
+        for r in rows:
+            if r["misses_by_refusal"]:
+                kinds = "; ".join(f"{k} **{v}**" for k, v in r["misses_by_refusal"].items())
+                lines.append(f"- {r['camera_rate']:g} Hz, {r['safety']}, {r['people']}: {kinds}")
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

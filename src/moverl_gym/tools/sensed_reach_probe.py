@@ -1,10 +1,15 @@
 #!/usr/bin/env python3
 """Can the goal be reached at all in the sensed mode? A scripted policy drives the joints straight at a goal
-configuration and keeps pushing while the shield holds the arm; per camera rate in simulated time and per safety
-definition (launch argument safety), against the same policy with the shield off.
+configuration (--policy joint) or the end effector straight at the goal (--policy cartesian) and keeps pushing while
+the shield holds the arm; per camera rate in simulated time and per safety definition (launch argument safety),
+against the same policy with the shield off. Each missed episode is counted by the refusal most of its discarded
+steps got (the table, the map, a self collision, ...).
 
     python src/moverl_gym/tools/sensed_reach_probe.py --world human --camera-rates 2 5 10 \
         --goal-q -0.022 0.052 0.023 -2.379 -0.002 2.431 0.003 --out docs/sensed_person/reach_probe
+    python src/moverl_gym/tools/sensed_reach_probe.py --world shared_bench --camera-rates 30 --mode realtime \
+        --safety ssm --people unmonitored tracked --shield-off --policy cartesian --episodes 300 \
+        --out docs/sensed_person/shared_bench_cartesian_realtime_300
     python src/moverl_gym/tools/sensed_reach_probe.py --world shared_bench --camera-rates 30 --mode realtime \
         --safety separation ssm --shield-off --goal-q 0.024 -0.539 -0.416 -2.944 -0.319 2.418 -0.096
 
@@ -250,7 +255,7 @@ def main(argv=None) -> int:
         choices=("joint", "cartesian"),
         default="joint",
         help="the scripted policy: joint drives the joints straight at the goal configuration; cartesian drives the "
-        "end effector straight at the goal (CartesianReacher; region goals only)",
+        "end effector straight at the goal (CartesianReacher)",
     )
     p.add_argument("--shield-off", action="store_true", help="add the same policy with the shield off (a baseline)")
     p.add_argument("--mode", choices=CHOICES["mode"], default=None, help="the simulator's clock (default: lockstep)")

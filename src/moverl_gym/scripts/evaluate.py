@@ -144,6 +144,7 @@ def main(argv=None) -> int:
                 ep["return"] += float(reward)
                 ep["length"] += 1
                 ep["contacts"] += max(info.get("contacts", 0), 0)
+                ep["contacts_moving"] += max(info.get("contacts_moving", 0), 0)  # of them, while the robot moved
                 ep["interventions"] += int(bool(info.get("discarded")))
                 if info.get("discarded"):
                     ep[info.get("verdict", "discarded")] += 1  # by verdict: discarded_pose, ..., discarded_unseen
@@ -183,6 +184,7 @@ def main(argv=None) -> int:
         "contacts_total": int(col("contacts").sum()),
         "contacts_per_episode": float(col("contacts").mean()),
         "episodes_with_contacts": int((col("contacts") > 0).sum()),
+        "contacts_moving_total": int(col("contacts_moving").sum()),
         "interventions_total": int(col("interventions").sum()),
         "interventions_per_episode": float(col("interventions").mean()),
         "replanned_total": int(col("replanned").sum()),
@@ -221,7 +223,8 @@ def main(argv=None) -> int:
     )
     print(
         f"ground-truth contacts: {result['contacts_total']} total, {result['contacts_per_episode']:.2f} per "
-        f"episode ({result['episodes_with_contacts']} episodes with contacts)"
+        f"episode ({result['episodes_with_contacts']} episodes with contacts; {result['contacts_moving_total']} while "
+        "the robot moved)"
     )
     print(
         f"shield interventions (discarded): {result['interventions_total']} "

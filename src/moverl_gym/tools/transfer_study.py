@@ -43,17 +43,40 @@ from moverl_gym.workers import run_logged
 
 REPO = Path(__file__).resolve().parents[3]
 SCRIPTS = REPO / "src" / "moverl_gym" / "scripts"
-ENV = "MoveRL/PandaReachHuman-v0"
 ISO_WORLD = REPO / "src" / "moverl_gym" / "test" / "worlds" / "human_iso_speed.yaml"
 CELL = ["--obstacles", "sensed", "--launch", "camera_rate=30", "--launch", "obstacle_poses=tracker", "--launch",
         "mode=realtime"]  # fmt: skip
-CONDITIONS = {
-    "world_file": ("the world file, lockstep (as trained)", []),
-    "cell": ("cameras at 30 Hz + tracker, real time", CELL),
-    "cell_iso": ("the cell with ISO's 1.6 m/s speed bound", [*CELL, "--world", str(ISO_WORLD)]),
-}
-METRICS = ("success_rate", "contacts_total", "steps_per_second", "discarded_unseen_total", "steps_with_lost_tracks",
-           "mean_track_age", "interventions_per_episode", "mean_length")  # fmt: skip
+SSM = ["--obstacles", "sensed", "--launch", "camera_rate=30", "--launch", "mode=realtime", "--launch", "safety=ssm"]
+#: --scenario: the env id trained on, the conditions evaluated ({name: (what it is, evaluate.py's arguments)}), the
+#: condition the others' success is compared with, and whether a policy is also trained in the sensed mode.
+SCENARIOS = {
+    "human": dict(
+        env="MoveRL/PandaReachHuman-v0",
+        conditions={
+            "world_file": ("the world file, lockstep (as trained)", []),
+            "cell": ("cameras at 30 Hz + tracker, real time", CELL),
+            "cell_iso": ("the cell with ISO's 1.6 m/s speed bound", [*CELL, "--world", str(ISO_WORLD)]),
+        },
+        base="world_file",
+        sensed=True,
+    ),
+    # Issue 53's must-show 1: the person reaching at ISO 13855's speeds, safety:=ssm against the shield off.
+    "shared_bench": dict(
+        env="MoveRL/PandaReachSharedBench-v0",
+        conditions={
+            "world_file": ("the world file, lockstep (as trained: the shield on, safety separation)", []),
+            "off": ("the shield off, real time", ["--shield", "off", "--launch", "mode=realtime"]),
+            "ssm": ("safety ssm, the person unmonitored (ISO's speeds): cameras at 30 Hz, real time",
+                    [*SSM, "--launch", "people=unmonitored"]),
+            "ssm_tracked": ("ssm with the person tracked (REP 155 tracker, also the observation)",
+                            [*SSM, "--launch", "people=tracked", "--launch", "obstacle_poses=tracker"]),
+        },
+        base="off",
+        sensed=False,
+    ),
+}  # fmt: skip
+METRICS = ("success_rate", "contacts_total", "contacts_moving_total", "steps_per_second", "discarded_unseen_total",
+           "steps_with_lost_tracks", "mean_track_age", "interventions_per_episode", "mean_length")  # fmt: skip
 
 
 def run(cmd: list[str], log: Path, timeout: float) -> None:
@@ -73,13 +96,13 @@ def no_start(log: Path) -> str | None:
     return None
 
 
-def train_cmd(out: Path, seed: int, steps: int, extra: list[str]) -> list[str]:
-    return [sys.executable, str(SCRIPTS / "train.py"), "--env", ENV, "--algo", "ppo", "--seed", str(seed), "-n",
+def train_cmd(env: str, out: Path, seed: int, steps: int, extra: list[str]) -> list[str]:
+    return [sys.executable, str(SCRIPTS / "train.py"), "--env", env, "--algo", "ppo", "--seed", str(seed), "-n",
             str(steps), "--log-folder", str(out), "--no-progress", *extra]  # fmt: skip
 
 
-def run_folder(out: Path, seed: int) -> Path:
-    return out / f"ppo_{ENV.split('/')[-1]}_on_s{seed}"
+def run_folder(env: str, out: Path, seed: int) -> Path:
+    return out / f"ppo_{env.split('/')[-1]}_on_s{seed}"
 
 
 def fmt(m, h, scale=1.0, digits=1):
@@ -102,7 +125,10 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
     groups: dict = {}
     for r in rows:
         groups.setdefault((r["policy"], r["condition"]), []).append(r)
-    base = {p: mean_ci([r["success_rate"] for r in rs])[0] for (p, c), rs in groups.items() if c == "world_file"}
+    scenario = SCENARIOS[args.scenario]
+    env, conditions, base_condition = scenario["env"], scenario["conditions"], scenario["base"]
+    # every policy's success is compared with the world-file policy's in the base condition
+    base = {p: mean_ci([r["success_rate"] for r in rs])[0] for (p, c), rs in groups.items() if c == base_condition}
     summary, no_starts = [], {}
     for (policy, cond), rs in groups.items():
         if any(r.get("no_start") for r in rs):
@@ -111,13 +137,16 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
             if not rs:
                 continue
         s, h, n = mean_ci([r["success_rate"] for r in rs])
+        moving = [r.get("contacts_moving_total") for r in rs]
         row = dict(policy=policy, condition=cond, seeds=n, success=s, success_ci=h,
-                   contacts=sum(r["contacts_total"] for r in rs), episodes=sum(r["episodes"] for r in rs))  # fmt: skip
+                   contacts=sum(r["contacts_total"] for r in rs),
+                   contacts_moving=None if None in moving else sum(moving),
+                   episodes=sum(r["episodes"] for r in rs))  # fmt: skip
         for k in ("steps_per_second", "discarded_unseen_total", "steps_with_lost_tracks", "mean_track_age",
                   "interventions_per_episode", "mean_length"):  # fmt: skip
             vals = [r[k] for r in rs if r.get(k) is not None]
             row[k] = sum(vals) / len(vals) if vals else None
-        row["vs_world_file"] = s / base["world_file"] if base.get("world_file") else None
+        row["vs_base"] = s / base["world_file"] if base.get("world_file") else None
         summary.append(row)
     with open(docs / "results.csv", "w", newline="") as f:
         w = csv.DictWriter(f, list(summary[0]))
@@ -130,29 +159,37 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
         f"Command: `{cmd}` (started {started}, {wall / 60:.0f} min on this 2-core machine; figures of speed vary with "
         "its load).",
         "",
-        f"PPO (paper settings) trained on {ENV} with the world file in lockstep, {args.steps:,} steps per seed; "
-        f"evaluated deterministically over {args.episodes} episodes per seed and condition ({args.iso_episodes} in "
-        "cell_iso). Conditions: "
-        + "; ".join(f"**{c}**: {d}" for c, (d, _) in CONDITIONS.items())
-        + f". The policy trained directly in the sensed mode ({args.sensed_steps:,} steps, seed {args.seeds[0]}, "
-        "30 Hz cameras, lockstep) is the row `sensed30`. Success: mean ± 95 % t-interval over seeds; contacts: ground "
-        "truth, summed over all episodes; discarded unseen, steps with a lost track: summed per seed, mean over seeds; "
+        f"PPO (paper settings) trained on {env} with the world file in lockstep, {args.steps:,} steps per seed; "
+        f"evaluated deterministically over {args.episodes} episodes per seed and condition"
+        + (f" ({args.iso_episodes} in cell_iso)" if "cell_iso" in conditions else "")
+        + ". Conditions: "
+        + "; ".join(f"**{c}**: {d}" for c, (d, _) in conditions.items())
+        + (
+            f". The policy trained directly in the sensed mode ({args.sensed_steps:,} steps, seed {args.seeds[0]}, "
+            "30 Hz cameras, lockstep) is the row `sensed30`"
+            if args.sensed_steps
+            else ""
+        )
+        + ". Success: mean ± 95 % t-interval over seeds; contacts: ground "
+        "truth, summed over all episodes, and of them those while the robot moved (safety ssm allows the others); "
+        "discarded unseen, steps with a lost track: summed per seed, mean over seeds; "
         "track age: the mean age (s) of the tracked poses in the observation.",
         "",
-        "| policy | condition | seeds | success (%) | vs world file | contacts | steps/s | discarded unseen | "
-        "steps with a lost track | track age (s) | interventions / episode | steps / episode |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| policy | condition | seeds | success (%) | vs {base_condition} | contacts | while moving | steps/s | "
+        "discarded unseen | steps with a lost track | track age (s) | interventions / episode | steps / episode |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in summary:
         lines.append(
             f"| {r['policy']} | {r['condition']} | {r['seeds']} | {fmt(r['success'], r['success_ci'], 100)} | "
-            f"{fmt(r['vs_world_file'], None, 100, 0) + ' %' if r['vs_world_file'] is not None else '-'} | "
-            f"**{r['contacts']}** | {fmt(r['steps_per_second'], None)} | {fmt(r['discarded_unseen_total'], None)} | "
+            f"{fmt(r['vs_base'], None, 100, 0) + ' %' if r['vs_base'] is not None else '-'} | "
+            f"**{r['contacts']}** | {'-' if r['contacts_moving'] is None else r['contacts_moving']} | "
+            f"{fmt(r['steps_per_second'], None)} | {fmt(r['discarded_unseen_total'], None)} | "
             f"{fmt(r['steps_with_lost_tracks'], None)} | {fmt(r['mean_track_age'], None, 1, 3)} | "
             f"{fmt(r['interventions_per_episode'], None, 1, 2)} | {fmt(r['mean_length'], None)} |"
         )
     for (policy, cond), (n, why) in no_starts.items():
-        lines.append(f"| {policy} | {cond} | {n} | no free start (the first reset: {why}) |||||||||")
+        lines.append(f"| {policy} | {cond} | {n} | no free start (the first reset: {why}) ||||||||||")
     lines += ["", "Training (train.py's summary.json: success over the last 200 training episodes, ground-truth "
               "contacts during training, wall time):", "",
               "| policy | seed | steps | success, last 200 episodes (%) | contacts | wall time (min) | steps/s | "
@@ -177,21 +214,33 @@ def report(rows: list[dict], training: list, docs: Path, args, started: str, wal
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenario", choices=sorted(SCENARIOS), default="human", help="SCENARIOS: the env, the conditions")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--steps", type=int, default=40_000, help="training steps per world-file run (paper: 40,000)")
     p.add_argument(
-        "--sensed-steps", type=int, default=40_000, help="training steps of the sensed run (0: none; paper: 40,000)"
+        "--sensed-steps",
+        type=int,
+        default=None,
+        help="training steps of the sensed run (0: none; default: 40,000 as the paper where the scenario has one)",
     )
     p.add_argument("--episodes", type=int, default=100, help="evaluation episodes per seed and condition")
     p.add_argument("--iso-episodes", type=int, default=30, help="evaluation episodes per seed in cell_iso")
     p.add_argument("--jobs", type=int, default=2, help="trainings and lockstep evaluations at once (real time: one)")
-    p.add_argument("--out", type=Path, default=REPO / "runs" / "transfer")
-    p.add_argument("--docs", type=Path, default=REPO / "docs" / "transfer")
+    p.add_argument("--out", type=Path, default=None, help="default: runs/transfer[_<scenario>] (human: no suffix)")
+    p.add_argument("--docs", type=Path, default=None, help="default: docs/transfer[_<scenario>]")
     p.add_argument("--quick", action="store_true", help="the pipeline only: 1 seed, 300 steps, 2 episodes, no ISO")
     args = p.parse_args(argv)
+    scenario = SCENARIOS[args.scenario]
+    env = scenario["env"]
+    suffix = "" if args.scenario == "human" else f"_{args.scenario}"
+    args.out = args.out if args.out is not None else REPO / "runs" / f"transfer{suffix}"
+    args.docs = args.docs if args.docs is not None else REPO / "docs" / f"transfer{suffix}"
+    if args.sensed_steps is None:
+        args.sensed_steps = 40_000 if scenario["sensed"] else 0
     if args.quick:
-        args.seeds, args.steps, args.sensed_steps, args.episodes = args.seeds[:1], 300, 100, 2
-    conditions = {c: v for c, v in CONDITIONS.items() if not (args.quick and c == "cell_iso")}
+        args.seeds, args.steps, args.episodes = args.seeds[:1], 300, 2
+        args.sensed_steps = 100 if args.sensed_steps else 0
+    conditions = {c: v for c, v in scenario["conditions"].items() if not (args.quick and c == "cell_iso")}
     started, t0 = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), time.monotonic()
     out = args.out.resolve()
     logs = out / "logs"
@@ -203,19 +252,19 @@ def main(argv=None) -> int:
         ("sensed30", args.seeds[:1], args.sensed_steps),
     ):
         for seed in seeds if steps else []:
-            config = run_folder(out / policy, seed) / "config.yaml"
-            if config.exists() and (run_folder(out / policy, seed) / "model.zip").exists():
+            config = run_folder(env, out / policy, seed) / "config.yaml"
+            if config.exists() and (run_folder(env, out / policy, seed) / "model.zip").exists():
                 trained = yaml.safe_load(config.read_text())["n_timesteps"]
                 if trained != steps:
                     p.error(f"{config.parent} was trained for {trained} steps, not {steps}: move it away or pass that")
     jobs = []
     for seed in args.seeds:
-        if not (run_folder(out / "world_file", seed) / "model.zip").exists():
-            jobs.append((train_cmd(out / "world_file", seed, args.steps, []), logs / f"train_world_file_s{seed}.log",
-                         120 + args.steps * per_step / 5))  # fmt: skip
-    if args.sensed_steps and not (run_folder(out / "sensed30", args.seeds[0]) / "model.zip").exists():
+        if not (run_folder(env, out / "world_file", seed) / "model.zip").exists():
+            jobs.append((train_cmd(env, out / "world_file", seed, args.steps, []),
+                         logs / f"train_world_file_s{seed}.log", 120 + args.steps * per_step / 5))  # fmt: skip
+    if args.sensed_steps and not (run_folder(env, out / "sensed30", args.seeds[0]) / "model.zip").exists():
         extra = ["--obstacles", "sensed", "--launch", "camera_rate=30"]
-        jobs.append((train_cmd(out / "sensed30", args.seeds[0], args.sensed_steps, extra),
+        jobs.append((train_cmd(env, out / "sensed30", args.seeds[0], args.sensed_steps, extra),
                      logs / f"train_sensed30_s{args.seeds[0]}.log", 300 + args.sensed_steps * per_step))  # fmt: skip
     print(f"training: {len(jobs)} runs", flush=True)
     with ThreadPoolExecutor(args.jobs) as pool:
@@ -226,9 +275,9 @@ def main(argv=None) -> int:
     evals = []  # (policy, condition, seed, run folder, json)
     for seed in args.seeds:
         for cond in conditions:
-            evals.append(("world_file", cond, seed, run_folder(out / "world_file", seed)))
+            evals.append(("world_file", cond, seed, run_folder(env, out / "world_file", seed)))
     if args.sensed_steps:
-        evals.append(("sensed30", "cell", args.seeds[0], run_folder(out / "sensed30", args.seeds[0])))
+        evals.append(("sensed30", "cell", args.seeds[0], run_folder(env, out / "sensed30", args.seeds[0])))
 
     def eval_job(policy, cond, seed, folder):
         js = out / "evals" / f"{policy}_{cond}_s{seed}.json"
@@ -271,7 +320,7 @@ def main(argv=None) -> int:
         ("sensed30", args.seeds[:1], args.sensed_steps),
     ):
         for seed in seeds if steps else []:
-            t = json.loads((run_folder(out / policy, seed) / "summary.json").read_text())
+            t = json.loads((run_folder(env, out / policy, seed) / "summary.json").read_text())
             training.append((policy, seed, dict(t, steps=steps)))
     report(rows, training, args.docs, args, started, time.monotonic() - t0)
     return 0

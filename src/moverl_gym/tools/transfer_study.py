@@ -4,6 +4,13 @@ it.
 
     python src/moverl_gym/tools/transfer_study.py --seeds 0 1 2                 # ~1.5 h on 2 cores
     python src/moverl_gym/tools/transfer_study.py --quick --out /tmp/transfer   # the pipeline in ~2 min (CI)
+    python src/moverl_gym/tools/transfer_study.py --scenario shared_bench       # issue 53: ssm against the shield off
+
+--scenario shared_bench (SCENARIOS) trains on MoveRL/PandaReachSharedBench-v0 (a person reaching into the shared space
+at ISO 13855's 2.0 m/s) and evaluates with the shield off, safety:=ssm with the person unmonitored, and ssm with the
+tracker monitoring (people:=tracked, obstacle_poses:=tracker), each in real time with 30 Hz cameras; the success is
+compared with the shield off's, and the contacts while the robot moved are counted (ssm lets a person touch a robot
+at rest). What follows describes the default, --scenario human:
 
 1. Train PPO (paper settings, config/hyperparams/ppo.yml) on MoveRL/PandaReachHuman-v0 with the world file, in lockstep
    (train.py, with its default recovery: a failed graph is relaunched and the failure reported), one run per seed;

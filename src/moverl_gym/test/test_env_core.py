@@ -276,6 +276,37 @@ def test_a_sensed_map_that_has_not_seen_home_yet_looks_again_before_starting_far
         env.close()
 
 
+class _HomeBlockedTeleports(_HomeBlocked):
+    """_HomeBlocked on a backend that teleports (a simulator's lockstep link) but senses nothing: no map to look again
+    with, and no census to ask for on a reset that finds a start near home."""
+
+    teleports = True
+
+    def __init__(self):
+        super().__init__()
+        self.censuses = 0
+
+    def sensed_census(self):
+        self.censuses += 1
+        return None
+
+
+def test_a_teleporting_backend_without_a_sensed_map_starts_over_the_whole_range_and_asks_no_census_otherwise():
+    env = gym.make("MoveRL/PandaReachTable-v0", backend=_HomeBlockedTeleports(), shield=False)
+    try:
+        env.reset(seed=0)
+        u = env.unwrapped
+        assert np.max(np.abs(u.q - np.asarray(u._backend.home))) >= 0.5  # not within start_noise of home
+        asked = u._backend.censuses
+        assert asked >= 1  # (the error's reason asks too)
+        u._backend.check_state = super(_HomeBlocked, u._backend).check_state  # home free again
+        for _ in range(3):
+            env.reset()
+        assert u._backend.censuses == asked  # a start near home was found: no census asked
+    finally:
+        env.close()
+
+
 def test_a_later_reset_that_finds_nothing_free_starts_where_the_robot_stands():
     """Nothing free at the first reset: the world cannot be used as it is (NoFreeConfiguration, not a graph failure to
     relaunch). Nothing free later (sensed space the arm's own shadow turned possibly occupied): the episode starts

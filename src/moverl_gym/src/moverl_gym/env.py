@@ -472,12 +472,15 @@ class MoveRLReachEnv(gym.Env):
         start over the whole joint range is tried (a freshly launched graph's map has seen little around the robot's
         first pose, and a start far from home held the first episode still: 1 of 300 in docs/sensed_person).
         """
-        can_look = getattr(self._backend, "teleports", False) and self._backend.sensed_census() is not None
+        teleports = getattr(self._backend, "teleports", False)
         try:
-            return self._sample_start(near_home=near_home, over_range=not (can_look and near_home))
+            return self._sample_start(near_home=near_home, over_range=not (teleports and near_home))
         except MoveRLError:
-            if not can_look:
-                raise
+            # (the census only now: a service call and a count over the robot's reach, not for every reset)
+            if not teleports or self._backend.sensed_census() is None:
+                if not (teleports and near_home):
+                    raise
+                return self._sample_start(near_home=False)  # no map to look again: over the whole range
         lo, hi = self.limits.lower, self.limits.upper
         for k in range(self.config.start_sampling_attempts):
             look = self._home if k == 0 else self.np_random.uniform(lo, hi)

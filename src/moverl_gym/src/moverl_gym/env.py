@@ -473,14 +473,18 @@ class MoveRLReachEnv(gym.Env):
         first pose, and a start far from home held the first episode still: 1 of 300 in docs/sensed_person).
         """
         teleports = getattr(self._backend, "teleports", False)
+        look_first = teleports and near_home  # look again before a start over the whole range
         try:
-            return self._sample_start(near_home=near_home, over_range=not (teleports and near_home))
-        except MoveRLError:
-            # (the census only now: a service call and a count over the robot's reach, not for every reset)
-            if not teleports or self._backend.sensed_census() is None:
-                if not (teleports and near_home):
-                    raise
-                return self._sample_start(near_home=False)  # no map to look again: over the whole range
+            return self._sample_start(near_home=near_home, over_range=not look_first)
+        except MoveRLError as exc:
+            if not teleports:
+                raise
+            failed = exc
+        # The census only now: a service call and a count over the robot's reach, not for every reset.
+        if self._backend.sensed_census() is None:  # no map to look again with
+            if not look_first:
+                raise failed
+            return self._sample_start(near_home=False)  # the whole range, as without a map
         lo, hi = self.limits.lower, self.limits.upper
         for k in range(self.config.start_sampling_attempts):
             look = self._home if k == 0 else self.np_random.uniform(lo, hi)
